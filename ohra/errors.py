@@ -1,0 +1,54 @@
+"""Exceptions raised by ohra.
+
+Every error a user can cause derives from :class:`OhraError`, so a caller (and the CLI) can catch
+one type. Messages name the offending file, key or index and what was expected.
+"""
+
+from __future__ import annotations
+
+
+class OhraError(Exception):
+    """Base class of all ohra errors."""
+
+
+class ParamsError(OhraError, ValueError):
+    """Hand parameters are malformed or physically invalid."""
+
+
+class MappingError(OhraError, ValueError):
+    """A joint mapping between an original hand and the canonical hand is inconsistent."""
+
+
+class SpecError(OhraError, ValueError):
+    """A hand spec (YAML) is malformed or names things the original URDF does not have."""
+
+
+class ParseError(OhraError, ValueError):
+    """An original hand URDF cannot be parsed into canonical parameters."""
+
+
+class HandNotFoundError(OhraError, KeyError):
+    """An unknown hand name was requested from the registry."""
+
+    def __str__(self) -> str:  # KeyError would quote the message
+        return str(self.args[0]) if self.args else ""
+
+
+class AssetsNotFoundError(OhraError, FileNotFoundError):
+    """Original hand or object assets are not where the configuration says."""
+
+
+class ObjectError(OhraError, ValueError):
+    """An object mesh is missing, empty or unusable."""
+
+
+class GraspError(OhraError, ValueError):
+    """A grasp array has the wrong shape or invalid values."""
+
+
+class CheckpointError(OhraError, ValueError):
+    """A model checkpoint is missing, corrupt or incompatible."""
+
+
+class DatasetError(OhraError, ValueError):
+    """A grasp dataset is malformed or does not match its manifest."""
