@@ -22,6 +22,7 @@ from typing import Any, ClassVar, Mapping, Union
 import numpy as np
 
 from .errors import ParamsError
+from .transforms import inverse_rpy
 
 FINGERS: tuple[str, ...] = ("thumb", "index", "middle", "ring", "little")
 JOINTS_PER_FINGER: tuple[int, ...] = (5, 4, 4, 4, 5)
@@ -430,7 +431,7 @@ class BaseParams(_ParamsMixin):
         origins[9] = e
         axes[9] = (0.0, 1.0, 0.0)
         origins[10, :3] = self.finger_xyz[4]
-        origins[10, 3:] = -e[3:]
+        origins[10, 3:] = inverse_rpy(e[3:])
         axes[10] = (1.0, 0.0, 0.0)
         axes[11] = (0.0, 1.0, 0.0)
         return ExtendedParams(
@@ -616,7 +617,7 @@ class ExtendedParams(_ParamsMixin):
             need(not p[JOINT_INDEX[f"{FINGERS[fi]}_joint1"]] or np.allclose(a[row], [1, 0, 0]), f"{FINGERS[fi]}_joint1 axis is not +x")
             need(not p[JOINT_INDEX[f"{FINGERS[fi]}_joint2"]] or np.allclose(a[row + 1], [0, 1, 0]), f"{FINGERS[fi]}_joint2 axis is not +y")
         need(not p[17] or np.allclose(a[9], [0, 1, 0]), "little_joint0 axis is not +y")
-        need(np.allclose(o[10, 3:], -o[9, 3:], atol=1e-9), "little_joint1 rpy is not the inverse of little_joint0 rpy")
+        need(np.allclose(o[10, 3:], inverse_rpy(o[9, 3:]), atol=1e-9), "little_joint1 rpy is not the inverse of little_joint0 rpy")
         need(not p[18] or np.allclose(a[10], [1, 0, 0]), "little_joint1 axis is not +x")
         need(not p[19] or np.allclose(a[11], [0, 1, 0]), "little_joint2 axis is not +y")
         need(not np.any(o[11]), "little_joint2 origin is not zero")

@@ -1,0 +1,203 @@
+"""The unified action space: original hand joint vectors <-> the canonical 22-D vector.
+
+Each canonical slot is driven by at most one original joint, named (never indexed by tree
+traversal), with ``q_canon = sign * q_orig + offset``. Slots with no original joint hold a fixed
+value (0 by default; e.g. a joint frozen at a tilt). Original joints that drive no slot (a wrist, a
+twist joint the form cannot express) are set to 0 when mapping back, the reference's choice; pass
+``unmapped_default`` to choose other values.
+
+The original joint order is the order of the movable (revolute, continuous, prismatic) joints as
+they appear in the original URDF file.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from .errors import MappingError
+from .params import JOINT_INDEX, JOINT_NAMES
+from .transforms import invert, xyzrpy_to_matrix
+
+MOVABLE_TYPES = ("revolute", "continuous", "prismatic")
+
+
+@dataclass(frozen=True)
+class SlotMap:
+    """One canonical slot driven by the original joint ``name``: ``q_canon = sign * q_orig + offset``."""
+
+    name: str
+    sign: float = 1.0
+    offset: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.sign not in (1.0, -1.0, 1, -1):
+            raise MappingError(f"sign of original joint {self.name!r} must be +1 or -1, got {self.sign}")
+
+
+def original_joint_names(urdf: str | Path) -> list[str]:
+    """Movable joint names of a URDF (path or XML text) in file order."""
+    text = _read(urdf)
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as exc:
+        raise MappingError(f"original URDF is not valid XML: {exc}") from None
+    names = []
+    for j in root.iter("joint"):
+        if j.get("type") in MOVABLE_TYPES:
+            if j.find("mimic") is not None:
+                continue  # mimic joints follow another joint and are not part of the action space
+            names.append(j.get("name"))
+    return names
+
+
+def _read(urdf: str | Path) -> str:
+    if isinstance(urdf, Path) or (isinstance(urdf, str) and not urdf.lstrip().startswith("<")):
+        p = Path(urdf)
+        if not p.is_file():
+            raise MappingError(f"original URDF not found: {p}")
+        return p.read_text()
+    return str(urdf)
+
+
+@dataclass
+class ActionMap:
+    """Maps joint vectors between an original hand and its canonical hand.
+
+    Args:
+        slots: canonical joint name -> :class:`SlotMap` (or a dict with name/sign/offset).
+        original_joints: the original hand's joint names, in the order of its joint vectors.
+        palm_origin: ``[x, y, z, roll, pitch, yaw]`` of the canonical palm frame in the original
+            root frame (metres, fixed-axis radians); ``T_canonical = T_original_root @ T(palm_origin)``.
+        fixed: canonical joint name -> constant value for slots no original joint drives.
+        unmapped_default: original joint name -> value used by :meth:`to_original` for joints that
+            drive no slot (default 0).
+    """
+
+    slots: Mapping[str, SlotMap]
+    original_joints: Sequence[str]
+    palm_origin: Sequence[float] = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    fixed: Mapping[str, float] = field(default_factory=dict)
+    unmapped_default: Mapping[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.original_joints = tuple(self.original_joints)
+        if len(set(self.original_joints)) != len(self.original_joints):
+            dup = [n for n in self.original_joints if self.original_joints.count(n) > 1][0]
+            raise MappingError(f"original joint {dup!r} appears twice in the original joint order")
+        slots: dict[str, SlotMap] = {}
+        used: dict[str, str] = {}
+        for slot, sm in dict(self.slots).items():
+            if slot not in JOINT_INDEX:
+                raise MappingError(f"unknown canonical slot {slot!r}; expected one of {', '.join(JOINT_NAMES)}")
+            if isinstance(sm, Mapping):
+                sm = SlotMap(**sm)
+            elif isinstance(sm, str):
+                sm = SlotMap(sm)
+            if sm.name not in self.original_joints:
+                raise MappingError(
+                    f"slot {slot!r} names original joint {sm.name!r}, which is not a movable joint of the "
+                    f"original hand (known: {', '.join(self.original_joints)})"
+                )
+            if sm.name in used:
+                raise MappingError(f"original joint {sm.name!r} is mapped twice (slots {used[sm.name]!r} and {slot!r})")
+            used[sm.name] = slot
+            slots[slot] = sm
+        for slot in self.fixed:
+            if slot not in JOINT_INDEX:
+                raise MappingError(f"unknown canonical slot {slot!r} in fixed values")
+            if slot in slots:
+                raise MappingError(f"slot {slot!r} is both mapped and fixed")
+        for name in self.unmapped_default:
+            if name not in self.original_joints:
+                raise MappingError(f"unmapped default names unknown original joint {name!r}")
+        self.slots = slots
+        po = np.asarray(self.palm_origin, dtype=float)
+        if po.shape != (6,) or not np.all(np.isfinite(po)):
+            raise MappingError(f"palm_origin must be 6 finite numbers (xyz rpy), got {list(np.ravel(po))}")
+        self.palm_origin = po
+        n = len(self.original_joints)
+        self._c_idx = np.array([JOINT_INDEX[s] for s in slots], dtype=int)
+        self._o_idx = np.array([self.original_joints.index(sm.name) for sm in slots.values()], dtype=int)
+        self._sign = np.array([float(sm.sign) for sm in slots.values()])
+        self._offset = np.array([sm.offset for sm in slots.values()])
+        self._canon_const = np.zeros(22)
+        for slot, v in self.fixed.items():
+            self._canon_const[JOINT_INDEX[slot]] = float(v)
+        self._orig_const = np.zeros(n)
+        for name, v in self.unmapped_default.items():
+            self._orig_const[self.original_joints.index(name)] = float(v)
+        self._T_palm = xyzrpy_to_matrix(po)
+
+    @classmethod
+    def from_urdf(
+        cls,
+        urdf: str | Path,
+        slots: Mapping[str, SlotMap | Mapping | str],
+        palm_origin: Sequence[float] = (0.0,) * 6,
+        fixed: Mapping[str, float] | None = None,
+        unmapped_default: Mapping[str, float] | None = None,
+    ) -> "ActionMap":
+        """ActionMap whose original joint order is the movable joints of ``urdf`` (path or XML text) by name."""
+        return cls(slots, original_joint_names(urdf), palm_origin, dict(fixed or {}), dict(unmapped_default or {}))
+
+    @property
+    def n_original(self) -> int:
+        return len(self.original_joints)
+
+    @property
+    def mapped_slots(self) -> np.ndarray:
+        """(22,) bool: canonical slots driven by an original joint."""
+        m = np.zeros(22, dtype=bool)
+        m[self._c_idx] = True
+        return m
+
+    @property
+    def mapped_original(self) -> np.ndarray:
+        """(n_original,) bool: original joints that drive a canonical slot."""
+        m = np.zeros(self.n_original, dtype=bool)
+        m[self._o_idx] = True
+        return m
+
+    def _check(self, q: np.ndarray, n: int, what: str) -> np.ndarray:
+        q = np.asarray(q, dtype=float)
+        if q.ndim not in (1, 2) or q.shape[-1] != n:
+            raise MappingError(f"{what} vector must have shape ({n},) or (N, {n}), got {q.shape}")
+        return q
+
+    def to_canonical(self, q_orig: np.ndarray) -> np.ndarray:
+        """Original joint vector(s) (n,) or (N,n) -> canonical (22,) or (N,22)."""
+        q = self._check(q_orig, self.n_original, "original joint")
+        out = np.broadcast_to(self._canon_const, q.shape[:-1] + (22,)).copy()
+        out[..., self._c_idx] = self._sign * q[..., self._o_idx] + self._offset
+        return out
+
+    def to_original(self, q_canon: np.ndarray) -> np.ndarray:
+        """Canonical vector(s) (22,) or (N,22) -> original (n,) or (N,n); unmapped joints get their default."""
+        q = self._check(q_canon, 22, "canonical joint")
+        out = np.broadcast_to(self._orig_const, q.shape[:-1] + (self.n_original,)).copy()
+        out[..., self._o_idx] = self._sign * (q[..., self._c_idx] - self._offset)
+        return out
+
+    def limits_to_canonical(self, lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Canonical (22,) limits from original limits (a negated joint swaps and negates its limits)."""
+        lo = self._check(lower, self.n_original, "original lower-limit")
+        up = self._check(upper, self.n_original, "original upper-limit")
+        a = self._sign * lo[self._o_idx] + self._offset
+        b = self._sign * up[self._o_idx] + self._offset
+        clo, cup = self._canon_const.copy(), self._canon_const.copy()
+        clo[self._c_idx] = np.minimum(a, b)
+        cup[self._c_idx] = np.maximum(a, b)
+        return clo, cup
+
+    def wrist_to_canonical(self, T_root: np.ndarray) -> np.ndarray:
+        """Pose(s) of the original root frame (…,4,4) -> pose(s) of the canonical palm frame."""
+        return np.asarray(T_root, dtype=float) @ self._T_palm
+
+    def wrist_to_original(self, T_palm: np.ndarray) -> np.ndarray:
+        """Pose(s) of the canonical palm frame (…,4,4) -> pose(s) of the original root frame."""
+        return np.asarray(T_palm, dtype=float) @ invert(self._T_palm)

@@ -1,0 +1,394 @@
+"""Kinematics and collision geometry of a canonical hand.
+
+:class:`HandModel` wraps a Pinocchio model of a canonical URDF (the reference implementation for
+single configurations and Jacobians), a vectorised numpy forward kinematics over the same
+kinematic tree for batches of configurations, and Coal capsule geometry for collision queries.
+
+All poses are 4x4 homogeneous matrices in the canonical palm frame (the URDF root; +x palm normal,
++y thumb side of a right hand, +z finger-forward), in metres. Configurations are always the 22-D
+canonical joint vector (``ohra.params.JOINT_NAMES`` order) in radians; absent joints must be 0.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+from typing import Iterable, Sequence, Union
+
+import coal
+import numpy as np
+import pinocchio as pin
+
+from .errors import OhraError, ParamsError
+from .params import FINGERS, JOINT_NAMES, BaseParams, ExtendedParams, load_params
+from .urdfgen import palm_geometry, render
+
+Params = Union[BaseParams, ExtendedParams]
+SEGMENTS = ("proximal", "middle", "distal")
+
+
+@dataclass(frozen=True)
+class Capsules:
+    """Finger capsules at one configuration (K capsules) or a batch (leading N axis on p0/p1).
+
+    ``p0``/``p1`` are the centres of the two end spheres (the capsule's core segment) in the palm
+    frame [m]; ``radius`` [m]; ``link`` the link name and ``finger`` the finger index (0 thumb .. 4 little).
+    """
+
+    p0: np.ndarray
+    p1: np.ndarray
+    radius: np.ndarray
+    link: tuple[str, ...]
+    finger: np.ndarray
+
+
+@dataclass(frozen=True)
+class _Tree:
+    """The kinematic tree in a form numpy (and CasADi) can evaluate.
+
+    ``joint_parent[j]`` is the index of the parent joint (-1 for the root), ``joint_placement[j]`` the
+    fixed 4x4 transform from the parent joint frame to joint j at q=0, ``joint_axis[j]`` its unit
+    axis in its own frame and ``joint_q[j]`` its index in the canonical 22-vector. Frames (links, tips)
+    hang off a joint with a fixed placement.
+    """
+
+    joint_names: tuple[str, ...]
+    joint_parent: np.ndarray
+    joint_placement: np.ndarray
+    joint_axis: np.ndarray
+    joint_q: np.ndarray
+    frame_names: tuple[str, ...]
+    frame_joint: np.ndarray
+    frame_placement: np.ndarray
+
+
+def _rotation_batch(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """Rodrigues' rotation about a fixed unit ``axis`` for angles (N,) -> (N,3,3)."""
+    x, y, z = axis
+    K = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+    s, c = np.sin(angle)[:, None, None], np.cos(angle)[:, None, None]
+    return np.eye(3) + s * K + (1.0 - c) * (K @ K)
+
+
+def _joint_axis(jm: pin.JointModel) -> np.ndarray:
+    short = jm.shortname()
+    if short in ("JointModelRX", "JointModelRY", "JointModelRZ"):
+        return np.eye(3)["XYZ".index(short[-1])]
+    if short == "JointModelRevoluteUnaligned":
+        return np.asarray(jm.extract().axis, dtype=float)
+    raise OhraError(f"unsupported joint type {short} in canonical hand model")
+
+
+class HandModel:
+    """Kinematics (Pinocchio + batched numpy) and capsule collision geometry of a canonical hand."""
+
+    def __init__(self, urdf: str, params: Params | None = None):
+        self.urdf = urdf
+        self.params = params
+        try:
+            self.model: pin.Model = pin.buildModelFromXML(urdf)
+        except Exception as exc:  # pinocchio raises plain ValueError/RuntimeError
+            raise OhraError(f"Pinocchio cannot load the canonical URDF: {exc}") from None
+        self.data: pin.Data = self.model.createData()
+        missing = [n for n in JOINT_NAMES if not self.model.existJointName(n)]
+        if missing or self.model.nq != 22:
+            raise OhraError(f"not a canonical hand URDF: nq={self.model.nq}, missing joints {missing}")
+        # canonical index -> pinocchio q index
+        self._pin_q = np.array([self.model.joints[self.model.getJointId(n)].idx_q for n in JOINT_NAMES])
+        self._perm = np.argsort(self._pin_q)  # pinocchio q index -> canonical index
+        self.lower = np.array(self.model.lowerPositionLimit)[self._pin_q]
+        self.upper = np.array(self.model.upperPositionLimit)[self._pin_q]
+        self.present_joints = (self.lower != 0.0) | (self.upper != 0.0)
+        self.movable_joints = self.upper > self.lower
+        self.frame_names: tuple[str, ...] = tuple(
+            f.name for f in self.model.frames if f.type == pin.FrameType.BODY
+        )
+        self._frame_id = {n: self.model.getFrameId(n, pin.FrameType.BODY) for n in self.frame_names}
+        self.tip_names: tuple[str, ...] = tuple(f"{f}_tip" for f in FINGERS if f"{f}_tip" in self._frame_id)
+        self.present_fingers = np.array([f"{f}_tip" in self._frame_id for f in FINGERS])
+        self.tree = self._build_tree()
+
+    # -- construction --------------------------------------------------------------------------
+    @classmethod
+    def from_params(cls, params: Params) -> "HandModel":
+        """Model of the canonical hand rendered from ``params``."""
+        if not isinstance(params, (BaseParams, ExtendedParams)):
+            raise ParamsError(f"expected BaseParams or ExtendedParams, got {type(params).__name__}")
+        return cls(render(params), params)
+
+    @classmethod
+    def from_urdf(cls, path: str | Path, params: Params | None = None) -> "HandModel":
+        """Model from a canonical URDF file (capsule geometry then needs ``params``)."""
+        p = Path(path)
+        if not p.is_file():
+            raise OhraError(f"canonical URDF not found: {p}")
+        return cls(p.read_text(), params)
+
+    @classmethod
+    def from_json(cls, path: str | Path) -> "HandModel":
+        return cls.from_params(load_params(path))
+
+    def _build_tree(self) -> _Tree:
+        m = self.model
+        names, parents, placements, axes, qidx = [], [], [], [], []
+        jid_to_tree = {0: -1}
+        for jid in range(1, m.njoints):
+            jid_to_tree[jid] = len(names)
+            names.append(m.names[jid])
+            parents.append(jid_to_tree[m.parents[jid]])
+            placements.append(m.jointPlacements[jid].homogeneous)
+            axes.append(_joint_axis(m.joints[jid]))
+            qidx.append(JOINT_NAMES.index(m.names[jid]))
+        f_names, f_joint, f_place = [], [], []
+        for n in self.frame_names:
+            fr = m.frames[self._frame_id[n]]
+            f_names.append(n)
+            f_joint.append(jid_to_tree[fr.parentJoint])
+            f_place.append(fr.placement.homogeneous)
+        return _Tree(
+            tuple(names), np.array(parents), np.array(placements), np.array(axes), np.array(qidx),
+            tuple(f_names), np.array(f_joint), np.array(f_place),
+        )
+
+    # -- configurations ------------------------------------------------------------------------
+    @property
+    def nq(self) -> int:
+        return 22
+
+    def check_q(self, q: np.ndarray) -> np.ndarray:
+        """Validate a (22,) or (N,22) configuration; returns it as a float array."""
+        q = np.asarray(q, dtype=float)
+        if q.shape[-1:] != (22,) or q.ndim > 2:
+            raise OhraError(f"expected a canonical configuration of shape (22,) or (N, 22), got {q.shape}")
+        if not np.all(np.isfinite(q)):
+            raise OhraError("configuration contains NaN or inf")
+        return q
+
+    def clamp(self, q: np.ndarray) -> np.ndarray:
+        """Clip to the joint limits (absent joints to 0)."""
+        return np.clip(self.check_q(q), self.lower, self.upper)
+
+    def neutral(self) -> np.ndarray:
+        """Zero clamped into the limits (the reference's initial q)."""
+        return np.clip(np.zeros(22), self.lower, self.upper)
+
+    def random_configurations(self, n: int, seed: int = 0) -> np.ndarray:
+        """(n, 22) configurations uniform within the limits (absent joints 0), seeded."""
+        rng = np.random.default_rng(seed)
+        return self.lower + rng.random((int(n), 22)) * (self.upper - self.lower)
+
+    def _to_pin(self, q: np.ndarray) -> np.ndarray:
+        out = np.empty(22)
+        out[self._pin_q] = q
+        return out
+
+    # -- forward kinematics --------------------------------------------------------------------
+    def frame_pose(self, q: np.ndarray, frame: str) -> np.ndarray:
+        """4x4 pose of a link or tip frame at one configuration (Pinocchio)."""
+        q = self.check_q(q)
+        if q.ndim != 1:
+            raise OhraError("frame_pose takes one configuration; use frame_poses for batches")
+        fid = self._fid(frame)
+        pin.forwardKinematics(self.model, self.data, self._to_pin(q))
+        return pin.updateFramePlacement(self.model, self.data, fid).homogeneous.copy()
+
+    def frame_poses(self, q: np.ndarray, frames: Sequence[str] | None = None) -> np.ndarray:
+        """Poses of ``frames`` (default: every link and tip frame, order ``frame_names``).
+
+        ``q`` (22,) -> (F,4,4); (N,22) -> (N,F,4,4). Vectorised over the batch.
+        """
+        q = self.check_q(q)
+        single = q.ndim == 1
+        qb = q[None] if single else q
+        frames = self.frame_names if frames is None else tuple(frames)
+        idx = np.array([self.tree.frame_names.index(self._check_frame(f)) for f in frames], dtype=int)
+        J = self._joint_poses(qb)
+        T = self.tree.frame_placement[idx]
+        parent = self.tree.frame_joint[idx]
+        out = np.empty((qb.shape[0], len(idx), 4, 4))
+        for k, (pj, Tf) in enumerate(zip(parent, T)):
+            out[:, k] = Tf if pj < 0 else J[:, pj] @ Tf
+        return out[0] if single else out
+
+    def _joint_poses(self, qb: np.ndarray) -> np.ndarray:
+        """(N, njoints, 4, 4) joint frame poses after their own rotation."""
+        t = self.tree
+        n = qb.shape[0]
+        J = np.empty((n, len(t.joint_names), 4, 4))
+        J[:, :, 3, :] = (0.0, 0.0, 0.0, 1.0)
+        for j in range(len(t.joint_names)):
+            P = t.joint_placement[j]
+            base = P if t.joint_parent[j] < 0 else J[:, t.joint_parent[j]] @ P
+            R = _rotation_batch(t.joint_axis[j], qb[:, t.joint_q[j]])
+            J[:, j, :3, :3] = np.broadcast_to(base[..., :3, :3], (n, 3, 3)) @ R
+            J[:, j, :3, 3] = np.broadcast_to(base[..., :3, 3], (n, 3))
+        return J
+
+    def fingertips(self, q: np.ndarray) -> np.ndarray:
+        """Tip positions (…,5,3) in finger order; NaN rows for absent fingers."""
+        q = self.check_q(q)
+        lead = q.shape[:-1]
+        out = np.full(lead + (5, 3), np.nan)
+        if self.tip_names:
+            P = self.frame_poses(q, self.tip_names)[..., :3, 3]
+            out[..., self.present_fingers, :] = P
+        return out
+
+    def jacobian(self, q: np.ndarray, frame: str) -> np.ndarray:
+        """(6,22) frame Jacobian [linear; angular] in the palm-aligned frame at the frame origin."""
+        q = self.check_q(q)
+        fid = self._fid(frame)
+        qp = self._to_pin(q)
+        J = pin.computeFrameJacobian(self.model, self.data, qp, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+        return np.asarray(J)[:, self._pin_q]
+
+    def _check_frame(self, frame: str) -> str:
+        if frame not in self._frame_id:
+            raise OhraError(f"unknown frame {frame!r}; known: {', '.join(self.frame_names)}")
+        return frame
+
+    def _fid(self, frame: str) -> int:
+        return self._frame_id[self._check_frame(frame)]
+
+    # -- capsule geometry ----------------------------------------------------------------------
+    @cached_property
+    def capsule_specs(self) -> tuple[tuple[str, int, float, float], ...]:
+        """(link, finger index, radius, length) of every finger segment that carries geometry."""
+        if self.params is None:
+            raise OhraError("capsule geometry needs the hand parameters (build with HandModel.from_params)")
+        p = self.params
+        links = p.link_presence()
+        out = []
+        for fi, f in enumerate(FINGERS):
+            for s, seg in enumerate(SEGMENTS):
+                if not links[f][s]:
+                    continue
+                if isinstance(p, BaseParams):
+                    r, L = p.finger_radius, p.finger_lengths[0 if fi == 0 else 1, s]
+                else:
+                    r, L = p.finger_radii[fi], p.finger_lengths[fi, s]
+                out.append((f"{f}_{seg}", fi, float(r), float(L)))
+        return tuple(out)
+
+    @property
+    def palm(self) -> dict[str, float]:
+        """Palm cylinder: radius and depth [m]; axis +x, centre (0, 0, radius) in the palm frame."""
+        if self.params is None:
+            raise OhraError("palm geometry needs the hand parameters")
+        R, depth = palm_geometry(self.params)
+        return {"radius": R, "depth": depth}
+
+    def capsules(self, q: np.ndarray) -> Capsules:
+        """Capsule core segments at ``q`` ((22,) or (N,22)) in the palm frame."""
+        specs = self.capsule_specs
+        links = [s[0] for s in specs]
+        T = self.frame_poses(q, links) if links else np.zeros(np.shape(q)[:-1] + (0, 4, 4))
+        r = np.array([s[2] for s in specs])
+        L = np.array([s[3] for s in specs])
+        a = np.stack([np.zeros_like(r), np.zeros_like(r), r], axis=-1)
+        b = np.stack([np.zeros_like(r), np.zeros_like(r), L - r], axis=-1)
+        p0 = np.einsum("...kij,kj->...ki", T[..., :3, :3], a) + T[..., :3, 3]
+        p1 = np.einsum("...kij,kj->...ki", T[..., :3, :3], b) + T[..., :3, 3]
+        return Capsules(p0, p1, r, tuple(links), np.array([s[1] for s in specs], dtype=int))
+
+    # -- Coal collision ------------------------------------------------------------------------
+    def collision_objects(self, q: np.ndarray, T_world_palm: np.ndarray | None = None) -> list[tuple[str, int, coal.CollisionObject]]:
+        """Coal objects (name, finger index or -1 for the palm, object) of the hand at one configuration."""
+        q = self.check_q(q)
+        T0 = np.eye(4) if T_world_palm is None else np.asarray(T_world_palm, dtype=float)
+        out: list[tuple[str, int, coal.CollisionObject]] = []
+        R, depth = palm_geometry(self.params) if self.params is not None else (0.0, 0.0)
+        Tp = np.eye(4)
+        Tp[:3, :3] = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])  # cylinder z -> palm x
+        Tp[:3, 3] = (0.0, 0.0, R)
+        out.append(("palm", -1, coal.CollisionObject(coal.Cylinder(R, depth), _se3(T0 @ Tp))))
+        specs = self.capsule_specs
+        if specs:
+            T = self.frame_poses(q, [s[0] for s in specs])
+            for (link, fi, r, L), Tl in zip(specs, T):
+                Tc = Tl.copy()
+                Tc[:3, 3] = Tl[:3, 3] + Tl[:3, 2] * (L / 2.0)
+                geom = coal.Capsule(r, max(L - 2.0 * r, 0.0))
+                out.append((link, fi, coal.CollisionObject(geom, _se3(T0 @ Tc))))
+        return out
+
+    def self_collision_pairs(self, q: np.ndarray, margin: float = 0.0) -> list[tuple[str, str]]:
+        """Colliding pairs of segments on different fingers (palm-finger and same-finger pairs are
+        excluded, as in the evaluation protocol)."""
+        objs = [o for o in self.collision_objects(q) if o[1] >= 0]
+        hits = []
+        for i in range(len(objs)):
+            for j in range(i + 1, len(objs)):
+                if objs[i][1] == objs[j][1]:
+                    continue
+                d = _distance(objs[i][2], objs[j][2])
+                if d < margin:
+                    hits.append((objs[i][0], objs[j][0]))
+        return hits
+
+    def self_collision(self, q: np.ndarray, margin: float = 0.0) -> bool:
+        """True when segments of two different fingers intersect (closer than ``margin`` metres)."""
+        return bool(self.self_collision_pairs(q, margin))
+
+    def object_distances(
+        self, q: np.ndarray, geometry: coal.CollisionGeometry, T_palm_object: np.ndarray | None = None
+    ) -> dict[str, float]:
+        """Distance [m] from every hand shape (palm and capsules) to an object.
+
+        ``T_palm_object`` is the object's pose in the palm frame. For a convex object (``coal.Convex``
+        or a primitive) the value is signed: negative means penetration and its magnitude is the
+        penetration depth (GJK/EPA). For a triangle mesh (``coal.BVHModel``) Coal's distance is
+        unsigned: a colliding shape reports ``-depth`` taken from the deepest contact of a collision
+        query, which is exact for shallow contacts but underestimates deep ones (the mesh has no
+        inside); use an SDF (``ohra.objects``) when deep signed values matter.
+        """
+        To = np.eye(4) if T_palm_object is None else np.asarray(T_palm_object, dtype=float)
+        obj = coal.CollisionObject(geometry, _se3(To))
+        is_mesh = isinstance(geometry, coal.BVHModelBase)
+        out: dict[str, float] = {}
+        for name, _, co in self.collision_objects(q):
+            d = _distance(co, obj)
+            if is_mesh and d <= 0.0:
+                d = -_penetration(co, obj)
+            out[name] = d
+        return out
+
+    def min_distance(self, q: np.ndarray, geometry: coal.CollisionGeometry, T_palm_object: np.ndarray | None = None) -> float:
+        """Smallest value of :meth:`object_distances` (negative: penetration depth)."""
+        return min(self.object_distances(q, geometry, T_palm_object).values())
+
+    def penetration_depth(self, q: np.ndarray, geometry: coal.CollisionGeometry, T_palm_object: np.ndarray | None = None) -> float:
+        """Largest penetration depth [m] of any hand shape into the object (0 when free)."""
+        return max(0.0, -self.min_distance(q, geometry, T_palm_object))
+
+
+def _se3(T: np.ndarray) -> coal.Transform3s:
+    return coal.Transform3s(np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]))
+
+
+def _distance(a: coal.CollisionObject, b: coal.CollisionObject) -> float:
+    req = coal.DistanceRequest()
+    req.enable_signed_distance = True
+    res = coal.DistanceResult()
+    return float(coal.distance(a, b, req, res))
+
+
+def _penetration(a: coal.CollisionObject, b: coal.CollisionObject) -> float:
+    req = coal.CollisionRequest()
+    req.num_max_contacts = 64
+    req.enable_contact = True
+    res = coal.CollisionResult()
+    coal.collide(a, b, req, res)
+    if not res.isCollision():
+        return 0.0
+    return max(abs(float(res.getContact(i).penetration_depth)) for i in range(res.numContacts()))
+
+
+def load_hand_model(hand: str | Params) -> HandModel:
+    """HandModel of a registered hand name, a params JSON path or params."""
+    if isinstance(hand, (BaseParams, ExtendedParams)):
+        return HandModel.from_params(hand)
+    from .hands import get_hand
+
+    return HandModel.from_params(get_hand(hand))
