@@ -108,6 +108,11 @@ class HandModel:
         self.tip_names: tuple[str, ...] = tuple(f"{f}_tip" for f in FINGERS if f"{f}_tip" in self._frame_id)
         self.present_fingers = np.array([f"{f}_tip" in self._frame_id for f in FINGERS])
         self.tree = self._build_tree()
+        # index of the basis axis (0, 1, 2) of each joint when it is +-x, +-y or +-z, else -1
+        self._aligned = [
+            int(np.argmax(np.abs(a))) if np.isclose(np.abs(a).max(), 1.0, rtol=0, atol=1e-12) else -1
+            for a in self.tree.joint_axis
+        ]
 
     # -- construction --------------------------------------------------------------------------
     @classmethod
@@ -196,34 +201,72 @@ class HandModel:
     def frame_poses(self, q: np.ndarray, frames: Sequence[str] | None = None) -> np.ndarray:
         """Poses of ``frames`` (default: every link and tip frame, order ``frame_names``).
 
-        ``q`` (22,) -> (F,4,4); (N,22) -> (N,F,4,4). Vectorised over the batch.
+        ``q`` (22,) -> (F,4,4); (N,22) -> (N,F,4,4). Vectorised over the batch; only the joints the
+        requested frames hang from are evaluated.
         """
         q = self.check_q(q)
         single = q.ndim == 1
-        qb = q[None] if single else q
         frames = self.frame_names if frames is None else tuple(frames)
+        if single:  # one configuration: Pinocchio's C++ FK beats numpy's per-call overhead
+            pin.framesForwardKinematics(self.model, self.data, self._to_pin(q))
+            oMf = self.data.oMf
+            return np.array([oMf[self._fid(f)].homogeneous for f in frames])
+        qb = q
         idx = np.array([self.tree.frame_names.index(self._check_frame(f)) for f in frames], dtype=int)
-        J = self._joint_poses(qb)
-        T = self.tree.frame_placement[idx]
         parent = self.tree.frame_joint[idx]
-        out = np.empty((qb.shape[0], len(idx), 4, 4))
-        for k, (pj, Tf) in enumerate(zip(parent, T)):
-            out[:, k] = Tf if pj < 0 else J[:, pj] @ Tf
-        return out[0] if single else out
+        R, t = self._joint_poses(qb, self._ancestors(tuple(int(p) for p in parent)))
+        Tf = self.tree.frame_placement[idx]
+        n = qb.shape[0]
+        out = np.zeros((n, len(idx), 4, 4))
+        out[..., 3, 3] = 1.0
+        for k, pj in enumerate(parent):
+            if pj < 0:
+                out[:, k] = Tf[k]
+                continue
+            out[:, k, :3, :3] = R[pj] @ Tf[k, :3, :3]
+            out[:, k, :3, 3] = R[pj] @ Tf[k, :3, 3] + t[pj]
+        return out
 
-    def _joint_poses(self, qb: np.ndarray) -> np.ndarray:
-        """(N, njoints, 4, 4) joint frame poses after their own rotation."""
+    def _ancestors(self, joints: tuple[int, ...]) -> tuple[int, ...]:
+        """The given joints and all their ancestors, in tree (topological) order."""
+        need: set[int] = set()
+        for j in joints:
+            while j >= 0 and j not in need:
+                need.add(j)
+                j = int(self.tree.joint_parent[j])
+        return tuple(sorted(need))
+
+    def _joint_poses(self, qb: np.ndarray, joints: tuple[int, ...]) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray]]:
+        """Rotations (N,3,3) and positions (N,3) of joint frames after their own rotation."""
         t = self.tree
         n = qb.shape[0]
-        J = np.empty((n, len(t.joint_names), 4, 4))
-        J[:, :, 3, :] = (0.0, 0.0, 0.0, 1.0)
-        for j in range(len(t.joint_names)):
+        Rs: dict[int, np.ndarray] = {}
+        ts: dict[int, np.ndarray] = {}
+        for j in joints:  # parents come first: joint indices follow the tree order
             P = t.joint_placement[j]
-            base = P if t.joint_parent[j] < 0 else J[:, t.joint_parent[j]] @ P
-            R = _rotation_batch(t.joint_axis[j], qb[:, t.joint_q[j]])
-            J[:, j, :3, :3] = np.broadcast_to(base[..., :3, :3], (n, 3, 3)) @ R
-            J[:, j, :3, 3] = np.broadcast_to(base[..., :3, 3], (n, 3))
-        return J
+            pj = int(t.joint_parent[j])
+            if pj < 0:
+                base_R = np.broadcast_to(P[:3, :3], (n, 3, 3))
+                ts[j] = np.broadcast_to(P[:3, 3], (n, 3)).copy()
+            else:
+                base_R = Rs[pj] @ P[:3, :3]
+                ts[j] = Rs[pj] @ P[:3, 3] + ts[pj]
+            a = t.joint_axis[j]
+            ang = qb[:, t.joint_q[j]]
+            c, s = np.cos(ang)[:, None], np.sin(ang)[:, None]
+            k = self._aligned[j]
+            if k >= 0:
+                # rotation about a basis axis: mix the two other columns of the base rotation
+                sign = a[k]
+                u, v = (k + 1) % 3, (k + 2) % 3
+                R = np.empty((n, 3, 3))
+                R[:, :, k] = base_R[:, :, k]
+                R[:, :, u] = c * base_R[:, :, u] + sign * s * base_R[:, :, v]
+                R[:, :, v] = -sign * s * base_R[:, :, u] + c * base_R[:, :, v]
+            else:
+                R = base_R @ _rotation_batch(a, ang)
+            Rs[j] = R
+        return Rs, ts
 
     def fingertips(self, q: np.ndarray) -> np.ndarray:
         """Tip positions (…,5,3) in finger order; NaN rows for absent fingers."""
