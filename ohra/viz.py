@@ -1,0 +1,121 @@
+"""meshcat scenes: canonical hands (capsules), meshes, grasps; static HTML export.
+
+Every function draws into a ``meshcat.Visualizer`` under a path of your choice, in metres. Poses
+are 4x4 transforms of the palm frame in the scene (world) frame. ``static_html`` snapshots a scene
+into a self-contained HTML page (meshcat's own export) that opens without a running server.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .kinematics import HandModel
+
+HAND_COLOR = 0x66BFFF
+OBJECT_COLOR = 0xD9A066
+ORIGINAL_COLOR = 0xB0B0B0
+
+# three.js cylinders run along their local y axis; ours run along z.
+_Y_TO_Z = np.array([[1.0, 0, 0, 0], [0, 0, -1.0, 0], [0, 1.0, 0, 0], [0, 0, 0, 1.0]])
+
+
+def new_visualizer(open_browser: bool = False):
+    """Start a meshcat server (local, loopback) and return its Visualizer."""
+    import meshcat
+
+    vis = meshcat.Visualizer()
+    if open_browser:  # pragma: no cover - interactive
+        vis.open()
+    return vis
+
+
+def _material(color: int, opacity: float):
+    import meshcat.geometry as g
+
+    return g.MeshLambertMaterial(color=color, opacity=opacity, transparent=opacity < 1.0)
+
+
+def add_hand(vis: Any, hand: HandModel, q: np.ndarray, T_world_palm: np.ndarray | None = None,
+             path: str = "hand", color: int = HAND_COLOR, opacity: float = 0.8) -> None:
+    """Draw the canonical hand (palm cylinder + finger capsules) at configuration ``q``."""
+    import meshcat.geometry as g
+
+    T0 = np.eye(4) if T_world_palm is None else np.asarray(T_world_palm, dtype=float)
+    mat = _material(color, opacity)
+    vis[path].delete()
+    palm = hand.palm
+    Tp = np.eye(4)
+    Tp[:3, :3] = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])  # cylinder y -> palm x
+    Tp[:3, 3] = (0.0, 0.0, palm["radius"])
+    vis[path]["palm"].set_object(g.Cylinder(palm["depth"], palm["radius"]), mat)
+    vis[path]["palm"].set_transform(T0 @ Tp)
+    caps = hand.capsules(q)
+    for k, link in enumerate(caps.link):
+        a, b, r = caps.p0[k], caps.p1[k], float(caps.radius[k])
+        d = b - a
+        length = float(np.linalg.norm(d))
+        z = d / length if length > 1e-12 else np.array([0.0, 0.0, 1.0])
+        x = np.cross([0.0, 1.0, 0.0], z) if abs(z[1]) < 0.9 else np.cross([1.0, 0.0, 0.0], z)
+        x /= np.linalg.norm(x)
+        R = np.column_stack([x, np.cross(z, x), z])
+        Tc = np.eye(4)
+        Tc[:3, :3] = R
+        Tc[:3, 3] = (a + b) / 2
+        node = vis[path][link]
+        if length > 1e-9:
+            node["body"].set_object(g.Cylinder(length, r), mat)
+            node["body"].set_transform(T0 @ Tc @ _Y_TO_Z)
+        for end, p in (("end0", a), ("end1", b)):
+            Ts = np.eye(4)
+            Ts[:3, 3] = p
+            node[end].set_object(g.Sphere(r), mat)
+            node[end].set_transform(T0 @ Ts)
+
+
+def add_mesh(vis: Any, vertices: np.ndarray, faces: np.ndarray, T: np.ndarray | None = None,
+             path: str = "object", color: int = OBJECT_COLOR, opacity: float = 1.0) -> None:
+    """Draw a triangle mesh (vertices in metres) at pose ``T``."""
+    import meshcat.geometry as g
+
+    vis[path].set_object(g.TriangularMeshGeometry(np.asarray(vertices, dtype=float), np.asarray(faces, dtype=np.int64)),
+                         _material(color, opacity))
+    vis[path].set_transform(np.eye(4) if T is None else np.asarray(T, dtype=float))
+
+
+def add_points(vis: Any, points: np.ndarray, path: str = "points", color: int = 0xFF3030, size: float = 0.004) -> None:
+    """Draw a point cloud (N,3)."""
+    import meshcat.geometry as g
+
+    pts = np.asarray(points, dtype=np.float32).T
+    colors = np.tile(np.array([[(color >> 16) & 255], [(color >> 8) & 255], [color & 255]], dtype=np.float32) / 255.0, (1, pts.shape[1]))
+    vis[path].set_object(g.PointCloud(pts, colors, size=size))
+
+
+def add_frame(vis: Any, T: np.ndarray, path: str = "frame", length: float = 0.05) -> None:
+    """Draw a coordinate triad (x red, y green, z blue)."""
+    import meshcat.geometry as g
+
+    vis[path].set_object(g.triad(length))
+    vis[path].set_transform(np.asarray(T, dtype=float))
+
+
+def static_html(vis: Any) -> str:
+    """A self-contained HTML snapshot of the scene (opens without a server)."""
+    return vis.static_html()
+
+
+def save_html(vis: Any, path: str | Path) -> Path:
+    """Write :func:`static_html` to ``path`` (atomically)."""
+    import os
+    import tempfile
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=str(path.parent), suffix=".tmp")
+    with os.fdopen(fd, "w") as fh:
+        fh.write(static_html(vis))
+    os.replace(tmp, path)
+    return path
