@@ -1,0 +1,77 @@
+"""Objects: repair of real meshes, SDF signs, analytic volumes of the built-ins, samples, errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from ohra import ObjectError
+from ohra.objects import ObjectModel, builtin_object_names, farthest_point_sampling
+from ohra.objects_builtin import ANALYTIC_VOLUME
+
+
+@pytest.mark.parametrize("name", list(ANALYTIC_VOLUME))
+def test_builtin_volume_is_analytic_within_one_percent(name):
+    o = ObjectModel.builtin(name)
+    assert o.volume == pytest.approx(ANALYTIC_VOLUME[name], rel=0.01)
+    assert o.mass == pytest.approx(o.volume * 500.0)
+
+
+def test_builtins_include_a_non_convex_shape_with_convex_pieces():
+    assert {"sphere", "box", "cylinder", "capsule", "ellipsoid"} <= set(builtin_object_names())
+    o = ObjectModel.builtin("l_block")
+    assert o.mesh.convex_hull.volume > 1.2 * o.volume
+    assert len(o.convex_pieces()) == 2
+
+
+def test_repaired_ycb_can_has_volume_and_consistent_sdf_signs(objects_dir):
+    o = ObjectModel.load(objects_dir / "ycb" / "MasterChefCan")
+    assert not o.repair_report.watertight_before
+    assert o.volume > 0
+    g = o.sdf()
+    inside = g.query(o.center_mass[None])[0]
+    outside = g.query((o.bounds[1] + 0.04)[None])[0]
+    assert inside < -0.02 and outside > 0.03
+    assert o.signed_distance(o.center_mass[None])[0] < 0
+
+
+def test_sdf_of_a_sphere_is_accurate():
+    o = ObjectModel.builtin("sphere")
+    pts = np.array([[0, 0, 0], [0.05, 0, 0], [0, 0.02, 0], [0, 0, -0.08]])
+    exact = np.linalg.norm(pts, axis=1) - 0.035
+    assert np.allclose(o.signed_distance(pts), exact, atol=1.5e-3)
+    assert np.allclose(o.sdf().query(pts), exact, atol=3e-3)
+
+
+def test_surface_samples_are_seeded_and_on_the_surface():
+    o = ObjectModel.builtin("box")
+    a, na = o.sample_surface(256, seed=3, oversample=4)
+    b, _ = o.sample_surface(256, seed=3, oversample=4)
+    assert np.array_equal(a, b) and a.shape == (256, 3)
+    assert np.allclose(np.abs(o.signed_distance(a)), 0.0, atol=2e-3)
+    assert np.allclose(np.linalg.norm(na, axis=1), 1.0)
+
+
+def test_farthest_point_sampling_spreads_points():
+    pts = np.random.default_rng(0).random((500, 3))
+    idx = farthest_point_sampling(pts, 20, seed=0)
+    assert len(set(idx.tolist())) == 20
+
+
+def test_urdf_object_applies_its_scale(objects_dir):
+    a = ObjectModel.load(objects_dir / "ycb" / "TomatoSoupCan" / "model.urdf")
+    b = ObjectModel.load(objects_dir / "ycb" / "TomatoSoupCan" / "textured_simple_reoriented.obj")
+    scale = float(np.ptp(a.mesh.vertices, axis=0).max() / np.ptp(b.mesh.vertices, axis=0).max())
+    assert scale == pytest.approx(0.7, rel=1e-3) or scale == pytest.approx(1.0, rel=1e-3)
+
+
+def test_missing_or_empty_mesh_is_a_clear_error(tmp_path):
+    with pytest.raises(ObjectError, match="not found"):
+        ObjectModel.load(tmp_path / "nope.obj")
+    empty = tmp_path / "empty.obj"
+    empty.write_text("# nothing\n")
+    with pytest.raises(ObjectError, match="no faces"):
+        ObjectModel.load(empty)
+    with pytest.raises(ObjectError, match="unknown built-in object"):
+        ObjectModel.builtin("teapot")
