@@ -1,0 +1,66 @@
+"""``python -m ohra.synth``: synthesise a filtered grasp dataset for one or more hands."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Sequence
+
+from ..errors import OhraError
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def build_parser(prog: str = "python -m ohra.synth") -> argparse.ArgumentParser:
+    p = _Parser(prog=prog, description="Synthesise force-closure grasps (CasADi/IPOPT) and filter them in PyBullet.")
+    p.add_argument("--hand", required=True, help="registered hand, leap_XXXX, a params JSON, or all-leap")
+    p.add_argument("--objects", nargs="+", default=["builtin"], help="builtin | builtin:NAME | mesh/URDF file | folder (default: builtin)")
+    p.add_argument("--grasps-per-object", type=int, default=8, help="solver restarts per object (default 8)")
+    p.add_argument("--workers", type=int, default=1, help="worker processes (default 1)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", default="out/grasps", help="dataset directory (default out/grasps)")
+    p.add_argument("--no-filter", action="store_true", help="skip the PyBullet filter")
+    p.add_argument("--resume", action="store_true", help="skip shards that are complete")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    return p
+
+
+def _hands(spec: str):
+    from ..hands import get_hand, variant_names
+
+    if spec == "all-leap":
+        return [(n, get_hand(n)) for n in variant_names() if get_hand(n).num_fingers >= 2]
+    name = Path(spec).stem if spec.endswith(".json") else spec
+    return [(name, get_hand(spec))]
+
+
+def run(argv: Sequence[str] | None = None, prog: str = "python -m ohra.synth") -> int:
+    args = build_parser(prog).parse_args(argv)
+    try:
+        if args.workers < 1:
+            raise OhraError(f"--workers must be >= 1, got {args.workers}")
+        if args.grasps_per_object < 1:
+            raise OhraError(f"--grasps-per-object must be >= 1, got {args.grasps_per_object}")
+        out = Path(args.out)
+        if out.exists() and not out.is_dir():
+            raise OhraError(f"--out {out} exists and is not a directory")
+        from ..objects import resolve_objects
+        from .pipeline import SynthSettings, synthesize
+
+        hands = _hands(args.hand)
+        objects = resolve_objects(args.objects)
+        settings = SynthSettings(grasps_per_object=args.grasps_per_object, seed=args.seed, filter=not args.no_filter)
+        man = synthesize(hands, objects, out, settings, workers=args.workers, resume=args.resume, progress=not args.quiet)
+    except OhraError as exc:
+        print(f"ohra.synth: error: {exc}", file=sys.stderr)
+        return 2
+    for name, entry in man["hands"].items():
+        c = entry["counts"]
+        rate = c["grasps"] / max(c["solved"], 1)
+        print(f"{name}: {c['candidates']} solves, {c['solved']} converged, {c['grasps']} passed the filter "
+              f"(pass rate {rate:.0%}) -> {out.resolve()}")
+    return 0

@@ -1,0 +1,202 @@
+"""The force-closure grasp NLP (CasADi + IPOPT) for one canonical hand and one object.
+
+Decision variables: palm translation ``t`` (object frame, m), a rotation-vector increment ``w``
+about a sampled initial orientation ``R0`` (``R = R0 Exp(w)``), the movable joints, and one contact
+force per contact (object frame, normalised units). Contacts are the end sphere of the last present
+segment of every present finger (plus the palm face for hands with fewer than three fingers, whose
+point contacts cannot resist every wrench).
+
+Constraints: contact spheres on the surface (``-0.5 mm <= sdf - r <= 1 mm``), every other capsule
+sample and palm sample at least 1 mm clear of the object, different fingers' samples apart, force
+and torque balance, friction cones with the design friction ``mu`` (0.5, well below the simulator's
+3.0) and a unit minimum normal force. Objective: small forces plus a posture prior. The object is a
+C2 cubic B-spline interpolant of its SDF grid. One solver per (hand, object) is reused across all
+restarts, which differ only in their parameters (``R0``, posture prior) and initial guesses.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from ..kinematics import HandModel
+from ..objects import ObjectModel
+from ..urdfgen import palm_geometry
+from .fk import frame_transforms
+
+SUCCESS_STATUSES = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+
+
+@dataclass(frozen=True)
+class NLPSettings:
+    mu: float = 0.5  # design friction
+    contact_band: tuple[float, float] = (-0.0005, 0.001)  # m, sdf - r at the contacts
+    clearance: float = 0.001  # m, other links and palm
+    finger_gap: float = 0.001  # m between different fingers
+    w_force: float = 1e-2
+    w_posture: float = 1e-1
+    torque_length: float = 0.05  # m, torque normalisation
+    max_iter: int = 300
+    sdf_cells: int = 40
+    tol: float = 1e-6
+
+
+def _rodrigues(w: ca.SX) -> ca.SX:
+    th = ca.sqrt(ca.dot(w, w) + 1e-12)
+    K = ca.skew(w / th)
+    return ca.SX.eye(3) + ca.sin(th) * K + (1 - ca.cos(th)) * (K @ K)
+
+
+class GraspNLP:
+    """A compiled IPOPT problem for one hand and one object, solved from many starts."""
+
+    def __init__(self, hand: HandModel, obj: ObjectModel, settings: NLPSettings | None = None):
+        self.hand, self.obj = hand, obj
+        self.s = s = settings or NLPSettings()
+        grid = obj.sdf(max_cells=s.sdf_cells)
+        self.grid = grid
+        axes = grid.axes()
+        sdf_fn = ca.interpolant("sdf", "bspline", axes, grid.values.ravel(order="F"))
+        lo = np.array([a[0] for a in axes])
+        hi = np.array([a[-1] for a in axes])
+
+        ps = ca.SX.sym("p", 3)
+        pcl = ca.fmin(ca.fmax(ps, lo + 1e-6), hi - 1e-6)
+        dist = sdf_fn(pcl) + ca.sqrt(ca.dot(ps - pcl, ps - pcl) + 1e-12) - 1e-6
+        phi = ca.Function("phi", [ps], [dist])
+        grad_phi = ca.Function("grad_phi", [ps], [ca.gradient(dist, ps)])
+
+        self.movable = np.flatnonzero(hand.movable_joints)
+        nq = len(self.movable)
+        caps = hand.capsule_specs
+        fingers = sorted({c[1] for c in caps})
+        last = {f: max((c for c in caps if c[1] == f), key=lambda c: ("proximal", "middle", "distal").index(c[0].split("_")[1])) for f in fingers}
+        self.contact_links = [last[f][0] for f in fingers]
+        R_palm, depth = palm_geometry(hand.params)
+        self.palm_contact = len(fingers) < 3
+        n_c = len(fingers) + (1 if self.palm_contact else 0)
+        self.n_contacts = n_c
+
+        t = ca.SX.sym("t", 3)
+        w = ca.SX.sym("w", 3)
+        qm = ca.SX.sym("q", nq)
+        f = ca.SX.sym("f", 3 * n_c)
+        R0 = ca.SX.sym("R0", 3, 3)
+        q_pref = ca.SX.sym("q_pref", nq)
+        center = ca.SX(obj.center_mass)
+        q_full = ca.SX.zeros(22)
+        fixed = np.clip(np.zeros(22), hand.lower, hand.upper)
+        for k in range(22):
+            q_full[k] = fixed[k]
+        for i, k in enumerate(self.movable):
+            q_full[int(k)] = qm[i]
+        R = R0 @ _rodrigues(w)
+        links = [c[0] for c in caps]
+        poses = dict(zip(links, frame_transforms(hand, q_full, links))) if links else {}
+
+        g, lbg, ubg = [], [], []
+        contact_pts, normals = [], []
+        spheres: list[tuple[ca.SX, float, int]] = []  # (world point, radius, finger)
+        for (link, fi, r, L) in caps:
+            Rl, pl = poses[link]
+            a = R @ (pl + Rl @ ca.SX([0, 0, r])) + t
+            b = R @ (pl + Rl @ ca.SX([0, 0, L - r])) + t
+            samples = [a, b] if L - 2 * r < 0.02 else [a, 0.5 * (a + b), b]
+            if link in self.contact_links:
+                d = phi(b)
+                g.append(d - r); lbg.append(s.contact_band[0]); ubg.append(s.contact_band[1])
+                grad = grad_phi(b)
+                n = grad / ca.sqrt(ca.dot(grad, grad) + 1e-12)
+                contact_pts.append(b - r * n)
+                normals.append(n)
+                samples = samples[:-1]
+            for p in samples:
+                g.append(phi(p) - r); lbg.append(s.clearance); ubg.append(ca.inf)
+            spheres += [(p, r, fi) for p in ([a, b] if len(samples) < 3 else [a, 0.5 * (a + b), b])]
+        # palm: spheres of the palm's half-thickness over its disc
+        pr = depth / 2.0
+        ys = np.linspace(-(R_palm - pr), R_palm - pr, 4)
+        zs = np.linspace(pr, 2 * R_palm - pr, 4)
+        for y in ys:
+            for z in zs:
+                if y * y + (z - R_palm) ** 2 <= (R_palm - pr) ** 2 + 1e-9:
+                    p = R @ ca.SX([0.0, y, z]) + t
+                    g.append(phi(p) - pr); lbg.append(s.clearance if not self.palm_contact else 0.0); ubg.append(ca.inf)
+        if self.palm_contact:
+            pc = R @ ca.SX([depth / 2.0, 0.0, R_palm]) + t
+            d = phi(pc)
+            g.append(d); lbg.append(s.contact_band[0]); ubg.append(s.contact_band[1])
+            grad = grad_phi(pc)
+            n = grad / ca.sqrt(ca.dot(grad, grad) + 1e-12)
+            contact_pts.append(pc)
+            normals.append(n)
+        # different fingers keep apart
+        for i in range(len(spheres)):
+            for j in range(i + 1, len(spheres)):
+                pa, ra, fa = spheres[i]
+                pb_, rb, fb = spheres[j]
+                if fa != fb:
+                    dd = pa - pb_
+                    g.append(ca.dot(dd, dd) - (ra + rb + s.finger_gap) ** 2); lbg.append(0.0); ubg.append(ca.inf)
+        # wrench balance and friction cones
+        F = ca.SX.zeros(3)
+        Tq = ca.SX.zeros(3)
+        for i, (p, n) in enumerate(zip(contact_pts, normals)):
+            fi_ = f[3 * i : 3 * i + 3]
+            fn = -ca.dot(fi_, n)
+            ft = fi_ + fn * n
+            g.append(fn); lbg.append(1.0); ubg.append(ca.inf)
+            g.append(s.mu**2 * fn * fn - ca.dot(ft, ft)); lbg.append(0.0); ubg.append(ca.inf)
+            F += fi_
+            Tq += ca.cross(p - center, fi_) / s.torque_length
+        for k in range(3):
+            g.append(F[k]); lbg.append(0.0); ubg.append(0.0)
+        for k in range(3):
+            g.append(Tq[k]); lbg.append(0.0); ubg.append(0.0)
+        J = s.w_force * ca.dot(f, f) + s.w_posture * ca.dot(qm - q_pref, qm - q_pref)
+        x = ca.vertcat(t, w, qm, f)
+        p_par = ca.vertcat(ca.reshape(R0, 9, 1), q_pref)
+        opts = {"ipopt.print_level": 0, "print_time": 0, "ipopt.sb": "yes", "ipopt.max_iter": s.max_iter,
+                "ipopt.tol": s.tol, "ipopt.constr_viol_tol": 1e-4, "ipopt.mu_strategy": "adaptive"}
+        self.solver = ca.nlpsol("grasp", "ipopt", {"x": x, "p": p_par, "f": J, "g": ca.vertcat(*g)}, opts)
+        self.lbg, self.ubg = np.array(lbg, dtype=float), np.array(ubg, dtype=float)
+        n_x = x.shape[0]
+        self.lbx = np.full(n_x, -np.inf)
+        self.ubx = np.full(n_x, np.inf)
+        self.lbx[3:6], self.ubx[3:6] = -np.pi, np.pi
+        self.lbx[6 : 6 + nq] = hand.lower[self.movable]
+        self.ubx[6 : 6 + nq] = hand.upper[self.movable]
+        self.n_x, self.nq = n_x, nq
+        self._contact_fn = ca.Function("contacts", [x, p_par], [ca.horzcat(*contact_pts).T if contact_pts else ca.SX.zeros(0, 3)])
+
+    def solve(self, R0: np.ndarray, t0: np.ndarray, q0: np.ndarray, q_pref: np.ndarray) -> dict:
+        """Solve from one start; returns grasp (31,), status, success, constraint violation, contacts."""
+        x0 = np.zeros(self.n_x)
+        x0[:3] = t0
+        x0[6 : 6 + self.nq] = q0[self.movable]
+        # forces start along the direction to the object centre from each contact's rough position
+        x0[6 + self.nq :] = np.tile([0.0, 0.0, 0.0], self.n_contacts)
+        p = np.concatenate([np.asarray(R0, dtype=float).reshape(-1, order="F"), q_pref[self.movable]])
+        sol = self.solver(x0=x0, p=p, lbx=self.lbx, ubx=self.ubx, lbg=self.lbg, ubg=self.ubg)
+        stats = self.solver.stats()
+        x = np.asarray(sol["x"]).ravel()
+        gval = np.asarray(sol["g"]).ravel()
+        viol = float(np.maximum(np.maximum(self.lbg - gval, gval - self.ubg), 0.0).max()) if gval.size else 0.0
+        w = x[3:6]
+        th = np.sqrt(w @ w + 1e-12)
+        K = np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]]) / th
+        R = R0 @ (np.eye(3) + np.sin(th) * K + (1 - np.cos(th)) * K @ K)
+        q = np.clip(np.zeros(22), self.hand.lower, self.hand.upper)
+        q[self.movable] = x[6 : 6 + self.nq]
+        from ..rotations import matrix_to_rot6d
+
+        grasp = np.concatenate([x[:3], matrix_to_rot6d(R), q])
+        contacts = np.asarray(self._contact_fn(x, p))
+        forces = x[6 + self.nq :].reshape(-1, 3)
+        status = stats.get("return_status", "unknown")
+        return {
+            "grasp": grasp, "status": status, "success": bool(stats.get("success", False)) and viol <= 1e-3,
+            "violation": viol, "iterations": int(stats.get("iter_count", -1)), "contacts": contacts, "forces": forces,
+        }
