@@ -1,0 +1,108 @@
+"""Grasp synthesis: solved grasps satisfy their constraints, datasets, resume, bad input."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from ohra.data import GraspDataset
+from ohra.hands import get_hand
+from ohra.kinematics import HandModel
+from ohra.objects import ObjectModel
+from ohra.rotations import grasp_to_pose
+from ohra.synth.init import initial_poses
+from ohra.synth.nlp import GraspNLP
+from ohra.synth.pipeline import SynthSettings, synthesize
+from ohra.synth.quality import ferrari_canny
+
+
+@pytest.fixture(scope="module")
+def sphere_nlp():
+    hand = HandModel.from_params(get_hand("leap_3303"))
+    obj = ObjectModel.builtin("sphere")
+    return hand, obj, GraspNLP(hand, obj)
+
+
+def test_solved_grasps_touch_without_penetrating_and_have_force_closure(sphere_nlp):
+    hand, obj, nlp = sphere_nlp
+    starts = initial_poses(hand, obj, 4, np.random.default_rng(0))
+    solved = 0
+    for st in starts:
+        r = nlp.solve(st["R0"], st["t0"], st["q0"], st["q_pref"])
+        if not r["success"]:
+            continue
+        solved += 1
+        T, q = grasp_to_pose(r["grasp"])
+        caps = hand.capsules(q)
+        p0 = caps.p0 @ T[:3, :3].T + T[:3, 3]
+        p1 = caps.p1 @ T[:3, :3].T + T[:3, 3]
+        # exact sphere distance (not the grid) for the contact capsule ends
+        for k, link in enumerate(caps.link):
+            d1 = np.linalg.norm(p1[k]) - 0.035 - caps.radius[k]
+            d0 = np.linalg.norm(p0[k]) - 0.035 - caps.radius[k]
+            if link in nlp.contact_links:
+                assert -0.0015 <= d1 <= 0.002, (link, d1)
+            assert d0 >= -0.0015, (link, d0)
+        assert ferrari_canny(r["contacts"], obj, 0.5) > 0
+    assert solved >= 3
+
+
+def test_pipeline_writes_a_valid_dataset_and_resume_reproduces_it(tmp_path):
+    settings = SynthSettings(grasps_per_object=2, seed=3)
+    objs = [ObjectModel.builtin("box"), ObjectModel.builtin("sphere")]
+    hands = [("leap_2200", get_hand("leap_2200"))]
+    full = synthesize(hands, objs, tmp_path / "full", settings, progress=False)
+    # interrupted run: only the first object done, then resume
+    synthesize(hands, objs[:1], tmp_path / "part", settings, progress=False)
+    resumed = synthesize(hands, objs, tmp_path / "part", settings, resume=True, progress=False)
+    for name in ("box", "sphere"):
+        a = GraspDataset(tmp_path / "full").load_shard("leap_2200", name)
+        b = GraspDataset(tmp_path / "part").load_shard("leap_2200", name)
+        assert np.array_equal(a["raw"], b["raw"]) and np.array_equal(a["grasps"], b["grasps"], equal_nan=True)
+    ds = GraspDataset(tmp_path / "full")
+    assert ds.grasps().shape[1] == 31
+    assert full["hands"]["leap_2200"]["counts"]["candidates"] == 4
+    assert resumed["hands"]["leap_2200"]["counts"] == full["hands"]["leap_2200"]["counts"]
+
+
+def test_dataset_rejects_a_tampered_shard(tmp_path):
+    synthesize([("leap_2200", get_hand("leap_2200"))], [ObjectModel.builtin("box")], tmp_path, SynthSettings(grasps_per_object=1, filter=False), progress=False)
+    man = json.loads((tmp_path / "manifest.json").read_text())
+    shard = tmp_path / man["hands"]["leap_2200"]["shards"]["box"]["file"]
+    shard.write_bytes(shard.read_bytes()[:-10] + b"0123456789")
+    from ohra.errors import DatasetError
+
+    with pytest.raises(DatasetError, match="does not match the manifest"):
+        GraspDataset(tmp_path).load_shard("leap_2200", "box")
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--hand", "no_such_hand"], "unknown hand"),
+        (["--hand", "leap_1000"], "at least two"),
+        (["--hand", "leap_3303", "--objects", "/nonexistent/obj.stl"], "not found"),
+        (["--hand", "leap_3303", "--workers", "0"], "--workers must be >= 1"),
+        (["--hand", "leap_3303", "--out", "{file}"], "not a directory"),
+    ],
+)
+def test_bad_input_is_one_line_and_exit_2(tmp_path, args, message):
+    f = tmp_path / "afile"
+    f.write_text("x")
+    empty = tmp_path / "empty.obj"
+    empty.write_text("")
+    args = [a.format(file=f) for a in args]
+    proc = subprocess.run([sys.executable, "-m", "ohra.synth", *args, "--quiet"], capture_output=True, text=True)
+    lines = [l for l in proc.stderr.splitlines() if l.strip() and "pybullet build time" not in l]
+    assert proc.returncode == 2 and len(lines) == 1 and message in lines[0], proc.stderr
+
+
+def test_empty_object_file_is_rejected(tmp_path):
+    empty = tmp_path / "empty.obj"
+    empty.write_text("")
+    proc = subprocess.run([sys.executable, "-m", "ohra.synth", "--hand", "leap_3303", "--objects", str(empty), "--quiet"], capture_output=True, text=True)
+    assert proc.returncode == 2 and "no faces" in proc.stderr
