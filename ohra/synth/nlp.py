@@ -189,7 +189,8 @@ class GraspNLP:
         K = np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]]) / th
         R = R0 @ (np.eye(3) + np.sin(th) * K + (1 - np.cos(th)) * K @ K)
         q = np.clip(np.zeros(22), self.hand.lower, self.hand.upper)
-        q[self.movable] = x[6 : 6 + self.nq]
+        # IPOPT may relax bounds by ~1e-8; clip so the grasp is exactly within the limits
+        q[self.movable] = np.clip(x[6 : 6 + self.nq], self.hand.lower[self.movable], self.hand.upper[self.movable])
         from ..rotations import matrix_to_rot6d
 
         grasp = np.concatenate([x[:3], matrix_to_rot6d(R), q])
