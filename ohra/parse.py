@@ -686,14 +686,18 @@ def original_keypoints(m: Measurement, q_orig: np.ndarray) -> OriginalKeypoints:
 
 
 def sample_original(m: Measurement, n: int, seed: int) -> np.ndarray:
-    """(n+1, dof) original configurations: canonical zero, then n uniform within the mapped joints'
-    limits (unmapped joints stay at their canonical-zero value)."""
+    """(n, dof) original configurations uniform within the mapped joints' limits (unmapped joints
+    stay at their canonical-zero value), preceded by canonical zero itself when that lies within the
+    original limits (Barrett's bent distal links, e.g., cannot straighten)."""
     hand, am = m.hand, m.action_map
     rng = np.random.default_rng(seed)
-    q = np.tile(m.q0, (n + 1, 1))
+    q = np.tile(m.q0, (n, 1))
     mapped = am.mapped_original
     lo, up = hand.lower[mapped], hand.upper[mapped]
-    q[1:, mapped] = lo + rng.random((n, int(mapped.sum()))) * (up - lo)
+    q[:, mapped] = lo + rng.random((n, int(mapped.sum()))) * (up - lo)
+    q0 = m.q0[mapped]
+    if np.all((q0 >= lo - 1e-9) & (q0 <= up + 1e-9)):
+        q = np.vstack([m.q0[None], q])
     return q
 
 

@@ -119,3 +119,95 @@ def save_html(vis: Any, path: str | Path) -> Path:
         fh.write(static_html(vis))
     os.replace(tmp, path)
     return path
+
+
+# -- original vs canonical overlays (parser / fidelity) ----------------------------------------------
+def add_capsules(vis: Any, capsules: Any, T_world_palm: np.ndarray | None = None, path: str = "capsules",
+                 color: int = HAND_COLOR, opacity: float = 0.8) -> None:
+    """Draw :class:`ohra.Capsules` (one configuration) as cylinders + end spheres."""
+    import meshcat.geometry as g
+
+    T0 = np.eye(4) if T_world_palm is None else np.asarray(T_world_palm, dtype=float)
+    mat = _material(color, opacity)
+    for k, link in enumerate(capsules.link):
+        a, b, r = capsules.p0[k], capsules.p1[k], float(capsules.radius[k])
+        d = b - a
+        length = float(np.linalg.norm(d))
+        z = d / length if length > 1e-12 else np.array([0.0, 0.0, 1.0])
+        x = np.cross([0.0, 1.0, 0.0], z) if abs(z[1]) < 0.9 else np.cross([1.0, 0.0, 0.0], z)
+        x /= np.linalg.norm(x)
+        Tc = np.eye(4)
+        Tc[:3, :3] = np.column_stack([x, np.cross(z, x), z])
+        Tc[:3, 3] = (a + b) / 2
+        if length > 1e-9:
+            vis[path][link]["body"].set_object(g.Cylinder(length, r), mat)
+            vis[path][link]["body"].set_transform(T0 @ Tc @ _Y_TO_Z)
+        for end, p in (("end0", a), ("end1", b)):
+            Ts = np.eye(4)
+            Ts[:3, 3] = p
+            vis[path][link][end].set_object(g.Sphere(r), mat)
+            vis[path][link][end].set_transform(T0 @ Ts)
+
+
+def add_original(vis: Any, hand: Any, q_orig: np.ndarray, T_world_root: np.ndarray | None = None,
+                 path: str = "original", color: int = ORIGINAL_COLOR, opacity: float = 0.6,
+                 links: list[str] | None = None, prefer: str = "collision") -> None:
+    """Draw an :class:`ohra.original.OriginalHand` at its joint vector ``q_orig`` (root pose ``T_world_root``)."""
+    import warnings
+
+    T0 = np.eye(4) if T_world_root is None else np.asarray(T_world_root, dtype=float)
+    names = list(hand.links if links is None else links)
+    poses = hand.link_poses(np.asarray(q_orig, dtype=float), names)
+    vis[path].delete()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for name, T in zip(names, poses):
+            m = hand.link_geometry(name, prefer=prefer)
+            if m is None:
+                continue
+            add_mesh(vis, m.vertices, m.faces, T0 @ T, path=f"{path}/{name}", color=color, opacity=opacity)
+
+
+def add_overlay(vis: Any, name: str, form: str = "base", q: np.ndarray | None = None,
+                T_world_palm: np.ndarray | None = None, path: str = "overlay", original: bool = True) -> None:
+    """The paper's Fig. 2 view: a registered hand's original meshes and canonical capsules at the same
+    canonical configuration ``q`` (default 0 clamped into the limits), both in the palm frame."""
+    from .hands import registry
+    from .kinematics import HandModel
+    from .transforms import invert, xyzrpy_to_matrix
+
+    params = registry.registered_params(name, form)
+    hm = HandModel.from_params(params)
+    qc = hm.neutral() if q is None else hm.clamp(q)
+    T0 = np.eye(4) if T_world_palm is None else np.asarray(T_world_palm, dtype=float)
+    add_hand(vis, hm, qc, T0, path=f"{path}/canonical")
+    if original:
+        import warnings
+
+        sp = registry.spec(name)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            orig = registry.load_original(name)
+        am = sp.action_map(form, orig.movable_joints)
+        T_root = T0 @ invert(xyzrpy_to_matrix(sp.palm_origin))
+        add_original(vis, orig, am.to_original(qc), T_root, path=f"{path}/original")
+
+
+def compare_html(name: str, form: str, out: str | Path, seed: int = 0, vis: Any = None) -> Path:
+    """Static HTML with the overlay at q = 0 and at a random configuration (side by side, 0.3 m apart)."""
+    from .hands import registry
+    from .kinematics import HandModel
+
+    hm = HandModel.from_params(registry.registered_params(name, form))
+    vis = new_visualizer() if vis is None else vis
+    vis.delete()
+    add_overlay(vis, name, form, None, np.eye(4), path="q0")
+    T = np.eye(4)
+    T[1, 3] = -0.3
+    add_overlay(vis, name, form, hm.random_configurations(1, seed)[0], T, path="random")
+    return save_html(vis, out)
+
+
+def show_hand(vis: Any, name: str, form: str = "base", q: np.ndarray | None = None, original: bool = False) -> None:
+    """Draw a registered hand (optionally over its original) for ``ohra hand show``."""
+    add_overlay(vis, name, form, q, path="hand", original=original)

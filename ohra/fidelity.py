@@ -1,0 +1,291 @@
+"""How well a canonical hand reproduces its original: joint, fingertip and surface errors.
+
+For a hand and a form, N original configurations are sampled uniformly within the mapped joints'
+limits (seeded; unmapped joints at their canonical-zero value), mapped to canonical with the hand's
+:class:`ohra.ActionMap`, and both hands are compared in the canonical palm frame:
+
+* **joints**: distance from each canonical joint origin to the mapped original joint's axis line
+  (a revolute joint's position along its own axis has no kinematic meaning); ``joint_origins``
+  reports the plain distance between the original child-frame origin and the canonical joint origin.
+* **tips**: canonical tip frame vs the original fingertip point. The original fingertip is defined
+  automatically: the point of the distal link's geometry (the child link of the finger's last mapped
+  joint, with links fixed to it; collision geometry, else visual) farthest along the finger direction
+  at canonical zero, carried rigidly with that link.
+* **surface**: symmetric mean point-to-surface distance between the canonical capsule hand (palm
+  cylinder + capsules) and the original geometry of the hand's links (the palm link and everything
+  below it), over a few configurations. Original -> canonical distances are analytic; canonical ->
+  original use ``trimesh`` closest-point queries. Hands whose palm mesh is missing show it here.
+
+All statistics are mean / 95th percentile / max in millimetres, per finger and for the hand.
+"""
+
+from __future__ import annotations
+
+import warnings
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .kinematics import HandModel
+from .params import FINGER_SLICES, FINGERS, JOINT_NAMES
+from .parse import Measurement, ParseResult, line_distance, measure, original_keypoints, sample_original
+
+
+@dataclass(frozen=True)
+class Stats:
+    mean: float
+    p95: float
+    max: float
+    n: int
+
+    @classmethod
+    def of(cls, values_m: np.ndarray) -> "Stats":
+        v = np.asarray(values_m, dtype=float).ravel() * 1e3
+        v = v[np.isfinite(v)]
+        if v.size == 0:
+            return cls(float("nan"), float("nan"), float("nan"), 0)
+        return cls(float(v.mean()), float(np.percentile(v, 95)), float(v.max()), int(v.size))
+
+    def to_dict(self) -> dict[str, float]:
+        return {"mean_mm": round(self.mean, 3), "p95_mm": round(self.p95, 3), "max_mm": round(self.max, 3), "n": self.n}
+
+
+@dataclass
+class FidelityReport:
+    hand: str
+    form: str
+    samples: int
+    joints: dict[str, Stats]
+    joint_origins: dict[str, Stats]
+    tips: dict[str, Stats]
+    surface: dict[str, Stats] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "hand": self.hand, "form": self.form, "samples": self.samples,
+            "joints": {k: v.to_dict() for k, v in self.joints.items()},
+            "joint_origins": {k: v.to_dict() for k, v in self.joint_origins.items()},
+            "tips": {k: v.to_dict() for k, v in self.tips.items()},
+            "surface": {k: v.to_dict() for k, v in self.surface.items()},
+            "notes": self.notes,
+        }
+
+    def table(self) -> str:
+        """Plain-text table: rows fingers + hand, columns tip / joint / surface mean, p95, max [mm]."""
+        rows = [f for f in FINGERS if f in self.tips] + ["hand"]
+        lines = [f"{self.hand} ({self.form}), {self.samples} configurations; errors in mm (mean / p95 / max)",
+                 f"{'':8s} {'fingertip':>24s} {'joint (axis line)':>24s} {'surface':>24s}"]
+
+        def cell(d: dict[str, Stats], k: str) -> str:
+            s = d.get(k)
+            return f"{s.mean:7.2f} {s.p95:7.2f} {s.max:7.2f}" if s is not None and s.n else f"{'-':>23s}"
+
+        for r in rows:
+            lines.append(f"{r:8s} {cell(self.tips, r):>24s} {cell(self.joints, r):>24s} {cell(self.surface, r):>24s}")
+        return "\n".join(lines)
+
+
+def _joint_links(urdf: str) -> dict[str, str]:
+    """Canonical joint name -> its child link (the frame at the joint origin)."""
+    root = ET.fromstring(urdf)
+    return {j.get("name"): j.find("child").get("link") for j in root.findall("joint")}
+
+
+def keypoint_errors(res: ParseResult, samples: int = 200, seed: int = 0) -> tuple[dict, dict, dict]:
+    """Per-finger joint (axis-line), joint-origin and fingertip errors [m] as arrays."""
+    m = res.measurement
+    hm = HandModel.from_params(res.params)
+    q_orig = sample_original(m, samples, seed)
+    ok = original_keypoints(m, q_orig)
+    qc = np.clip(ok.q_canon, hm.lower, hm.upper)
+    links = _joint_links(hm.urdf)
+    mapped = [k for k in range(22) if np.isfinite(ok.joints[0, k, 0])]
+    frames = [links[JOINT_NAMES[k]] for k in mapped]
+    P = hm.frame_poses(qc, frames)[..., :3, 3]  # (N, K, 3)
+    tips = hm.fingertips(qc)
+    jerr, oerr, terr = {}, {}, {}
+    for fi, f in enumerate(FINGERS):
+        ks = [i for i, k in enumerate(mapped) if FINGER_SLICES[f].start <= k < FINGER_SLICES[f].stop]
+        if not ks:
+            continue
+        kk = [mapped[i] for i in ks]
+        jerr[f] = line_distance(P[:, ks], ok.joints[:, kk], ok.axes[:, kk])
+        oerr[f] = np.linalg.norm(P[:, ks] - ok.joints[:, kk], axis=-1)
+        if np.isfinite(ok.tips[0, fi, 0]) and np.isfinite(tips[0, fi, 0]):
+            terr[f] = np.linalg.norm(tips[:, fi] - ok.tips[:, fi], axis=-1)
+    return jerr, oerr, terr
+
+
+# -- surface ---------------------------------------------------------------------------------------
+def _capsule_signed(points: np.ndarray, p0: np.ndarray, p1: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Signed distance of points (P,3) to capsules (K) -> (P,K)."""
+    d = p1 - p0
+    L2 = np.maximum(np.sum(d * d, axis=1), 1e-18)
+    w = points[:, None, :] - p0[None]
+    t = np.clip(np.sum(w * d[None], axis=2) / L2, 0.0, 1.0)
+    c = p0[None] + t[..., None] * d[None]
+    return np.linalg.norm(points[:, None, :] - c, axis=2) - r[None]
+
+
+def _palm_signed(points: np.ndarray, R: float, depth: float) -> np.ndarray:
+    """Signed distance to the palm cylinder (axis +x, centre (0,0,R), radius R, length depth)."""
+    x = np.abs(points[:, 0]) - depth / 2.0
+    rad = np.hypot(points[:, 1], points[:, 2] - R) - R
+    outside = np.hypot(np.maximum(x, 0.0), np.maximum(rad, 0.0))
+    return outside + np.minimum(np.maximum(x, rad), 0.0)
+
+
+def _sample_capsule(rng, p0, p1, r, n) -> np.ndarray:
+    """~uniform surface samples of one capsule."""
+    d = p1 - p0
+    L = float(np.linalg.norm(d))
+    z = d / L if L > 1e-12 else np.array([0.0, 0.0, 1.0])
+    x = np.cross(z, [1.0, 0.0, 0.0])
+    if np.linalg.norm(x) < 1e-6:
+        x = np.cross(z, [0.0, 1.0, 0.0])
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    area_cyl, area_sph = 2 * np.pi * r * L, 4 * np.pi * r * r
+    n_cyl = int(round(n * area_cyl / (area_cyl + area_sph)))
+    th = rng.uniform(0, 2 * np.pi, n_cyl)
+    s = rng.uniform(0, 1, n_cyl)
+    cyl = p0 + s[:, None] * d + r * (np.cos(th)[:, None] * x + np.sin(th)[:, None] * y)
+    u = rng.normal(size=(n - n_cyl, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    along = u @ z
+    cap = np.where((along >= 0)[:, None], p1 + r * u, p0 + r * u)
+    return np.vstack([cyl, cap])
+
+
+def _sample_palm(rng, R, depth, n) -> np.ndarray:
+    area_side, area_disc = 2 * np.pi * R * depth, np.pi * R * R
+    n_side = int(round(n * area_side / (area_side + 2 * area_disc)))
+    th = rng.uniform(0, 2 * np.pi, n_side)
+    side = np.column_stack([rng.uniform(-depth / 2, depth / 2, n_side), R * np.cos(th), R + R * np.sin(th)])
+    m = n - n_side
+    rr = R * np.sqrt(rng.uniform(0, 1, m))
+    ph = rng.uniform(0, 2 * np.pi, m)
+    xs = np.where(rng.uniform(0, 1, m) < 0.5, -depth / 2, depth / 2)
+    disc = np.column_stack([xs, rr * np.cos(ph), R + rr * np.sin(ph)])
+    return np.vstack([side, disc])
+
+
+def surface_errors(res: ParseResult, configs: int = 3, points: int = 1500, seed: int = 0) -> dict[str, np.ndarray]:
+    """Per-finger and hand symmetric surface distances [m] (concatenated over configurations)."""
+    import trimesh
+
+    m: Measurement = res.measurement
+    hand = m.hand
+    hm = HandModel.from_params(res.params)
+    rng = np.random.default_rng(seed)
+    hand_links = [l for l in hand.descendants(m.palm_link)]
+    finger_of: dict[str, str] = {}
+    for f, fm in m.fingers.items():
+        for l in fm.seg_links:
+            finger_of[l] = f
+    meshes = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for l in hand_links:
+            g = hand.link_geometry(l)
+            if g is not None:
+                meshes[l] = g
+    q_orig = sample_original(m, configs - 1, seed + 1) if configs > 1 else m.q0[None]
+    ok = original_keypoints(m, q_orig)
+    qc = np.clip(ok.q_canon, hm.lower, hm.upper)
+    palm = hm.palm
+    out: dict[str, list[np.ndarray]] = {k: [] for k in list(m.fingers) + ["hand"]}
+    link_list = list(meshes)
+    poses = hand.link_poses(q_orig, link_list) if link_list else None
+    for c in range(q_orig.shape[0]):
+        parts, labels = [], []
+        for i, l in enumerate(link_list):
+            T = m.T_palm_root @ poses[c, i]
+            mm = meshes[l].copy()
+            mm.apply_transform(T)
+            parts.append(mm)
+            labels.append(finger_of.get(l, "palm"))
+        if not parts:
+            continue
+        areas = np.array([p.area for p in parts])
+        counts = np.maximum(1, np.round(points * areas / areas.sum()).astype(int))
+        o_pts, o_lab = [], []
+        for p, n, lab in zip(parts, counts, labels):
+            s, _ = trimesh.sample.sample_surface(p, int(n), seed=int(rng.integers(1 << 31)))
+            o_pts.append(np.asarray(s))
+            o_lab += [lab] * len(s)
+        o_pts = np.vstack(o_pts)
+        o_lab = np.array(o_lab)
+        caps = hm.capsules(qc[c])
+        sd = np.min(_capsule_signed(o_pts, caps.p0, caps.p1, caps.radius), axis=1) if len(caps.link) else np.full(len(o_pts), np.inf)
+        sd = np.minimum(sd, _palm_signed(o_pts, palm["radius"], palm["depth"]))
+        d_o2c = np.abs(sd)
+        # canonical samples, proportional to area, kept only where on the union's surface
+        c_pts, c_lab = [], []
+        areas_c = [2 * np.pi * r * np.linalg.norm(b - a) + 4 * np.pi * r * r for a, b, r in zip(caps.p0, caps.p1, caps.radius)]
+        area_palm = 2 * np.pi * palm["radius"] * palm["depth"] + 2 * np.pi * palm["radius"] ** 2
+        tot = sum(areas_c) + area_palm
+        for k in range(len(caps.link)):
+            s = _sample_capsule(rng, caps.p0[k], caps.p1[k], caps.radius[k], max(8, int(points * areas_c[k] / tot)))
+            c_pts.append(s)
+            c_lab += [FINGERS[caps.finger[k]]] * len(s)
+        s = _sample_palm(rng, palm["radius"], palm["depth"], max(8, int(points * area_palm / tot)))
+        c_pts.append(s)
+        c_lab += ["palm"] * len(s)
+        c_pts = np.vstack(c_pts)
+        c_lab = np.array(c_lab)
+        inside = np.zeros(len(c_pts), dtype=bool)
+        if len(caps.link):
+            inside |= np.min(_capsule_signed(c_pts, caps.p0, caps.p1, caps.radius), axis=1) < -1e-6
+        inside |= _palm_signed(c_pts, palm["radius"], palm["depth"]) < -1e-6
+        c_pts, c_lab = c_pts[~inside], c_lab[~inside]
+        merged = trimesh.util.concatenate(parts)
+        _, d_c2o, _ = trimesh.proximity.closest_point(merged, c_pts)
+        for f in m.fingers:
+            out[f].append(np.concatenate([d_o2c[o_lab == f], d_c2o[c_lab == f]]))
+        out["hand"].append(np.concatenate([d_o2c, d_c2o]))
+    return {k: np.concatenate(v) if v else np.array([]) for k, v in out.items()}
+
+
+def compare(
+    hand: str | ParseResult,
+    form: str = "base",
+    samples: int = 200,
+    seed: int = 0,
+    surface: bool = True,
+    surface_configs: int = 3,
+    surface_points: int = 1500,
+) -> FidelityReport:
+    """Fidelity of a registered hand (committed params) or of a :class:`ParseResult`."""
+    if isinstance(hand, ParseResult):
+        res = hand
+        name = res.spec.name
+    else:
+        from .hands import registry
+
+        name = hand
+        sp = registry.spec(name)
+        params = registry.registered_params(name, form)
+        orig = registry.load_original(name)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            m = measure(orig, sp, form)
+        res = ParseResult(params, form, sp, m, params, None, list(m.notes))
+    jerr, oerr, terr = keypoint_errors(res, samples, seed)
+    rep = FidelityReport(
+        name, res.form, samples,
+        {**{f: Stats.of(v) for f, v in jerr.items()}, "hand": Stats.of(np.concatenate([v.ravel() for v in jerr.values()]))},
+        {**{f: Stats.of(v) for f, v in oerr.items()}, "hand": Stats.of(np.concatenate([v.ravel() for v in oerr.values()]))},
+        {**{f: Stats.of(v) for f, v in terr.items()}, "hand": Stats.of(np.concatenate([v.ravel() for v in terr.values()]) if terr else np.array([]))},
+        notes=list(res.notes),
+    )
+    if surface:
+        se = surface_errors(res, surface_configs, surface_points, seed)
+        rep.surface = {k: Stats.of(v) for k, v in se.items()}
+    return rep
+
+
+__all__ = ["compare", "FidelityReport", "Stats", "keypoint_errors", "surface_errors"]

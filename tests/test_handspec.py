@@ -1,0 +1,85 @@
+"""HandSpec YAML: the registered specs load; malformed specs raise SpecError naming the problem."""
+
+from __future__ import annotations
+
+import pytest
+
+from ohra.errors import SpecError
+from ohra.handspec import load_spec
+from ohra.hands import registry
+from ohra.resources import hands_data_dir
+
+MINIMAL = """
+name: toy
+urdf: toy.urdf
+palm_origin: {xyz: [0, 0, 0], rpy: [0, 0, 0]}
+joints:
+  index_joint2: a
+  index_joint3: {joint: b, sign: -1, offset: 0.5}
+forms:
+  base: {}
+  extended:
+    joints: {index_joint3: null}
+    fixed: {index_joint3: 0.1}
+"""
+
+
+def test_every_registered_spec_loads_and_names_its_forms():
+    names = registry.registered_hands()
+    assert len(names) == 14
+    for n in names:
+        sp = registry.spec(n)
+        assert sp.name == n
+        assert set(sp.forms) == set(registry.registered_forms(n))
+    assert registry.registered_forms("mano") == ["extended"]
+
+
+def test_shorthand_sign_offset_and_per_form_changes():
+    sp = load_spec(MINIMAL)
+    base = sp.form("base")
+    assert base.slots["index_joint2"].name == "a" and base.slots["index_joint2"].sign == 1.0
+    assert base.slots["index_joint3"].sign == -1.0 and base.slots["index_joint3"].offset == 0.5
+    ext = sp.form("extended")
+    assert "index_joint3" not in ext.slots and ext.fixed == {"index_joint3": 0.1}
+    am = sp.action_map("base", ["a", "b", "c"])
+    assert am.to_canonical([0.0, 1.0, 0.0])[7] == pytest.approx(-0.5)
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (("  index_joint3: {joint: b, sign: -1, offset: 0.5}", "  index_joint3: a"), "duplicate mapping"),
+        (("  index_joint2: a", "  index_joint2: a\n  index_joint2: b"), "duplicate key 'index_joint2'"),
+        (("  index_joint2: a", "  pinky_joint2: a"), "unknown canonical slot 'pinky_joint2'"),
+        (("sign: -1,", "sign: 2,"), "expected 1 or -1"),
+        (("palm_origin: {xyz: [0, 0, 0], rpy: [0, 0, 0]}", "palm_origin: [0, 0]"), "palm_origin"),
+        (("    fixed: {index_joint3: 0.1}", "    fixed: {index_joint2: 0.1}"), "both mapped and fixed"),
+        (("name: toy", "name: toy\ncolour: red"), "unknown key(s) ['colour']"),
+        (("urdf: toy.urdf\n", ""), "missing key 'urdf'"),
+    ],
+)
+def test_malformed_specs_name_the_problem(change, message):
+    text = MINIMAL.replace(*change)
+    assert text != MINIMAL
+    with pytest.raises(SpecError, match=message.replace("(", r"\(").replace(")", r"\)").replace("[", r"\[").replace("]", r"\]")):
+        load_spec(text)
+
+
+def test_override_needs_a_reason():
+    text = MINIMAL + "overrides:\n  - {key: palm_radius, value: 0.05}\n"
+    with pytest.raises(SpecError, match="missing 'reason'"):
+        load_spec(text)
+    ok = load_spec(MINIMAL + "overrides:\n  - {key: 'finger_lengths[0][2]', value: 0.05, reason: tip pad not modelled}\n")
+    assert ok.overrides[0].name == "finger_lengths" and ok.overrides[0].index == (0, 2)
+
+
+def test_check_joints_names_the_missing_joint():
+    sp = load_spec(MINIMAL)
+    with pytest.raises(SpecError, match="'b', which is not a movable joint"):
+        sp.check_joints(["a", "c"])
+
+
+def test_spec_files_are_not_confused_with_other_yaml():
+    # leap_template.yaml is the LEAP-variant input, not a hand spec
+    assert (hands_data_dir() / "leap_template.yaml").is_file()
+    assert "leap_template" not in registry.registered_hands()
