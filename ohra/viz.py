@@ -211,3 +211,55 @@ def compare_html(name: str, form: str, out: str | Path, seed: int = 0, vis: Any 
 def show_hand(vis: Any, name: str, form: str = "base", q: np.ndarray | None = None, original: bool = False) -> None:
     """Draw a registered hand (optionally over its original) for ``ohra hand show``."""
     add_overlay(vis, name, form, q, path="hand", original=original)
+
+
+def add_grasp(vis: Any, hand: HandModel, grasp: np.ndarray, vertices: np.ndarray | None = None, faces: np.ndarray | None = None,
+              path: str = "grasp") -> None:
+    """Draw a grasp (31-vector, palm pose in the object frame) with its object mesh at the origin."""
+    from .rotations import grasp_to_pose
+
+    T, q = grasp_to_pose(np.asarray(grasp, dtype=float))
+    if vertices is not None and faces is not None:
+        add_mesh(vis, vertices, faces, path=f"{path}/object")
+    add_hand(vis, hand, q, T, path=f"{path}/hand")
+
+
+def grasp_png(hand: HandModel, grasp: np.ndarray, vertices: np.ndarray, faces: np.ndarray, path: str | Path,
+              views: tuple[tuple[float, float], ...] = ((20, -60), (20, 30)), size: float = 4.0) -> Path:
+    """Render a grasp to a PNG with matplotlib (no display needed): object mesh + capsule hand,
+    one panel per (elevation, azimuth) view, metres on the axes."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    from .rotations import grasp_to_pose
+
+    T, q = grasp_to_pose(np.asarray(grasp, dtype=float))
+    caps = hand.capsules(q)
+    p0 = caps.p0 @ T[:3, :3].T + T[:3, 3]
+    p1 = caps.p1 @ T[:3, :3].T + T[:3, 3]
+    V, F = np.asarray(vertices), np.asarray(faces)
+    fig = plt.figure(figsize=(size * len(views), size))
+    for k, (elev, azim) in enumerate(views):
+        ax = fig.add_subplot(1, len(views), k + 1, projection="3d")
+        ax.add_collection3d(Poly3DCollection(V[F], facecolor="#d9a066", edgecolor="none", alpha=0.6))
+        pts = np.vstack([V, p0, p1])
+        c, h = pts.mean(axis=0), (pts.max(axis=0) - pts.min(axis=0)).max() / 2 + 0.02
+        pt_per_m = size * 72 * 0.4 / (2 * h)  # marker points per metre at this zoom
+        for a, b, r in zip(p0, p1, caps.radius):
+            n = max(2, int(np.linalg.norm(b - a) / (0.5 * r)) + 2)
+            seg = a + np.linspace(0, 1, n)[:, None] * (b - a)
+            ax.scatter(*seg.T, color="#2a7fd4", s=(2 * r * pt_per_m) ** 2, alpha=0.9, depthshade=False, edgecolors="none")
+        palm = T[:3, 3] + T[:3, :3] @ np.array([0.0, 0.0, hand.palm["radius"]])
+        ax.scatter(*palm, color="#2a7fd4", s=(2 * hand.palm["radius"] * pt_per_m) ** 2, alpha=0.35, edgecolors="none")
+        ax.set_xlim(c[0] - h, c[0] + h); ax.set_ylim(c[1] - h, c[1] + h); ax.set_zlim(c[2] - h, c[2] + h)
+        ax.view_init(elev, azim)
+        ax.set_xlabel("x [m]"); ax.set_ylabel("y [m]"); ax.set_zlabel("z [m]")
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+    return path
