@@ -8,9 +8,10 @@ limits (seeded; unmapped joints at their canonical-zero value), mapped to canoni
   (a revolute joint's position along its own axis has no kinematic meaning); ``joint_origins``
   reports the plain distance between the original child-frame origin and the canonical joint origin.
 * **tips**: canonical tip frame vs the original fingertip point. The original fingertip is defined
-  automatically: the point of the distal link's geometry (the child link of the finger's last mapped
-  joint, with links fixed to it; collision geometry, else visual) farthest along the finger direction
-  at canonical zero, carried rigidly with that link.
+  automatically from the distal link's geometry (the child link of the finger's last mapped joint,
+  with links fixed to it; collision geometry, else visual) at canonical zero: the centroid of its
+  points within 1 mm of the farthest extent along the finger direction, moved out to that extent,
+  and carried rigidly with that link.
 * **surface**: symmetric mean point-to-surface distance between the canonical capsule hand (palm
   cylinder + capsules) and the original geometry of the hand's links (the palm link and everything
   below it), over a few configurations. Original -> canonical distances are analytic; canonical ->

@@ -12,8 +12,8 @@ The rules are general (no hand names anywhere):
 * stations along a finger: base (j1/j2), middle joint (j3 / thumb j3,j4), distal joint (j4 / thumb
   j5) and the fingertip. Link lengths are distances between consecutive stations (collapsed stations
   follow the templates' rules); the **distal length** reaches the fingertip point.
-* fingertip point: the point of the distal link's geometry (with links fixed to it) farthest along
-  the finger direction. Without geometry: the distal joint plus the previous segment's length (warned).
+* fingertip point: the centroid of the distal link's geometry points (with links fixed to it) within
+  1 mm of its farthest extent along the finger direction, moved out to that extent. Without geometry: the distal joint plus the previous segment's length (warned).
 * palm radius: half the mean of the palm geometry's extents in y and z (the disc's plane); without
   palm geometry, from the knuckle spread (warned). Finger radius: half the mean cross-section width
   of each segment link, median over links (base: all fingers; extended: per finger), capped so every
@@ -134,6 +134,18 @@ def _closest_point_on_b(pa: np.ndarray, da: np.ndarray, pb: np.ndarray, db: np.n
     return pb + t * db
 
 
+TIP_BAND = 1e-3  # m: geometry points this close to the farthest extent form the fingertip
+
+
+def _farthest(points: np.ndarray, origin: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """The fingertip point: centroid of the points within TIP_BAND of the farthest extent along z,
+    moved out to that extent (a flat or rounded finger end gives a point on its axis)."""
+    s = (points - origin) @ z
+    top = s.max()
+    c = points[s >= top - TIP_BAND].mean(axis=0)
+    return c + (top - (c - origin) @ z) * z
+
+
 def _warn(notes: list[str], msg: str) -> None:
     notes.append("estimated: " + msg)
     warnings.warn(msg, ParseWarning, stacklevel=3)
@@ -229,10 +241,10 @@ def measure(hand: OriginalHand, spec: HandSpec, form: str) -> Measurement:
             z = _unit(dist_pts.mean(axis=0) - ref)
             if np.linalg.norm(dist_pts.mean(axis=0) - ref) < 1e-6:
                 z = _unit(p_last - joint_pts[0])
-            tip = dist_pts[np.argmax((dist_pts - p_last) @ z)]
+            tip = _farthest(dist_pts, p_last, z)
             if len(joint_pts) >= 2:  # refine the direction through the tip
                 z = _unit(tip - ref) if np.linalg.norm(tip - ref) > 1e-6 else z
-                tip = dist_pts[np.argmax((dist_pts - p_last) @ z)]
+                tip = _farthest(dist_pts, p_last, z)
         else:
             if len(joint_pts) < 2:
                 raise ParseError(

@@ -199,13 +199,20 @@ def compare_html(name: str, form: str, out: str | Path, seed: int = 0, vis: Any 
     from .kinematics import HandModel
 
     hm = HandModel.from_params(registry.registered_params(name, form))
-    vis = new_visualizer() if vis is None else vis
-    vis.delete()
-    add_overlay(vis, name, form, None, np.eye(4), path="q0")
-    T = np.eye(4)
-    T[1, 3] = -0.3
-    add_overlay(vis, name, form, hm.random_configurations(1, seed)[0], T, path="random")
-    return save_html(vis, out)
+    own = vis is None
+    vis = new_visualizer() if own else vis
+    try:
+        vis.delete()
+        add_overlay(vis, name, form, None, np.eye(4), path="q0")
+        T = np.eye(4)
+        T[1, 3] = -0.3
+        add_overlay(vis, name, form, hm.random_configurations(1, seed)[0], T, path="random")
+        return save_html(vis, out)
+    finally:
+        proc = getattr(getattr(vis, "window", None), "server_proc", None)
+        if own and proc is not None:  # the meshcat server we started for the export
+            proc.kill()
+            proc.wait()
 
 
 def show_hand(vis: Any, name: str, form: str = "base", q: np.ndarray | None = None, original: bool = False) -> None:

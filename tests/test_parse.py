@@ -1,0 +1,197 @@
+"""Parser: registered hands reproduce their committed params and URDFs; malformed inputs fail cleanly."""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ohra import cli
+from ohra.errors import ParseError, SpecError
+from ohra.handspec import load_spec
+from ohra.hands import registry
+from ohra.kinematics import HandModel
+from ohra.original import MissingMeshWarning, load_urdf
+from ohra.parse import ParseWarning, canonical_keypoints, ext_arrays, ext_arrays_from_base, parse
+from ohra.params import BaseParams
+from ohra.urdfgen import render
+
+pytestmark = pytest.mark.assets
+
+JOBS = [(n, f) for n in registry.registered_hands() for f in registry.registered_forms(n)]
+FAST = {("shadow_hand_right", "base"), ("gaia_hand_left", "extended")}
+
+
+def _quiet_parse(*args, **kwargs):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return parse(*args, **kwargs)
+
+
+@pytest.mark.parametrize("name, form", sorted(FAST))
+def test_parse_reproduces_committed_params(hands_dir, name, form):
+    res = _quiet_parse(registry.spec(name), form, fit_params=True)
+    committed = registry.registered_params(name, form)
+    assert res.params.isclose(committed, atol=1e-6)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name, form", [j for j in JOBS if j not in FAST])
+def test_parse_reproduces_committed_params_all(hands_dir, name, form):
+    res = _quiet_parse(registry.spec(name), form, fit_params=True)
+    assert res.params.isclose(registry.registered_params(name, form), atol=1e-6)
+
+
+@pytest.mark.parametrize("name, form", JOBS)
+def test_committed_urdfs_are_up_to_date(name, form):
+    path = registry.urdf_path(name, form)
+    assert path.read_text() == render(registry.registered_params(name, form), robot_name=name), (
+        f"{path} is stale: run python -m ohra.hands.registry {name}"
+    )
+
+
+@pytest.mark.parametrize("name, form", JOBS)
+def test_fit_kinematics_mirror_the_rendered_urdf(name, form):
+    params = registry.registered_params(name, form)
+    hm = HandModel.from_params(params)
+    q = hm.random_configurations(5, seed=3)
+    arr = ext_arrays_from_base(params.to_vector(), params.present_joints) if isinstance(params, BaseParams) else ext_arrays(params)
+    _, tips = canonical_keypoints(arr, params.present_joints, q)
+    np.testing.assert_allclose(tips, hm.fingertips(q), atol=1e-6)  # URDF numbers carry 12 digits
+
+
+@pytest.mark.parametrize("name, form", JOBS)
+def test_canonical_original_canonical_round_trip_is_exact(hands_dir, name, form):
+    sp = registry.spec(name)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        orig = load_urdf(sp.urdf_path())
+    am = sp.action_map(form, orig.movable_joints)
+    params = registry.registered_params(name, form)
+    rng = np.random.default_rng(7)
+    q = params.joint_lowers + rng.random((50, 22)) * (params.joint_uppers - params.joint_lowers)
+    np.testing.assert_array_equal(am.mapped_slots | ~params.movable_joints, np.ones(22, dtype=bool))
+    np.testing.assert_allclose(am.to_canonical(am.to_original(q)), q, atol=1e-12)
+
+
+def test_limits_follow_sign_and_offset(hands_dir):
+    p = registry.registered_params("barrett_hand", "base")
+    # index_joint3 = -finger_1_med_joint (limits [-2.44, 0]) -> [0, 2.44]
+    assert (p.joint_lowers[7], p.joint_uppers[7]) == pytest.approx((0.0, 2.44))
+    # index_joint4 = -finger_1_dist_joint + 0.785 (limits [-0.785, 0]) -> [0.785, 1.57]
+    assert (p.joint_lowers[8], p.joint_uppers[8]) == pytest.approx((0.785, 1.57))
+    # Allegro base: the 5 deg mounting tilt is a frozen abduction
+    a = registry.registered_params("allegro_hand_right", "base")
+    assert a.joint_lowers[5] == a.joint_uppers[5] == pytest.approx(-0.0873)
+
+
+@pytest.mark.parametrize("name, missing", [("gaia_hand_left", "left_base_link.STL"), ("leap_hand_left", "palm_lower_left.obj")])
+def test_missing_meshes_warn_and_still_give_a_usable_hand(hands_dir, name, missing, tmp_path):
+    with pytest.warns(MissingMeshWarning, match=missing):
+        orig = registry.load_original(name)
+    assert any(missing in m for m in orig.missing_meshes)
+    assert missing not in orig.urdf_text
+    model = orig.pinocchio_model()
+    assert model.nq == len(orig.movable_joints)
+    import pybullet as pb
+
+    f = tmp_path / "cleaned.urdf"
+    f.write_text(orig.urdf_text)
+    cid = pb.connect(pb.DIRECT)
+    try:
+        body = pb.loadURDF(str(f), physicsClientId=cid)
+        assert pb.getNumJoints(body, physicsClientId=cid) >= len(orig.movable_joints)
+    finally:
+        pb.disconnect(cid)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = parse(registry.spec(name), "base", fit_params=False, hand=orig)
+    HandModel.from_params(res.params)
+    if name == "gaia_hand_left":  # no palm geometry at all: the palm radius is estimated and said so
+        assert any(issubclass(w.category, ParseWarning) and "knuckle spread" in str(w.message) for w in caught)
+        assert any("palm radius" in n for n in res.notes)
+        assert 0.03 < res.params.palm_radius < 0.07
+
+
+# -- malformed inputs --------------------------------------------------------------------------------
+GOOD_URDF = """<?xml version="1.0"?>
+<robot name="toy">
+  <link name="palm"><collision><geometry><box size="0.02 0.08 0.09"/></geometry><origin xyz="0 0 0.045"/></collision></link>
+  <link name="l1"><collision><geometry><cylinder radius="0.008" length="0.04"/></geometry><origin xyz="0 0 0.02"/></collision></link>
+  <link name="l2">TIP</link>
+  <joint name="a" type="revolute"><parent link="palm"/><child link="l1"/><origin xyz="0 0.02 0.09"/><axis xyz="0 1 0"/><limit lower="0" upper="1.5"/></joint>
+  <joint name="b" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="0 0 0.04"/><axis xyz="0 1 0"/><limit lower="0" upper="1.5"/></joint>
+</robot>
+"""
+TIP_OK = '<collision><geometry><cylinder radius="0.008" length="0.03"/></geometry><origin xyz="0 0 0.015"/></collision>'
+SPEC = """name: toy
+urdf: {urdf}
+palm_origin: [0, 0, 0, 0, 0, 0]
+joints: {{index_joint2: a, index_joint4: b}}
+forms: {{base: {{}}}}
+"""
+
+
+def _toy(tmp_path: Path, urdf: str, spec_extra: str = "") -> Path:
+    (tmp_path / "toy.urdf").write_text(urdf)
+    spec = tmp_path / "toy.yaml"
+    spec.write_text(SPEC.format(urdf=tmp_path / "toy.urdf") + spec_extra)
+    return spec
+
+
+def test_a_toy_hand_parses(tmp_path):
+    res = parse(_toy(tmp_path, GOOD_URDF.replace("TIP", TIP_OK)), "base", fit_params=True)
+    assert res.params.finger_lengths[1][0] == pytest.approx(0.04, abs=1e-3)
+    assert res.params.finger_lengths[1][2] == pytest.approx(0.03, abs=1e-3)  # distal reaches the tip geometry
+
+
+@pytest.mark.parametrize(
+    "urdf, spec_change, error, message",
+    [
+        ("this is not XML <", None, ParseError, "not valid XML"),
+        (GOOD_URDF.replace("TIP", TIP_OK).replace('<parent link="l1"/>', '<parent link="l2"/>').replace('<child link="l1"/>', '<child link="l2"/>'),
+         None, ParseError, "kinematic loop"),
+        (GOOD_URDF.replace("TIP", TIP_OK).replace('<parent link="l1"/><child link="l2"/>', '<parent link="l2"/><child link="l1"/>'),
+         None, ParseError, "kinematic loop"),
+        (GOOD_URDF.replace("TIP", TIP_OK).replace("</robot>", '<link name="stray"/></robot>'), None, ParseError, "2 root links"),
+        (GOOD_URDF.replace("TIP", '<collision><geometry><mesh filename="empty.obj"/></geometry></collision>'),
+         None, ParseError, "zero faces"),
+        (GOOD_URDF.replace("TIP", TIP_OK), ("index_joint4: b", "index_joint4: nope"), SpecError, "'nope', which is not a movable joint"),
+        (GOOD_URDF.replace("TIP", TIP_OK), ("index_joint4: b", "index_joint4: a"), SpecError, "duplicate mapping"),
+        (GOOD_URDF.replace("TIP", TIP_OK), ("index_joint4: b", "index_joint4: {joint: b, sign: -1}"), SpecError, "use sign"),
+    ],
+)
+def test_malformed_inputs_fail_cleanly_and_write_nothing(tmp_path, capsys, urdf, spec_change, error, message):
+    (tmp_path / "empty.obj").write_text("# no faces\nv 0 0 0\n")
+    spec = _toy(tmp_path, urdf)
+    if spec_change:
+        spec.write_text(spec.read_text().replace(*spec_change))
+    with pytest.raises(error, match=message):
+        parse(spec, "base", fit_params=False)
+    out = tmp_path / "out.json"
+    assert cli.main(["hand", "parse", str(spec), "-o", str(out), "--no-fidelity"]) == 2
+    assert not out.exists()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message.split("'")[0] in err[0]
+
+
+def test_unknown_form_and_missing_urdf(tmp_path):
+    spec = _toy(tmp_path, GOOD_URDF.replace("TIP", TIP_OK))
+    with pytest.raises(SpecError, match="no 'extended' form"):
+        parse(spec, "extended")
+    sp = load_spec(spec)
+    sp.urdf = str(tmp_path / "absent.urdf")
+    from ohra.errors import AssetsNotFoundError
+
+    with pytest.raises(AssetsNotFoundError, match="absent.urdf"):
+        parse(sp, "base")
+
+
+def test_load_original_names_the_expected_path(monkeypatch, tmp_path):
+    from ohra.errors import AssetsNotFoundError
+
+    monkeypatch.setenv("OHRA_HANDS_ROOT", str(tmp_path / "nowhere"))
+    with pytest.raises(AssetsNotFoundError, match="nowhere/shadow_hand/shadow_hand_right.urdf"):
+        registry.load_original("shadow_hand_right")
