@@ -153,7 +153,7 @@ class ObjectModel:
 
     def __init__(self, mesh: trimesh.Trimesh, name: str, density: float = DEFAULT_DENSITY,
                  source: Path | None = None, convex_pieces: list[trimesh.Trimesh] | None = None,
-                 repair: bool = True):
+                 repair: bool = True, primitives: list[dict] | None = None):
         if len(mesh.faces) == 0:
             raise ObjectError(f"object {name!r}: mesh has no faces")
         if repair:
@@ -167,6 +167,8 @@ class ObjectModel:
         self.density = float(density)
         self.source = source
         self._pieces = convex_pieces
+        # exact solids for the simulator (built-ins only; see ohra.objects_builtin), else None
+        self.primitives = primitives
 
     # -- construction ------------------------------------------------------------------------------
     @classmethod
@@ -205,8 +207,8 @@ class ObjectModel:
 
         if name not in BUILTINS:
             raise ObjectError(f"unknown built-in object {name!r}; known: {', '.join(BUILTINS)}")
-        mesh, pieces = BUILTINS[name]()
-        return cls(mesh, name, density, None, pieces, repair=False)
+        mesh, pieces, prims = BUILTINS[name]()
+        return cls(mesh, name, density, None, pieces, repair=False, primitives=prims)
 
     # -- properties ----------------------------------------------------------------------------------
     @cached_property

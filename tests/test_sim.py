@@ -4,15 +4,17 @@ from __future__ import annotations
 
 import math
 
+import xml.etree.ElementTree as ET
+
 import numpy as np
 import pybullet as pb
 import pytest
 
-from ohra import GraspError
-from ohra.sim import GraspEvaluator, Protocol
-from ohra.urdfgen import DUMMY_MASS
+from ohra import ActionMap, GraspError, HandModel, JOINT_NAMES
+from ohra.sim import GraspEvaluator, Protocol, SimHand, closes_positive, squeeze_targets
+from ohra.urdfgen import DUMMY_MASS, render
 
-from sim_fixtures import pinch_box, pinch_grasp, pinch_hand
+from sim_fixtures import L, R_F, pinch_box, pinch_grasp, pinch_hand
 
 
 @pytest.fixture(scope="module")
@@ -67,23 +69,95 @@ def test_early_exit_changes_no_outcome():
 
 
 def test_loaded_bodies_carry_protocol_mass_and_friction(evaluator):
+    evaluator.evaluate(pinch_grasp())  # the object body exists after a grasp
     w = evaluator.world
     c = w.client
     box = pinch_box()
-    assert pb.getDynamicsInfo(w.obj_body, -1, physicsClientId=c)[0] == pytest.approx(box.volume * 500.0)
-    mu = math.sqrt(3.0)
-    assert pb.getDynamicsInfo(w.obj_body, -1, physicsClientId=c)[1] == pytest.approx(mu)
-    for j in range(pb.getNumJoints(w.body, physicsClientId=c)):
-        info = pb.getDynamicsInfo(w.body, j, physicsClientId=c)
-        assert info[1] == pytest.approx(mu)
-        name = pb.getJointInfo(w.body, j, physicsClientId=c)[12].decode()
-        if name.endswith(("_knuckle", "_tip", "_base")):
-            assert info[0] == pytest.approx(DUMMY_MASS)
+    obj = pb.getDynamicsInfo(w.obj_body, -1, physicsClientId=c)
+    assert obj[0] == pytest.approx(box.volume * 500.0)
+    mu = math.sqrt(3.0)  # PyBullet multiplies the two coefficients: effective 3.0
+    assert obj[1] == pytest.approx(mu)
+    # the object's inertia is the mesh's (a 3 x 4 cm face box: principal moments m (b^2 + c^2) / 12)
+    m, (a, b, cc) = box.volume * 500.0, box.mesh.extents
+    expected = sorted(m * np.array([b * b + cc * cc, a * a + cc * cc, a * a + b * b]) / 12)
+    assert sorted(obj[2]) == pytest.approx(expected, rel=1e-6)
+    for j, _ in w.links:  # every hand link, the palm (base, -1) included
+        assert pb.getDynamicsInfo(w.body, j, physicsClientId=c)[1] == pytest.approx(mu)
+
+
+def _declared_masses(urdf: str) -> tuple[dict[str, float], dict[str, str]]:
+    root = ET.fromstring(urdf)
+    mass = {l.get("name"): float(l.find("inertial/mass").get("value")) for l in root.iter("link")}
+    fixed_parent = {j.find("child").get("link"): j.find("parent").get("link") for j in root.iter("joint") if j.get("type") == "fixed"}
+    return mass, fixed_parent
+
+
+def test_dummy_links_carry_their_small_declared_mass(evaluator):
+    """No link gets PyBullet's 1 kg default: every loaded link weighs what the URDF declares for it
+    plus the links merged into it through fixed joints (tip frames, locked joints)."""
+    w = evaluator.world
+    mass, fixed_parent = _declared_masses(w.hand.urdf)
+
+    def survivor(link: str) -> str:
+        while link in fixed_parent:
+            link = fixed_parent[link]
+        return link
+
+    expected: dict[str, float] = {}
+    for link, m in mass.items():
+        expected[survivor(link)] = expected.get(survivor(link), 0.0) + m
+    dummies = 0
+    for j, name in w.links[1:]:  # the fixed base reports mass 0 in PyBullet
+        got = pb.getDynamicsInfo(w.body, j, physicsClientId=w.client)[0]
+        assert got == pytest.approx(expected[name], rel=1e-9), name
+        if name.endswith("_knuckle"):
+            assert got == pytest.approx(DUMMY_MASS)
+            dummies += 1
+    assert dummies == 2
+
+
+def test_capsule_links_keep_their_exact_shape(evaluator):
+    """The cylinder + two spheres of a canonical link load as one native capsule of the same size."""
+    w = evaluator.world
+    hm = HandModel.from_params(pinch_hand())
+    q = np.zeros(22)
+    q[[6, 19]] = 0.4
+    w.reset_hand(np.eye(4), w.hand.to_sim(q))
+    link = dict((n, j) for j, n in w.links)["index_distal"]
+    T = hm.frame_pose(q, "index_distal")
+    probe = pb.createCollisionShape(pb.GEOM_SPHERE, radius=1e-3, physicsClientId=w.client)
+    for local in ([0.0, 0.0, L[2] + 0.004], [R_F + 0.004, 0.0, L[2] / 2]):  # probe surface 3 mm off the tip / side
+        p = T[:3, :3] @ np.array(local) + T[:3, 3]
+        b = pb.createMultiBody(0, probe, -1, p.tolist(), physicsClientId=w.client)
+        d = min(cp[8] for cp in pb.getClosestPoints(w.body, b, 0.05, linkIndexA=link, physicsClientId=w.client))
+        pb.removeBody(b, physicsClientId=w.client)
+        assert d == pytest.approx(0.003, abs=1e-6)
 
 
 def test_strict_preset():
     p = Protocol.strict()
-    assert p.friction == 1.0 and p.gravity_in_evaluation > 9
+    assert p.friction == 1.0 and p.gravity_in_evaluation == pytest.approx(9.81)
+    assert Protocol().friction == 3.0 and Protocol().gravity_in_evaluation == 0.0
+    assert p.total_steps == 700 and Protocol.preset("strict") == p
+
+
+def test_strict_preset_is_harder_on_the_same_grasp():
+    """The pinch holds with friction 3 and no gravity; with friction 1 and gravity it slips."""
+    ev = GraspEvaluator(pinch_hand(), pinch_box(), Protocol.strict())
+    r = ev.evaluate(pinch_grasp()).results[0]
+    ev.close()
+    assert not r.success
+
+
+def test_squeeze_controller_opens_then_closes_past_the_grasp():
+    """A joint whose positive rotation moves its link toward the object resets toward its lower limit
+    and targets past the grasp toward its upper limit (reference controller.py), and vice versa."""
+    # joint at (0, 0.05, 0), axis +x, link along +z: +q moves the link toward -y, i.e. toward the origin
+    closes = closes_positive(np.array([[1.0, 0, 0], [-1.0, 0, 0]]), np.array([[0, 0, 1.0], [0, 0, 1.0]]),
+                             np.array([[0, 0.05, 0], [0, 0.05, 0]]))
+    assert closes.tolist() == [True, False]
+    reset, target = squeeze_targets(np.array([0.5, 0.5]), np.zeros(2), np.ones(2), closes)
+    assert reset == pytest.approx([0.45, 0.55]) and target == pytest.approx([0.55, 0.45])
 
 
 def test_post_simulation_grasp_is_relative_to_the_settled_object(evaluator):
@@ -114,3 +188,51 @@ def test_joints_outside_limits_are_clamped_with_a_warning(evaluator):
     with pytest.warns(UserWarning, match="clamped"):
         rep = evaluator.evaluate(g)
     assert rep.clamped_count == 1
+
+
+def _as_original(params, palm_origin=np.zeros(6)) -> tuple[str, ActionMap]:
+    """The canonical URDF as if it were an original hand: identity joint map, root ``palm_origin`` away."""
+    text = render(params)
+    root = ET.fromstring(text)
+    j = next(j for j in root.iter("joint") if j.get("name") == "world_to_palm")
+    j.find("origin").set("xyz", " ".join(str(x) for x in palm_origin[:3]))
+    j.find("origin").set("rpy", " ".join(str(x) for x in palm_origin[3:]))
+    present = [n for n, lo, up in zip(JOINT_NAMES, params.joint_lowers, params.joint_uppers) if up > lo]
+    am = ActionMap.from_urdf(ET.tostring(root, encoding="unicode"), {n: n for n in present}, palm_origin=palm_origin)
+    return ET.tostring(root, encoding="unicode"), am
+
+
+def test_original_hand_path_reproduces_the_canonical_hand_exactly():
+    G = np.array([pinch_grasp(), pinch_grasp(dx=0.03), pinch_grasp(dy=0.02)])
+    canon = GraspEvaluator(pinch_hand(), pinch_box()).evaluate(G)
+    urdf, am = _as_original(pinch_hand())
+    orig = GraspEvaluator.from_urdf(urdf, am, pinch_box()).evaluate(G)
+    for a, b in zip(canon.results, orig.results):
+        assert a.success == b.success
+        assert np.array_equal(a.post_grasp, b.post_grasp)
+
+
+def test_original_hand_with_offset_root_is_placed_by_its_palm_origin():
+    """A root frame 5 cm and 0.3 rad away from the palm: the palm still lands at the grasp pose."""
+    po = np.array([0.0, 0.02, -0.05, 0.0, 0.0, 0.3])
+    urdf, am = _as_original(pinch_hand(), po)
+    ev = GraspEvaluator.from_urdf(urdf, am, pinch_box())
+    assert not ev.hand.canonical
+    r = ev.evaluate(np.array([pinch_grasp(), pinch_grasp(dx=0.03)]))
+    assert r.success.tolist() == [True, False]
+    # the pinched box may spin about the line between the fingertips; the palm's distance to the box
+    # origin changes by at most how far that origin moved (squeeze + perturbations)
+    r0 = r.results[0]
+    moved = r0.displacement[0] + r0.displacement[-1]
+    assert abs(np.linalg.norm(r0.post_grasp[:3]) - np.linalg.norm(pinch_grasp()[:3])) <= moved + 1e-9
+
+
+def test_report_is_json_with_null_for_phases_not_run(evaluator):
+    import json
+
+    rep = evaluator.evaluate(np.array([pinch_grasp(), pinch_grasp(dx=0.03)]))
+    d = json.loads(rep.to_json())
+    assert d["n"] == 2 and d["successes"] == 1 and d["hand"] and d["object"] == "pinch_box"
+    assert set(d["grasps"][0]["displacement_m"]) == {"squeeze", "+x", "+y", "+z", "-x", "-y", "-z"}
+    if d["grasps"][1]["early_exit"]:
+        assert None in d["grasps"][1]["displacement_m"].values()

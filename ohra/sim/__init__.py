@@ -1,5 +1,11 @@
-"""PyBullet simulation: the six-direction grasp evaluator."""
+"""PyBullet simulation: the six-direction grasp evaluator (canonical and original hands)."""
 
-from .evaluator import DIRECTIONS, EvalReport, GraspEvaluator, GraspResult, Protocol
+from .controller import closes_positive, squeeze_targets
+from .evaluator import PHASES, EvalReport, GraspEvaluator, GraspResult, evaluate_grasps, run_grasp
+from .hands import SimHand
+from .protocol import DIRECTION_NAMES, DIRECTIONS, Protocol
 
-__all__ = ["GraspEvaluator", "Protocol", "EvalReport", "GraspResult", "DIRECTIONS"]
+__all__ = [
+    "GraspEvaluator", "Protocol", "EvalReport", "GraspResult", "SimHand", "DIRECTIONS", "DIRECTION_NAMES", "PHASES",
+    "evaluate_grasps", "run_grasp", "closes_positive", "squeeze_targets",
+]

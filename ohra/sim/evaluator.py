@@ -1,89 +1,72 @@
 """The six-direction perturbation test in PyBullet (port of the OHRA / D(R,O) Isaac Gym filter).
 
-Per grasp: the canonical hand is fixed at the grasp pose (palm frame in the object frame, which is
-the world frame), the object (convex pieces, mass from volume x density) sits at the origin.
-Every present joint is reset 10 % of the way toward its opening limit and driven 10 % past the
-grasp toward its closing limit ("squeeze"), 1 s. Then a force of ``0.5 m`` N pulls the object along
-+x, +y, +z, -x, -y, -z, 1 s each, re-applied every step. Success: the object's final displacement
-since the end of the squeeze is at most 2 cm (filter mode: and it ends within 5 cm of the origin).
+Per grasp ``[t, rot6d, q22]`` (canonical palm pose in the object's mesh frame, canonical joints):
+the hand is fixed at that pose, the object (convex pieces, mass = volume x density) is free at the
+origin, gravity is off. Every driven joint is reset 10 % of the way toward its opening limit and
+driven 10 % past the grasp toward its closing limit (:mod:`ohra.sim.controller`), 1 s. Then a
+force of ``0.5 m`` N pulls the object along +x, +y, +z, -x, -y, -z, 1 s each, re-applied every
+step. Success: the object's final displacement since the end of the squeeze is at most 2 cm
+(filter mode: and it ends within 5 cm of the origin). Constants: :class:`ohra.sim.Protocol`.
 
-Determinism: one world per (hand, object) is built once per process and restored from a saved
-state before every grasp, so a grasp's outcome does not depend on the order, the batch or the
-number of worker processes (tests check this bit for bit).
+Speed: one :class:`~ohra.sim.world.World` per (hand, object) and process, reset per grasp (see
+there for why results do not depend on what ran before); absent/locked joints become fixed and
+fixed links are merged; optional early exit; ``workers=K`` processes.
 
-Early exit (optional, on by default): when the object touches nothing and its free-flight path
-under the remaining force schedule stays out of the hand's reach, the rest of the run is decided;
-the grasp is stopped and marked failed only if that path ends more than ``early_exit_margin``
-beyond the success threshold (so early exit never changes an outcome; the benchmark checks it).
+Early exit: when the object touches nothing and the free flight of its centre of mass under the
+rest of the force schedule never comes within reach of the hand, nothing can touch it again and the
+flight is exact; the grasp is stopped as a failure only if that flight ends more than
+``early_exit_margin`` beyond the success threshold. So early exit never changes an outcome (the
+benchmark and the tests compare with it off).
 """
 
 from __future__ import annotations
 
-import math
+import json
 import multiprocessing as mp
 import os
-import tempfile
 import warnings
-import xml.etree.ElementTree as ET
-from dataclasses import asdict, dataclass, field, replace
-from pathlib import Path
-from typing import Sequence, Union
+from dataclasses import asdict, dataclass, field
+from typing import Iterable, Sequence, Union
 
 import numpy as np
 import pybullet as pb
 
 from ..errors import GraspError
-from ..kinematics import HandModel
 from ..objects import ObjectModel
-from ..params import FINGERS, JOINT_NAMES, BaseParams, ExtendedParams
-from ..rotations import check_grasps, grasp_to_pose, matrix_to_quat, pose_to_grasp, quat_to_matrix
-from ..urdfgen import render
+from ..params import BaseParams, ExtendedParams
+from ..rotations import check_grasps, grasp_to_pose, pose_to_grasp
+from .controller import closes_positive, squeeze_targets
+from .hands import SimHand
+from .protocol import DIRECTION_NAMES, DIRECTIONS, Protocol
+from .world import World
 
 Params = Union[BaseParams, ExtendedParams]
-DIRECTIONS = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [-1, 0, 0], [0, -1, 0], [0, 0, -1]], dtype=float)
-
-
-@dataclass(frozen=True)
-class Protocol:
-    """Constants of the perturbation protocol (reference values as defaults)."""
-
-    dt: float = 0.01  # s, simulation step
-    substeps: int = 2
-    squeeze_time: float = 1.0  # s
-    direction_time: float = 1.0  # s per direction
-    force_per_mass: float = 0.5  # N/kg (0.5 m/s^2)
-    friction: float = 3.0  # effective hand-object friction (PyBullet multiplies: sqrt on each body)
-    density: float = 500.0  # kg/m^3
-    outer: float = 0.1  # fraction of the range opened at reset
-    inner: float = 0.1  # fraction of the range closed past the grasp as target
-    motor_force: float = 1.0  # N m, drive limit (URDF effort)
-    position_gain: float = 0.3
-    velocity_gain: float = 1.0
-    success_displacement: float = 0.02  # m
-    filter_max_distance: float = 0.05  # m from the origin (filter mode)
-    gravity_in_evaluation: float = 0.0  # m/s^2 along -z during the perturbation phase
-    early_exit: bool = True
-    early_exit_margin: float = 0.05  # m beyond the threshold before a free flight counts as decided
-
-    @classmethod
-    def strict(cls) -> "Protocol":
-        """Harder preset: friction 1.0 and gravity on during the perturbation phase."""
-        return cls(friction=1.0, gravity_in_evaluation=9.81)
+PHASES = ("squeeze",) + DIRECTION_NAMES
 
 
 @dataclass
 class GraspResult:
-    """Outcome of one grasp."""
+    """Outcome of one grasp (metres, radians)."""
 
     success: bool
-    displacement: np.ndarray  # (7,) m: after the squeeze (from the start) and after each direction (from p0)
-    final_distance_from_origin: float
+    displacement: np.ndarray  # (7,): squeeze (from the start), then after each direction (from the end of the squeeze); NaN after an early exit
+    final_distance_from_origin: float  # of the object's mesh-frame origin at the end
     contacts: int  # hand links touching the object at the end of the squeeze
-    initial_penetration: float  # m, deepest hand-object overlap at the input grasp
-    post_grasp: np.ndarray  # (31,) palm pose relative to the settled object + settled joints
-    clamped: bool  # joints were outside limits and were clamped
+    initial_penetration: float  # deepest hand-object overlap at the input grasp (>= 0)
+    post_grasp: np.ndarray  # (31,) canonical palm pose relative to the settled object + settled canonical joints
+    clamped: bool  # joints were outside the limits and were clamped
     early_exit: bool
     steps: int
+
+    def to_dict(self) -> dict:
+        return {
+            "success": bool(self.success),
+            "displacement_m": {k: (None if not np.isfinite(v) else float(v)) for k, v in zip(PHASES, self.displacement)},
+            "final_distance_from_origin_m": float(self.final_distance_from_origin),
+            "contacts": int(self.contacts), "initial_penetration_m": float(self.initial_penetration),
+            "clamped": bool(self.clamped), "early_exit": bool(self.early_exit), "steps": int(self.steps),
+            "post_grasp": [float(x) for x in self.post_grasp],
+        }
 
 
 @dataclass
@@ -93,6 +76,7 @@ class EvalReport:
     results: list[GraspResult]
     mode: str
     protocol: Protocol
+    meta: dict = field(default_factory=dict)
 
     @property
     def success(self) -> np.ndarray:
@@ -110,322 +94,215 @@ class EvalReport:
     def clamped_count(self) -> int:
         return int(sum(r.clamped for r in self.results))
 
+    @property
+    def penetration(self) -> np.ndarray:
+        return np.array([r.initial_penetration for r in self.results])
+
+    @property
+    def final_displacement(self) -> np.ndarray:
+        return np.array([r.displacement[-1] for r in self.results])
+
     def to_dict(self) -> dict:
         return {
-            "mode": self.mode,
-            "protocol": asdict(self.protocol),
-            "n": len(self.results),
-            "success_rate": self.success_rate,
+            **self.meta,
+            "mode": self.mode, "protocol": asdict(self.protocol), "n": len(self.results),
+            "successes": int(self.success.sum()), "success_rate": self.success_rate,
             "clamped_joints_grasps": self.clamped_count,
-            "grasps": [
-                {
-                    "success": r.success, "displacement_m": [float(x) for x in r.displacement],
-                    "final_distance_from_origin_m": r.final_distance_from_origin, "contacts": r.contacts,
-                    "initial_penetration_m": r.initial_penetration, "clamped": r.clamped,
-                    "early_exit": r.early_exit, "steps": r.steps,
-                }
-                for r in self.results
-            ],
+            "early_exits": int(sum(r.early_exit for r in self.results)),
+            "grasps": [r.to_dict() for r in self.results],
         }
 
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), indent=1)
 
-class _World:
-    """One PyBullet world with the hand and the object, restorable to its initial state."""
 
-    def __init__(self, params: Params, obj: ObjectModel, protocol: Protocol):
-        self.protocol = protocol
-        self.hand = HandModel.from_params(params)
-        self.obj = obj
-        self.client = pb.connect(pb.DIRECT)
-        fd, path = tempfile.mkstemp(suffix=".urdf")
-        with os.fdopen(fd, "w") as fh:
-            fh.write(self.hand.urdf)
-        self._urdf_path = path
-        self.build()
+# -- one grasp ---------------------------------------------------------------------------------------
+def run_grasp(world: World, grasp: np.ndarray, mode: str = "eval") -> GraspResult:
+    """Run the protocol on one validated grasp in ``world`` (reset first, so order never matters)."""
+    prot, c, hand = world.protocol, world.client, world.hand
+    T_palm, q = grasp_to_pose(grasp)
+    qc = np.clip(q, hand.canon_lower, hand.canon_upper)
+    clamped = bool(np.any(np.abs(qc - q) > 1e-9))
+    qs = np.clip(hand.to_sim(qc), hand.lower, hand.upper)
+    T_root = T_palm @ hand.T_palm_root
+    pb.setGravity(0, 0, 0, physicsClientId=c)
+    world.reset_hand(T_root, qs)
+    obj = world.new_object()
+    pen = 0.0
+    for cp in pb.getClosestPoints(world.body, obj, 0.0, physicsClientId=c):
+        pen = max(pen, -float(cp[8]))
+    axis, link_z, origin = world.joint_frames()
+    q_reset, q_target = squeeze_targets(qs, hand.lower, hand.upper, closes_positive(axis, link_z, origin), prot.outer, prot.inner)
+    world.set_joints(q_reset)
+    world.drive_joints(q_target)
 
-    def build(self) -> None:
-        """(Re)create the world from scratch. PyBullet's saveState/restoreState keeps contact caches
-        that make outcomes depend on earlier grasps, so every grasp starts from a fresh world."""
-        c, protocol = self.client, self.protocol
-        pb.resetSimulation(physicsClientId=c)
-        pb.setGravity(0, 0, 0, physicsClientId=c)
-        pb.setTimeStep(protocol.dt, physicsClientId=c)
-        pb.setPhysicsEngineParameter(numSubSteps=protocol.substeps, deterministicOverlappingPairs=1, physicsClientId=c)
-        self.body = pb.loadURDF(self._urdf_path, useFixedBase=True, flags=pb.URDF_USE_SELF_COLLISION | pb.URDF_IGNORE_VISUAL_SHAPES, physicsClientId=c)
-        self._setup_hand()
-        self._setup_object()
-
-    def _setup_hand(self) -> None:
-        c, b = self.client, self.body
-        mu = math.sqrt(self.protocol.friction)
-        self.joint_index: dict[str, int] = {}
-        link_finger: dict[int, int] = {}
-        child_of = {j.get("name"): j.find("child").get("link") for j in ET.fromstring(self.hand.urdf).iter("joint")}
-        self.child_link = [child_of[n] for n in JOINT_NAMES]
-        for j in range(pb.getNumJoints(b, physicsClientId=c)):
-            info = pb.getJointInfo(b, j, physicsClientId=c)
-            name, link = info[1].decode(), info[12].decode()
-            self.joint_index[name] = j
-            prefix = link.split("_")[0]
-            link_finger[j] = FINGERS.index(prefix) if prefix in FINGERS else -1  # palm: -1
-            pb.changeDynamics(b, j, lateralFriction=mu, spinningFriction=0.0, rollingFriction=0.0,
-                              linearDamping=0.0, angularDamping=0.0, jointDamping=0.0, physicsClientId=c)
-        links = sorted(link_finger)
-        for i in links:
-            for k in links:
-                if k <= i:
-                    continue
-                fi, fk = link_finger[i], link_finger[k]
-                if fi == fk or fi < 0 or fk < 0:  # palm-finger and same-finger pairs never collide
-                    pb.setCollisionFilterPair(b, b, i, k, 0, physicsClientId=c)
-        self.link_finger = link_finger
-        self.jidx = np.array([self.joint_index[n] for n in JOINT_NAMES])
-        present = self.hand.present_joints
-        for k, n in enumerate(JOINT_NAMES):
-            if not present[k]:  # inactive joints: locked at 0
-                pb.setJointMotorControl2(b, self.jidx[k], pb.POSITION_CONTROL, targetPosition=0.0, force=100.0, physicsClientId=c)
-        # reach of the hand from the palm origin (bounds every point a finger can touch)
-        p = self.hand.params
-        reach = 2.0 * p.palm_radius + 0.05
-        caps = self.hand.capsule_specs
-        if caps:
-            base = np.linalg.norm(self.hand.frame_poses(np.zeros(22), [s[0] for s in caps])[:, :3, 3], axis=1).max()
-            reach = max(reach, float(base) + sum(sorted((s[3] for s in caps), reverse=True)[:3]) + max(s[2] for s in caps))
-        self.reach = reach
-
-    def _setup_object(self) -> None:
-        c, o, prot = self.client, self.obj, self.protocol
-        pieces = o.convex_pieces()  # cached on the object
-        shapes = []
-        for piece in pieces:
-            shapes.append(pb.createCollisionShape(pb.GEOM_MESH, vertices=np.asarray(piece.vertices).tolist(), physicsClientId=c))
-        mass = o.volume * prot.density
-        com = o.center_mass
-        I = o.inertia / o.density * prot.density
-        w, V = np.linalg.eigh(0.5 * (I + I.T))
-        if np.linalg.det(V) < 0:
-            V[:, 0] *= -1
-        q_inertial = matrix_to_quat(V)
-        if len(shapes) == 1:
-            self.obj_body = pb.createMultiBody(mass, shapes[0], -1, [0, 0, 0], [0, 0, 0, 1], baseInertialFramePosition=com.tolist(),
-                                               baseInertialFrameOrientation=q_inertial.tolist(), physicsClientId=c)
-        else:
-            # compound: base carries the first piece, the others hang on fixed links; link masses split by volume
-            vols = np.array([p.volume for p in pieces])
-            shares = vols / vols.sum()
-            self.obj_body = pb.createMultiBody(
-                mass * shares[0], shapes[0], -1, [0, 0, 0], [0, 0, 0, 1],
-                baseInertialFramePosition=pieces[0].center_mass.tolist(),
-                linkMasses=(mass * shares[1:]).tolist(), linkCollisionShapeIndices=shapes[1:],
-                linkVisualShapeIndices=[-1] * (len(shapes) - 1), linkPositions=[[0, 0, 0]] * (len(shapes) - 1),
-                linkOrientations=[[0, 0, 0, 1]] * (len(shapes) - 1),
-                linkInertialFramePositions=[p.center_mass.tolist() for p in pieces[1:]],
-                linkInertialFrameOrientations=[[0, 0, 0, 1]] * (len(shapes) - 1),
-                linkParentIndices=[0] * (len(shapes) - 1), linkJointTypes=[pb.JOINT_FIXED] * (len(shapes) - 1),
-                linkJointAxis=[[0, 0, 1]] * (len(shapes) - 1), physicsClientId=c,
-            )
-        mu = math.sqrt(prot.friction)
-        for link in range(-1, pb.getNumJoints(self.obj_body, physicsClientId=c)):
-            pb.changeDynamics(self.obj_body, link, lateralFriction=mu, spinningFriction=0.0, rollingFriction=0.0,
-                              linearDamping=0.0, angularDamping=0.0, physicsClientId=c)
-        self.mass = mass
-        self.multi_piece = len(shapes) > 1
-
-    # -- per grasp ---------------------------------------------------------------------------------------
-    def _object_origin(self) -> tuple[np.ndarray, np.ndarray]:
-        """Position and rotation of the object's mesh frame (PyBullet reports the base inertial frame)."""
-        c = self.client
-        pos, orn = pb.getBasePositionAndOrientation(self.obj_body, physicsClientId=c)
-        R = quat_to_matrix(orn)
-        dyn = pb.getDynamicsInfo(self.obj_body, -1, physicsClientId=c)
-        local_pos, local_orn = np.array(dyn[3]), dyn[4]
-        R_local = quat_to_matrix(local_orn)
-        R_frame = R @ R_local.T
-        return np.asarray(pos) - R_frame @ local_pos, R_frame
-
-    def _com_velocity(self) -> tuple[np.ndarray, np.ndarray]:
-        c = self.client
-        pos, _ = pb.getBasePositionAndOrientation(self.obj_body, physicsClientId=c)
-        v, _ = pb.getBaseVelocity(self.obj_body, physicsClientId=c)
-        return np.asarray(pos), np.asarray(v)
-
-    def _set_joints(self, q: np.ndarray) -> None:
-        for k in range(22):
-            pb.resetJointState(self.body, int(self.jidx[k]), float(q[k]), 0.0, physicsClientId=self.client)
-
-    def squeeze_targets(self, T: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(q_outer, q_inner): per joint, open/close by the protocol fractions (reference controller)."""
-        hm = self.hand
-        poses = T @ hm.frame_poses(q, self.child_link)
-        axes = np.array([hm.tree.joint_axis[hm.tree.joint_names.index(n)] for n in JOINT_NAMES])
-        a_w = np.einsum("kij,kj->ki", poses[:, :3, :3], axes)
-        l_w = poses[:, :3, 2]
-        n = np.cross(a_w, l_w)
-        p = poses[:, :3, 3]
-        o = -p / np.maximum(np.linalg.norm(p, axis=1, keepdims=True), 1e-12)
-        closing_up = (n * o).sum(axis=1) >= 0.0
-        lo, up = hm.lower, hm.upper
-        prot = self.protocol
-        outer = np.where(closing_up, q + prot.outer * (lo - q), q + prot.outer * (up - q))
-        inner = np.where(closing_up, q + prot.inner * (up - q), q + prot.inner * (lo - q))
-        present = hm.present_joints
-        return np.where(present, outer, 0.0), np.where(present, inner, 0.0)
-
-    def run(self, grasp: np.ndarray, mode: str) -> GraspResult:
-        prot, c, hm = self.protocol, self.client, self.hand
-        self.build()
-        T, q = grasp_to_pose(grasp)
-        qc = np.clip(q, hm.lower, hm.upper)
-        clamped = bool(np.any(np.abs(qc - q) > 1e-9))
-        pb.resetBasePositionAndOrientation(self.body, T[:3, 3].tolist(), matrix_to_quat(T[:3, :3]).tolist(), physicsClientId=c)
-        self._set_joints(qc)
-        pen = 0.0
-        for cp in pb.getClosestPoints(self.body, self.obj_body, 0.0, physicsClientId=c):
-            pen = max(pen, -cp[8])
-        q_outer, q_inner = self.squeeze_targets(T, qc)
-        self._set_joints(q_outer)
-        present = hm.present_joints
-        for k in range(22):
-            if present[k]:
-                pb.setJointMotorControl2(self.body, int(self.jidx[k]), pb.POSITION_CONTROL, targetPosition=float(q_inner[k]),
-                                         force=prot.motor_force, positionGain=prot.position_gain,
-                                         velocityGain=prot.velocity_gain, physicsClientId=c)
-        n_sq = int(round(prot.squeeze_time / prot.dt))
-        n_dir = int(round(prot.direction_time / prot.dt))
-        start, _ = self._object_origin()
-        steps = 0
-        for _ in range(n_sq):
+    start = world.object_frame()[:3, 3]
+    steps = 0
+    for _ in range(prot.squeeze_steps):
+        pb.stepSimulation(physicsClientId=c)
+        steps += 1
+    p0 = world.object_frame()[:3, 3]
+    contacts = len({cp[3] for cp in pb.getContactPoints(world.body, obj, physicsClientId=c)})
+    disp = np.full(7, np.nan)
+    disp[0] = float(np.linalg.norm(p0 - start))
+    force = prot.force_per_mass * world.mass
+    if prot.gravity_in_evaluation:
+        pb.setGravity(0, 0, -prot.gravity_in_evaluation, physicsClientId=c)
+    n_dir, every = prot.direction_steps, prot.early_exit_every
+    early = False
+    for d, direction in enumerate(DIRECTIONS):
+        f = (force * direction).tolist()
+        for s in range(n_dir):
+            com, _ = world.object_com()
+            pb.applyExternalForce(obj, -1, f, com.tolist(), pb.WORLD_FRAME, physicsClientId=c)
             pb.stepSimulation(physicsClientId=c)
             steps += 1
-        p0, _ = self._object_origin()
-        contacts = len({cp[3] for cp in pb.getContactPoints(self.body, self.obj_body, physicsClientId=c)})
-        disp = np.full(7, np.nan)
-        disp[0] = float(np.linalg.norm(p0 - start))
-        F = prot.force_per_mass * self.mass
-        if prot.gravity_in_evaluation:
-            pb.setGravity(0, 0, -prot.gravity_in_evaluation, physicsClientId=c)
-        early = False
-        for d, direction in enumerate(DIRECTIONS):
-            for s in range(n_dir):
-                com, _ = self._com_velocity()
-                pb.applyExternalForce(self.obj_body, -1, (F * direction).tolist(), com.tolist(), pb.WORLD_FRAME, physicsClientId=c)
-                pb.stepSimulation(physicsClientId=c)
-                steps += 1
-                if prot.early_exit and s % 10 == 9 and self._decided_failure(T, p0, d, s + 1, n_dir):
-                    early = True
-                    break
-            p, _ = self._object_origin()
-            disp[d + 1] = float(np.linalg.norm(p - p0))
-            if early:
+            if prot.early_exit and (s + 1) % every == 0 and _failure_is_certain(world, T_root, p0, d, s + 1):
+                early = True
                 break
-        if prot.gravity_in_evaluation:
-            pb.setGravity(0, 0, 0, physicsClientId=c)
-        p_end, R_end = self._object_origin()
-        final_disp = float(np.linalg.norm(p_end - p0))
-        success = (not early) and final_disp <= prot.success_displacement
-        if mode == "filter":
-            success = success and float(np.linalg.norm(p_end)) <= prot.filter_max_distance
-        q_end = np.array([pb.getJointState(self.body, int(j), physicsClientId=c)[0] for j in self.jidx])
-        q_end = np.where(present, q_end, 0.0)
-        T_obj = np.eye(4)
-        T_obj[:3, :3], T_obj[:3, 3] = R_end, p_end
-        post = pose_to_grasp(np.linalg.inv(T_obj) @ T, q_end)
-        return GraspResult(bool(success), disp, float(np.linalg.norm(p_end)), contacts, float(pen), post, clamped, early, steps)
-
-    def _decided_failure(self, T: np.ndarray, p0: np.ndarray, d: int, s_done: int, n_dir: int) -> bool:
-        """Free flight of the COM under the remaining schedule: out of reach and far -> failure is certain."""
-        c = self.client
-        if pb.getContactPoints(self.body, self.obj_body, physicsClientId=c):
-            return False
-        if self.protocol.gravity_in_evaluation:
-            return False
-        com, v = self._com_velocity()
-        a = self.protocol.force_per_mass
-        dt = self.protocol.dt
-        acc = [DIRECTIONS[d]] * (n_dir - s_done) + [DIRECTIONS[k] for k in range(d + 1, 6) for _ in range(n_dir)]
-        acc = a * np.array(acc).reshape(-1, 3)
-        vel = v + np.cumsum(acc * dt, axis=0)
-        path = com + np.cumsum(vel * dt, axis=0)
-        path = np.vstack([com, path])
-        palm = T[:3, 3]
-        clearance = np.linalg.norm(path - palm, axis=1).min() - self.reach - self.obj.radius
-        if clearance <= 0.02:
-            return False
-        # the mesh origin sits at a fixed distance from the COM whatever the object's spin
-        offset = float(np.linalg.norm(com - self._object_origin()[0]))
-        far = float(np.linalg.norm(path[-1] - p0)) - 2.0 * offset
-        return far > self.protocol.success_displacement + self.protocol.early_exit_margin
-
-    def close(self) -> None:
-        if self.client is not None and pb.isConnected(self.client):
-            pb.disconnect(self.client)
-        self.client = None
-        Path(self._urdf_path).unlink(missing_ok=True)
+        disp[d + 1] = float(np.linalg.norm(world.object_frame()[:3, 3] - p0))
+        if early:
+            break
+    pb.setGravity(0, 0, 0, physicsClientId=c)
+    T_obj = world.object_frame()
+    p_end = T_obj[:3, 3]
+    final = float(np.linalg.norm(p_end - p0))
+    success = (not early) and final <= prot.success_displacement
+    if mode == "filter":
+        success = success and float(np.linalg.norm(p_end)) <= prot.filter_max_distance
+    q_end = hand.to_canonical(world.joint_values())
+    post = pose_to_grasp(np.linalg.inv(T_obj) @ T_root @ np.linalg.inv(hand.T_palm_root), q_end)
+    return GraspResult(bool(success), disp, float(np.linalg.norm(p_end)), contacts, pen, post, clamped, early, steps)
 
 
+def _failure_is_certain(world: World, T_root: np.ndarray, p0: np.ndarray, d: int, s_done: int) -> bool:
+    """Exact free-flight prediction (see module doc): True only if the object can never be caught."""
+    prot, c = world.protocol, world.client
+    if pb.getContactPoints(world.body, world.obj_body, physicsClientId=c):
+        return False
+    com, v = world.object_com()
+    n_dir = prot.direction_steps
+    acc = np.concatenate([np.repeat(DIRECTIONS[d:d + 1], n_dir - s_done, axis=0)]
+                         + [np.repeat(DIRECTIONS[k:k + 1], n_dir, axis=0) for k in range(d + 1, 6)]) * prot.force_per_mass
+    acc[:, 2] -= prot.gravity_in_evaluation
+    # semi-implicit Euler on the substep grid, as Bullet integrates
+    h = prot.dt / prot.substeps
+    acc = np.repeat(acc, prot.substeps, axis=0)
+    vel = v + np.cumsum(acc * h, axis=0)
+    path = np.vstack([com, com + np.cumsum(vel * h, axis=0)])
+    clearance = np.linalg.norm(path - T_root[:3, 3], axis=1).min() - world.reach - world.obj.radius
+    if clearance <= 0.02:
+        return False
+    # the mesh origin stays within |COM offset| of the COM whatever the spin
+    offset = float(np.linalg.norm(world.obj_inertial[:3, 3]))
+    return float(np.linalg.norm(path[-1] - p0)) - 2.0 * offset > prot.success_displacement + prot.early_exit_margin
+
+
+# -- workers -------------------------------------------------------------------------------------------
 _WORKER: dict = {}
 
 
-def _worker_init(params: Params, obj: ObjectModel, protocol: Protocol) -> None:
-    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ[var] = "1"
-    _WORKER["world"] = _World(params, obj, protocol)
+def _worker_init(hand: SimHand, obj: ObjectModel, protocol: Protocol) -> None:
+    _WORKER["world"] = World(hand, obj, protocol)
 
 
 def _worker_run(args: tuple[int, np.ndarray, str]) -> tuple[int, GraspResult]:
     i, g, mode = args
-    return i, _WORKER["world"].run(g, mode)
+    return i, run_grasp(_WORKER["world"], g, mode)
 
 
 class GraspEvaluator:
     """Evaluate canonical grasps of one hand on one object with the six-direction protocol.
 
     Args:
-        hand: canonical params of the hand.
-        obj: the object (its mesh frame is the world frame of the grasps).
-        protocol: protocol constants (:class:`Protocol`; ``Protocol.strict()`` for the harder preset).
+        hand: canonical params, a hand name (``ohra.get_hand``), or a :class:`SimHand` (e.g. an
+            original hand: :meth:`original`, :meth:`from_urdf`).
+        obj: the object; its mesh frame is the frame of the grasps.
+        protocol: constants (:class:`Protocol`; ``Protocol.strict()`` for the harder preset).
+
+    ``evaluate(grasps, mode, workers)`` returns an :class:`EvalReport` in input order; results are
+    identical for any order, batch split and worker count.
     """
 
-    def __init__(self, hand: Params, obj: ObjectModel, protocol: Protocol | None = None):
-        if not isinstance(hand, (BaseParams, ExtendedParams)):
-            raise TypeError("hand must be BaseParams or ExtendedParams")
-        self.params = hand
+    def __init__(self, hand: Params | SimHand | str, obj: ObjectModel, protocol: Protocol | None = None):
+        if isinstance(hand, str):
+            from ..hands import get_hand
+
+            hand = SimHand.from_params(get_hand(hand), name=hand)
+        elif isinstance(hand, (BaseParams, ExtendedParams)):
+            hand = SimHand.from_params(hand)
+        elif not isinstance(hand, SimHand):
+            raise TypeError(f"hand must be params, a hand name or a SimHand, got {type(hand).__name__}")
+        if not isinstance(obj, ObjectModel):
+            raise TypeError(f"obj must be an ObjectModel, got {type(obj).__name__}")
+        self.hand = hand
         self.obj = obj
         self.protocol = protocol or Protocol()
-        self._world: _World | None = None
+        self._world: World | None = None
+
+    @classmethod
+    def original(cls, name: str, obj: ObjectModel, protocol: Protocol | None = None, form: str | None = None) -> "GraspEvaluator":
+        """Evaluate canonical grasps on the *original* URDF of a registered hand (replay)."""
+        return cls(SimHand.registered_original(name, form), obj, protocol)
+
+    @classmethod
+    def from_urdf(cls, urdf, action_map, obj: ObjectModel, protocol: Protocol | None = None, **kw) -> "GraspEvaluator":
+        """Evaluate canonical grasps on any hand URDF driven through ``action_map`` (see :class:`SimHand`)."""
+        return cls(SimHand.from_original(urdf, action_map, **kw), obj, protocol)
 
     @property
-    def world(self) -> _World:
+    def world(self) -> World:
         if self._world is None:
-            self._world = _World(self.params, self.obj, self.protocol)
+            self._world = World(self.hand, self.obj, self.protocol)
         return self._world
 
-    def evaluate(self, grasps: np.ndarray, mode: str = "eval", workers: int = 1, progress: bool = False) -> EvalReport:
+    def check(self, grasps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Validated (N,31) float grasps and the (N,) mask of those with joints outside the limits."""
+        g = check_grasps(grasps)
+        q = g[:, 9:]
+        out = np.any((q < self.hand.canon_lower - 1e-9) | (q > self.hand.canon_upper + 1e-9), axis=1)
+        return g, out
+
+    def evaluate(self, grasps: np.ndarray, mode: str = "eval", workers: int = 1, progress: bool = False,
+                 chunksize: int = 1) -> EvalReport:
         """Run the protocol on (N,31) grasps; ``mode`` ``"eval"`` or ``"filter"``; ``workers`` processes."""
         if mode not in ("eval", "filter"):
             raise GraspError(f"mode must be 'eval' or 'filter', got {mode!r}")
         if int(workers) < 1:
             raise GraspError(f"workers must be >= 1, got {workers}")
-        g = check_grasps(grasps)
-        hm = self.world.hand if workers == 1 else HandModel.from_params(self.params)
-        q = g[:, 9:]
-        out_of_limits = np.any((q < hm.lower - 1e-9) | (q > hm.upper + 1e-9), axis=1)
-        if out_of_limits.any():
-            warnings.warn(f"{int(out_of_limits.sum())} grasp(s) have joints outside the limits; they are clamped", stacklevel=2)
-        bar = _progress(len(g), progress)
+        g, out = self.check(grasps)
+        if out.any():
+            warnings.warn(f"{int(out.sum())} grasp(s) have joints outside the limits; they are clamped", stacklevel=2)
         results: list[GraspResult | None] = [None] * len(g)
-        if workers == 1 or len(g) < 2:
-            for i in range(len(g)):
-                results[i] = self.world.run(g[i], mode)
+        bar = _progress(len(g), progress)
+        try:
+            for i, r in self._iter(g, mode, int(workers), int(chunksize)):
+                results[i] = r
                 bar.update(1)
-        else:
-            ctx = mp.get_context("fork")
-            with ctx.Pool(int(workers), initializer=_worker_init, initargs=(self.params, self.obj, self.protocol)) as pool:
-                for i, r in pool.imap_unordered(_worker_run, [(i, g[i], mode) for i in range(len(g))], chunksize=1):
-                    results[i] = r
-                    bar.update(1)
-        bar.close()
-        return EvalReport([r for r in results if r is not None], mode, self.protocol)
+        finally:
+            bar.close()
+        meta = {"hand": self.hand.name, "object": self.obj.name, "object_hash": self.obj.mesh_hash, "workers": int(workers)}
+        return EvalReport([r for r in results if r is not None], mode, self.protocol, meta)
+
+    def _iter(self, g: np.ndarray, mode: str, workers: int, chunksize: int) -> Iterable[tuple[int, GraspResult]]:
+        if workers == 1 or len(g) < 2:
+            world = self.world
+            for i in range(len(g)):
+                yield i, run_grasp(world, g[i], mode)
+            return
+        # fork: the hand and object reach the workers without pickling; 1 BLAS thread per worker
+        ctx = mp.get_context("fork")
+        saved = {v: os.environ.get(v) for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
+        os.environ.update({v: "1" for v in saved})
+        try:
+            with ctx.Pool(min(workers, len(g)), initializer=_worker_init, initargs=(self.hand, self.obj, self.protocol)) as pool:
+                yield from pool.imap_unordered(_worker_run, [(i, g[i], mode) for i in range(len(g))], chunksize=chunksize)
+        finally:
+            for v, old in saved.items():
+                if old is None:
+                    os.environ.pop(v, None)
+                else:
+                    os.environ[v] = old
 
     def close(self) -> None:
         if self._world is not None:
@@ -437,6 +314,12 @@ class GraspEvaluator:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+    def __del__(self) -> None:  # pragma: no cover - best effort
+        try:
+            self.close()
+        except Exception:
+            pass
 
 
 class _NoBar:
@@ -453,3 +336,14 @@ def _progress(total: int, enabled: bool):
     from tqdm import tqdm
 
     return tqdm(total=total, desc="evaluating", unit="grasp")
+
+
+def evaluate_grasps(hand: Params | SimHand | str, obj: ObjectModel, grasps: np.ndarray, mode: str = "eval",
+                    workers: int = 1, protocol: Protocol | None = None) -> EvalReport:
+    """One-shot convenience: ``GraspEvaluator(hand, obj, protocol).evaluate(grasps, mode, workers)``."""
+    with GraspEvaluator(hand, obj, protocol) as ev:
+        return ev.evaluate(grasps, mode=mode, workers=workers)
+
+
+__all__: Sequence[str] = ("GraspEvaluator", "GraspResult", "EvalReport", "Protocol", "DIRECTIONS", "run_grasp",
+                          "evaluate_grasps", "PHASES")

@@ -1,0 +1,282 @@
+"""What the simulator needs to know about a hand: URDF text, joint map, palm transform, fingers.
+
+:class:`SimHand` describes either a canonical hand (from params) or an original hand URDF driven
+through its :class:`ohra.ActionMap`; the evaluator treats both alike. Grasps are always canonical
+``[t, rot6d, q22]``: the palm pose is mapped to the URDF root with the palm origin, and the 22
+canonical joints to the URDF's movable joints with the action map.
+
+The URDF is prepared for speed without changing the hand: joints the grasp never moves (absent
+canonical joints, unmapped original joints, immovable ones) become fixed joints at their locked
+value ("inactive joints locked", exactly), so that links joined by fixed joints can be merged like
+Isaac Gym's ``collapse_fixed_joints``; a canonical capsule link's cylinder + two end spheres become
+one native ``<capsule>`` (the same solid); relative mesh paths become absolute.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Union
+
+import numpy as np
+
+from ..errors import GraspError
+from ..params import FINGER_SLICES, FINGERS, JOINT_NAMES, BaseParams, ExtendedParams
+from ..transforms import matrix_to_rpy, xyzrpy_to_matrix
+
+Params = Union[BaseParams, ExtendedParams]
+MOVABLE = ("revolute", "continuous", "prismatic")
+
+
+def _finger_of_slot(k: int) -> int:
+    for f, name in enumerate(FINGERS):
+        s = FINGER_SLICES[name]
+        if s.start <= k < s.stop:
+            return f
+    raise IndexError(k)
+
+
+@dataclass
+class SimHand:
+    """A hand as the simulator loads it.
+
+    Attributes:
+        name: label for reports.
+        urdf: prepared URDF text (see module doc).
+        joints: names of the URDF joints the grasp drives, in the order of the simulator vector.
+        lower, upper: their limits (radians / metres).
+        canon_lower, canon_upper: (22,) canonical limits; grasps outside them are clamped.
+        T_palm_root: (4,4) the URDF root link frame in the canonical palm frame.
+        joint_finger: finger index (0..4) of each driven joint.
+        link_finger: URDF link name -> finger index, -1 for the palm and other non-finger links.
+        mimic: joint name -> (driven joint name, multiplier, offset) for URDF mimic joints.
+    """
+
+    name: str
+    urdf: str
+    joints: tuple[str, ...]
+    lower: np.ndarray
+    upper: np.ndarray
+    canon_lower: np.ndarray
+    canon_upper: np.ndarray
+    drive: np.ndarray  # indices of the driven joints in the canonical (22) or original joint vector
+    base: np.ndarray  # canonical (22) or original full vector holding the locked values
+    action_map: object | None  # None for a canonical hand
+    T_palm_root: np.ndarray
+    joint_finger: np.ndarray
+    link_finger: dict[str, int]
+    mimic: dict[str, tuple[str, float, float]] = field(default_factory=dict)
+
+    @property
+    def canonical(self) -> bool:
+        return self.action_map is None
+
+    def to_sim(self, q: np.ndarray) -> np.ndarray:
+        """Canonical (..., 22) -> simulator vector (..., len(joints))."""
+        q = np.asarray(q, dtype=float)
+        full = q if self.action_map is None else self.action_map.to_original(q)
+        return full[..., self.drive]
+
+    def to_canonical(self, qs: np.ndarray) -> np.ndarray:
+        """Simulator vector (..., len(joints)) -> canonical (..., 22)."""
+        full = np.broadcast_to(self.base, np.shape(qs)[:-1] + self.base.shape).copy()
+        full[..., self.drive] = qs
+        return full if self.action_map is None else self.action_map.to_canonical(full)
+
+    # -- constructors ---------------------------------------------------------------------------
+    @classmethod
+    def from_params(cls, params: Params, name: str = "canonical_hand") -> "SimHand":
+        """A canonical hand: the driven joints are its movable canonical joints."""
+        from ..urdfgen import render
+
+        if not isinstance(params, (BaseParams, ExtendedParams)):
+            raise TypeError(f"expected BaseParams or ExtendedParams, got {type(params).__name__}")
+        lo, up = np.asarray(params.joint_lowers, dtype=float), np.asarray(params.joint_uppers, dtype=float)
+        movable = up > lo
+        locked = {n: float(lo[k]) for k, n in enumerate(JOINT_NAMES) if not movable[k]}
+        urdf = prepare_urdf(render(params), locked, capsules=True)
+        idx = np.flatnonzero(movable)
+        joints = tuple(JOINT_NAMES[k] for k in idx)
+        base = np.where(movable, 0.0, lo)
+        link_finger = _link_fingers(urdf, {n: _finger_of_slot(JOINT_NAMES.index(n)) for n in JOINT_NAMES})
+        return cls(name, urdf, joints, lo[idx], up[idx], lo, up, idx, base, None, np.eye(4),
+                   np.array([_finger_of_slot(k) for k in idx], dtype=int), link_finger, {})
+
+    @classmethod
+    def from_original(cls, urdf: str | Path, action_map, name: str | None = None,
+                      canon_limits: tuple[np.ndarray, np.ndarray] | None = None) -> "SimHand":
+        """An original hand URDF (path, or text with absolute mesh paths) driven through ``action_map``.
+
+        ``canon_limits`` defaults to the original limits mapped to canonical slots
+        (``action_map.limits_to_canonical``). Unmapped original joints are locked at the action
+        map's value for them (0 unless ``unmapped_default`` says otherwise).
+        """
+        path = None
+        if isinstance(urdf, Path) or not str(urdf).lstrip().startswith("<"):
+            path = Path(urdf)
+            if not path.is_file():
+                raise GraspError(f"original hand URDF not found: {path}")
+            text = path.read_text()
+        else:
+            text = str(urdf)
+        root = ET.fromstring(text)
+        info = {j.get("name"): j for j in root.iter("joint")}
+        mimic: dict[str, tuple[str, float, float]] = {}
+        for n, j in info.items():
+            m = j.find("mimic")
+            if m is not None and j.get("type") in MOVABLE:
+                mimic[n] = (m.get("joint"), float(m.get("multiplier", 1.0)), float(m.get("offset", 0.0)))
+        orig = tuple(action_map.original_joints)
+        missing = [n for n in orig if n not in info]
+        if missing:
+            raise GraspError(f"action map names joints {missing} that the URDF does not have")
+        lim = np.array([_limits(info[n]) for n in orig]).reshape(-1, 2)
+        mapped = action_map.mapped_original
+        probe = action_map.to_original(np.zeros(22))  # unmapped joints' locked values
+        locked = {n: float(probe[i]) for i, n in enumerate(orig) if not mapped[i] or lim[i, 1] <= lim[i, 0]}
+        drive = [i for i, n in enumerate(orig) if n not in locked]
+        joints = tuple(orig[i] for i in drive)
+        mimic = {n: m for n, m in mimic.items() if m[0] in joints}
+        locked.update({n: 0.0 for n, j in info.items() if j.get("type") in MOVABLE and n not in orig and n not in mimic})
+        prepared = prepare_urdf(text, locked, capsules=True, base_dir=path.parent if path else None)
+        lo_c, up_c = canon_limits if canon_limits is not None else action_map.limits_to_canonical(lim[:, 0], lim[:, 1])
+        drive_a = np.array(drive, dtype=int)
+        slot_of = {sm.name: k for k, sm in ((JOINT_NAMES.index(s), sm) for s, sm in action_map.slots.items())}
+        joint_finger = np.array([_finger_of_slot(slot_of[orig[i]]) for i in drive_a], dtype=int)
+
+        finger_of_joint = {orig[i]: f for i, f in zip(drive_a, joint_finger)}
+        finger_of_joint.update({n: finger_of_joint[m[0]] for n, m in mimic.items()})
+        link_finger = _link_fingers(prepared, finger_of_joint)
+        T = np.linalg.inv(xyzrpy_to_matrix(action_map.palm_origin))  # root in palm: inverse of palm in root
+        return cls(name or (path.stem if path else "original_hand"), prepared, joints, lim[drive_a, 0], lim[drive_a, 1],
+                   np.asarray(lo_c, float), np.asarray(up_c, float), drive_a, probe, action_map, T, joint_finger,
+                   link_finger, mimic)
+
+    @classmethod
+    def registered_original(cls, name: str, form: str | None = None) -> "SimHand":
+        """The original hand of a registered hand (needs the hand assets and the registry)."""
+        from ..hands import get_hand
+        from ..hands import registry
+
+        sp = registry.spec(name)
+        oh = registry.load_original(name)
+        params = get_hand(name, form)
+        am = sp.action_map(params.form, oh.movable_joints)
+        lo = np.asarray(params.joint_lowers, float)
+        up = np.asarray(params.joint_uppers, float)
+        return cls.from_original(_absolute_text(oh), am, name=f"{name}:original", canon_limits=(lo, up))
+
+
+def _absolute_text(oh) -> str:
+    """The cleaned URDF text of an :class:`ohra.original.OriginalHand` with absolute mesh paths."""
+    from ..original import resolve_mesh_path
+
+    root = ET.fromstring(oh.urdf_text)
+    base = oh.path.parent if oh.path is not None else Path.cwd()
+    for m in root.iter("mesh"):
+        m.set("filename", str(resolve_mesh_path(m.get("filename", ""), base)))
+    return ET.tostring(root, encoding="unicode")
+
+
+def _limits(j: ET.Element) -> tuple[float, float]:
+    if j.get("type") == "continuous":
+        return (-np.pi, np.pi)
+    lim = j.find("limit")
+    if lim is None:
+        return (0.0, 0.0)
+    return (float(lim.get("lower", 0.0)), float(lim.get("upper", 0.0)))
+
+
+def _link_fingers(urdf: str, finger_of_joint: dict[str, int]) -> dict[str, int]:
+    """Finger of every link: that of the nearest driven-joint ancestor (-1 when none: the palm)."""
+    root = ET.fromstring(urdf)
+    parent_joint = {j.find("child").get("link"): j for j in root.iter("joint")}
+    out: dict[str, int] = {}
+    for link in root.iter("link"):
+        n, f = link.get("name"), -1
+        cur = n
+        while cur in parent_joint:
+            j = parent_joint[cur]
+            if j.get("name") in finger_of_joint and j.get("type") in MOVABLE:
+                f = finger_of_joint[j.get("name")]
+                break
+            cur = j.find("parent").get("link")
+        out[n] = f
+    return out
+
+
+def _axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    a = axis / np.linalg.norm(axis)
+    K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+
+
+def prepare_urdf(text: str, locked: dict[str, float], capsules: bool = True, base_dir: Path | None = None) -> str:
+    """URDF text with ``locked`` joints made fixed at their value, capsule triples as ``<capsule>``."""
+    root = ET.fromstring(text)
+    for j in root.iter("joint"):
+        n = j.get("name")
+        if n not in locked or j.get("type") not in MOVABLE:
+            continue
+        o = j.find("origin")
+        xyz = np.array([float(x) for x in (o.get("xyz", "0 0 0") if o is not None else "0 0 0").split()])
+        rpy = np.array([float(x) for x in (o.get("rpy", "0 0 0") if o is not None else "0 0 0").split()])
+        ax_el = j.find("axis")
+        axis = np.array([float(x) for x in (ax_el.get("xyz") if ax_el is not None else "1 0 0").split()])
+        T = xyzrpy_to_matrix(np.concatenate([xyz, rpy]))
+        v = float(locked[n])
+        if j.get("type") == "prismatic":
+            T[:3, 3] += T[:3, :3] @ (axis / np.linalg.norm(axis) * v)
+        elif v != 0.0:
+            T[:3, :3] = T[:3, :3] @ _axis_rotation(axis, v)
+        for tag in ("axis", "limit", "mimic", "dynamics", "safety_controller", "calibration"):
+            for el in j.findall(tag):
+                j.remove(el)
+        if o is None:
+            o = ET.SubElement(j, "origin")
+        o.set("xyz", " ".join(repr(float(x)) for x in T[:3, 3]))
+        o.set("rpy", " ".join(repr(float(x)) for x in matrix_to_rpy(T[:3, :3])))
+        j.set("type", "fixed")
+    if capsules:
+        for link in root.iter("link"):
+            _capsulise(link)
+    if base_dir is not None:
+        from ..original import resolve_mesh_path
+
+        for m in root.iter("mesh"):
+            m.set("filename", str(resolve_mesh_path(m.get("filename", ""), base_dir)))
+    return ET.tostring(root, encoding="unicode")
+
+
+def _capsulise(link: ET.Element) -> None:
+    """Replace a cylinder(length l, radius r) + spheres(r) at its two ends by one capsule (same solid)."""
+    cols = link.findall("collision")
+    if len(cols) != 3:
+        return
+    geos = [c.find("geometry") for c in cols]
+    kinds = [g[0].tag if g is not None and len(g) else "" for g in geos]
+    if sorted(kinds) != ["cylinder", "sphere", "sphere"]:
+        return
+    ci = kinds.index("cylinder")
+    cyl = geos[ci][0]
+    r, length = float(cyl.get("radius")), float(cyl.get("length"))
+
+    def origin(c: ET.Element) -> np.ndarray:
+        o = c.find("origin")
+        xyz = [float(x) for x in (o.get("xyz", "0 0 0") if o is not None else "0 0 0").split()]
+        rpy = [float(x) for x in (o.get("rpy", "0 0 0") if o is not None else "0 0 0").split()]
+        return xyzrpy_to_matrix(np.array(xyz + rpy))
+
+    Tc = origin(cols[ci])
+    rel = sorted((np.linalg.inv(Tc) @ origin(cols[k]))[:3, 3].tolist() for k in range(3) if k != ci)
+    radii = [float(geos[k][0].get("radius")) for k in range(3) if k != ci]
+    expected = [[0.0, 0.0, -length / 2], [0.0, 0.0, length / 2]]
+    if not (np.allclose(radii, r) and np.allclose(rel, expected, atol=1e-9)):
+        return
+    for k in range(3):
+        if k != ci:
+            link.remove(cols[k])
+    g = geos[ci]
+    g.remove(cyl)
+    ET.SubElement(g, "capsule", radius=repr(r), length=repr(length))

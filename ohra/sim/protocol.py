@@ -1,0 +1,79 @@
+"""Constants of the six-direction perturbation protocol (reference values as defaults).
+
+Reference: the OHRA / D(R,O) Isaac Gym filter (survey §5.1), ported to PyBullet (survey §5.5).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+# Perturbation order of the reference: +x, +y, +z, -x, -y, -z (object / world frame).
+DIRECTIONS = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [-1, 0, 0], [0, -1, 0], [0, 0, -1]], dtype=float)
+DIRECTION_NAMES = ("+x", "+y", "+z", "-x", "-y", "-z")
+
+
+@dataclass(frozen=True)
+class Protocol:
+    """Every constant of the evaluation; the defaults are the reference's.
+
+    Units: seconds, metres, newtons, kg/m^3. ``friction`` is the *effective* hand-object coefficient:
+    PyBullet multiplies the two bodies' coefficients, so each body gets ``sqrt(friction)``.
+    """
+
+    dt: float = 0.01  # s, simulation step (reference: 100 Hz)
+    substeps: int = 2  # physics substeps per step
+    solver_iterations: int = 50  # PyBullet's default (PhysX TGS 8 position iterations has no equivalent)
+    squeeze_time: float = 1.0  # s, phase 1 (no external force)
+    direction_time: float = 1.0  # s per perturbation direction
+    force_per_mass: float = 0.5  # N/kg: the force is 0.5 * m newtons, re-applied every step
+    friction: float = 3.0  # effective hand-object friction
+    density: float = 500.0  # kg/m^3, object density (mass = volume x density)
+    outer: float = 0.1  # fraction of the way to the opening limit at reset
+    inner: float = 0.1  # fraction of the way to the closing limit for the target
+    motor_force: float = 1.0  # N m, position-motor force limit (the canonical URDF effort)
+    position_gain: float = 0.3
+    velocity_gain: float = 1.0
+    success_displacement: float = 0.02  # m, final displacement since the end of the squeeze
+    filter_max_distance: float = 0.05  # m, filter mode: final distance of the object from the origin
+    gravity_in_evaluation: float = 0.0  # m/s^2 along world -z during the perturbation phase
+    early_exit: bool = True  # stop a grasp once its failure is certain (never changes an outcome)
+    early_exit_margin: float = 0.05  # m beyond the threshold a predicted free flight must end
+    early_exit_every: int = 5  # steps between early-exit checks
+    merge_fixed_links: bool = True  # like Isaac's collapse_fixed_joints; 2-3x faster stepping
+
+    def __post_init__(self) -> None:
+        for name in ("dt", "squeeze_time", "direction_time", "density", "motor_force", "success_displacement"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"Protocol.{name} must be > 0, got {getattr(self, name)}")
+        if self.friction < 0 or self.force_per_mass < 0:
+            raise ValueError("Protocol.friction and force_per_mass must be >= 0")
+        if int(self.substeps) < 1 or int(self.early_exit_every) < 1:
+            raise ValueError("Protocol.substeps and early_exit_every must be >= 1")
+
+    @property
+    def squeeze_steps(self) -> int:
+        return int(round(self.squeeze_time / self.dt))
+
+    @property
+    def direction_steps(self) -> int:
+        return int(round(self.direction_time / self.dt))
+
+    @property
+    def total_steps(self) -> int:
+        return self.squeeze_steps + 6 * self.direction_steps
+
+    @classmethod
+    def strict(cls, **overrides) -> "Protocol":
+        """Harder preset: effective friction 1.0 and gravity (9.81 m/s^2, -z) during the perturbations."""
+        return replace(cls(friction=1.0, gravity_in_evaluation=9.81), **overrides)
+
+    @classmethod
+    def preset(cls, name: str) -> "Protocol":
+        """``"reference"`` (the default) or ``"strict"``."""
+        if name == "reference":
+            return cls()
+        if name == "strict":
+            return cls.strict()
+        raise ValueError(f"unknown protocol preset {name!r}; expected 'reference' or 'strict'")
