@@ -1,7 +1,8 @@
 """Objects to grasp: mesh loading and repair, surface samples, a signed-distance grid, convex pieces.
 
-Frame convention: an object lives in its **mesh frame** (the coordinates stored in the file, times
-the URDF scale when loaded from an object URDF). Nothing is recentred: grasps are expressed in this
+Frame convention: an object lives in its **mesh frame**: the coordinates stored in the file or,
+for an object URDF, its link frame (mesh scale, then the ``<visual>`` origin, as PyBullet places
+it). Nothing is recentred: grasps are expressed in this
 frame, and the evaluator places the object with its mesh frame at the world origin. ``center_mass``
 is reported separately.
 
@@ -72,6 +73,24 @@ class SDFGrid:
                     out += wx * wy * wz * v[i0[:, 0] + dx, i0[:, 1] + dy, i0[:, 2] + dz]
         return out + extra
 
+    def gradient(self, points: np.ndarray, h: float | None = None) -> np.ndarray:
+        """(N,3) gradient of :meth:`query` by central differences (step ``h``, default spacing / 2)."""
+        p = np.asarray(points, dtype=float).reshape(-1, 3)
+        h = self.spacing / 2 if h is None else float(h)
+        g = np.empty_like(p)
+        for d in range(3):
+            e = np.zeros(3)
+            e[d] = h
+            g[:, d] = (self.query(p + e) - self.query(p - e)) / (2 * h)
+        return g
+
+    def interpolant(self, method: str = "linear"):
+        """``scipy.interpolate.RegularGridInterpolator`` over the grid (``"linear"``, ``"cubic"``, ...);
+        points outside the grid are extrapolated."""
+        from scipy.interpolate import RegularGridInterpolator
+
+        return RegularGridInterpolator(self.axes(), self.values, method=method, bounds_error=False, fill_value=None)
+
 
 @dataclass
 class RepairReport:
@@ -126,26 +145,34 @@ def _load_mesh_file(path: Path, scale: np.ndarray | None = None) -> trimesh.Trim
     return loaded
 
 
-def _urdf_mesh(path: Path) -> tuple[Path, np.ndarray, Path | None]:
-    """Visual mesh, scale and collision mesh named by a PyBullet-style object URDF."""
+def _urdf_mesh(path: Path) -> tuple[Path, np.ndarray, np.ndarray, Path | None, np.ndarray]:
+    """Visual mesh, its scale and origin (4x4 in the link frame), and the collision mesh and origin
+    named by a PyBullet-style object URDF (the first ``<mesh>`` of each kind)."""
+    from .transforms import xyzrpy_to_matrix
+
     try:
         root = ET.parse(path).getroot()
     except ET.ParseError as exc:
         raise ObjectError(f"{path}: not valid XML ({exc})") from None
 
-    def find(tag: str) -> tuple[Path | None, np.ndarray]:
+    def find(tag: str) -> tuple[Path | None, np.ndarray, np.ndarray]:
         for el in root.iter(tag):
             m = el.find("geometry/mesh")
             if m is not None and m.get("filename"):
                 scale = np.array([float(x) for x in (m.get("scale") or "1 1 1").split()])
-                return path.parent / m.get("filename"), scale
-        return None, np.ones(3)
+                o = el.find("origin")
+                xyz = [float(x) for x in (o.get("xyz", "0 0 0") if o is not None else "0 0 0").split()]
+                rpy = [float(x) for x in (o.get("rpy", "0 0 0") if o is not None else "0 0 0").split()]
+                return path.parent / m.get("filename"), scale, xyzrpy_to_matrix(np.array(xyz + rpy))
+        return None, np.ones(3), np.eye(4)
 
-    vis, scale = find("visual")
-    col, _ = find("collision")
+    vis, scale, T_vis = find("visual")
+    col, _, T_col = find("collision")
     if vis is None and col is None:
         raise ObjectError(f"{path}: no <mesh> geometry in the object URDF")
-    return (vis or col), scale, col  # type: ignore[return-value]
+    if vis is None:
+        vis, T_vis = col, T_col
+    return vis, scale, T_vis, col, T_col  # type: ignore[return-value]
 
 
 class ObjectModel:
@@ -185,10 +212,14 @@ class ObjectModel:
             return cls.load(cands[0], density, name or path.name)
         pieces = None
         if path.suffix.lower() == ".urdf":
-            mesh_path, scale, col = _urdf_mesh(path)
+            # the object frame is the URDF link frame: mesh scale, then the <visual>/<collision> origin
+            mesh_path, scale, T_vis, col, T_col = _urdf_mesh(path)
             mesh = _load_mesh_file(mesh_path, scale)
+            mesh.apply_transform(T_vis)
             if col is not None and col.is_file() and col != mesh_path:
-                pieces = _split_convex(_load_mesh_file(col, scale))
+                cmesh = _load_mesh_file(col, scale)
+                cmesh.apply_transform(T_col)
+                pieces = _split_convex(cmesh)
             label = name or path.parent.name
         elif path.suffix.lower() in MESH_SUFFIXES:
             mesh = _load_mesh_file(path)

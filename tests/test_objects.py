@@ -75,3 +75,22 @@ def test_missing_or_empty_mesh_is_a_clear_error(tmp_path):
         ObjectModel.load(empty)
     with pytest.raises(ObjectError, match="unknown built-in object"):
         ObjectModel.builtin("teapot")
+
+
+def test_object_urdf_places_the_mesh_by_its_visual_origin(objects_dir):
+    """MustardBottle's URDF turns the mesh 1.57 rad about z: the object frame is the URDF link frame."""
+    a = ObjectModel.load(objects_dir / "ycb" / "MustardBottle" / "model.urdf")
+    b = ObjectModel.load(objects_dir / "ycb" / "MustardBottle" / "textured_simple_reoriented.obj")
+    Rz = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # 90 deg (1.57 ~ pi/2 to 1e-3 rad)
+    assert np.allclose(np.sort(a.mesh.vertices @ np.eye(3), axis=0)[[0, -1]],
+                       np.sort(b.mesh.vertices @ Rz.T, axis=0)[[0, -1]], atol=2e-4)
+
+
+def test_sdf_grid_gradient_points_away_from_a_sphere():
+    o = ObjectModel.builtin("sphere")
+    g = o.sdf()
+    pts = np.array([[0.05, 0.0, 0.0], [0.0, -0.06, 0.0], [0.0, 0.0, 0.045]])
+    grad = g.gradient(pts)
+    unit = pts / np.linalg.norm(pts, axis=1, keepdims=True)
+    assert np.all((grad * unit).sum(axis=1) > 0.95)
+    assert np.allclose(g.interpolant()(pts), g.query(pts), atol=1e-12)
