@@ -98,7 +98,7 @@ class GraspNLP:
 
         g, lbg, ubg = [], [], []
         contact_pts, normals = [], []
-        spheres: list[tuple[ca.SX, float, int]] = []  # (world point, radius, finger)
+        spheres: list[tuple[ca.SX, float, int, str, int]] = []  # (world point, radius, finger, link, sample index)
         for (link, fi, r, L) in caps:
             Rl, pl = poses[link]
             a = R @ (pl + Rl @ ca.SX([0, 0, r])) + t
@@ -114,7 +114,7 @@ class GraspNLP:
                 samples = samples[:-1]
             for p in samples:
                 g.append(phi(p) - r); lbg.append(s.clearance); ubg.append(ca.inf)
-            spheres += [(p, r, fi) for p in ([a, b] if len(samples) < 3 else [a, 0.5 * (a + b), b])]
+            spheres += [(p, r, fi, link, k) for k, p in enumerate([a, b])]
         # palm: spheres of the palm's half-thickness over its disc
         pr = depth / 2.0
         ys = np.linspace(-(R_palm - pr), R_palm - pr, 4)
@@ -132,14 +132,22 @@ class GraspNLP:
             n = grad / ca.sqrt(ca.dot(grad, grad) + 1e-12)
             contact_pts.append(pc)
             normals.append(n)
-        # different fingers keep apart
+        # different fingers keep apart: the thumb against every finger, other fingers against their
+        # neighbours (non-neighbours cannot meet without passing through the finger between them);
+        # knuckle spheres (first sample of the first segment) sit at fixed spacing and are skipped
+        order = [f for f in fingers if f != 0]
+        neighbours = {(a, b) for a, b in zip(order, order[1:])} | {(0, f) for f in order}
+        first_link = {f: min((c for c in caps if c[1] == f), key=lambda c: ("proximal", "middle", "distal").index(c[0].split("_")[1]))[0] for f in fingers}
         for i in range(len(spheres)):
             for j in range(i + 1, len(spheres)):
-                pa, ra, fa = spheres[i]
-                pb_, rb, fb = spheres[j]
-                if fa != fb:
-                    dd = pa - pb_
-                    g.append(ca.dot(dd, dd) - (ra + rb + s.finger_gap) ** 2); lbg.append(0.0); ubg.append(ca.inf)
+                pa, ra, fa, la, ka = spheres[i]
+                pb_, rb, fb, lb, kb = spheres[j]
+                if (min(fa, fb), max(fa, fb)) not in neighbours:
+                    continue
+                if (la == first_link[fa] and ka == 0) and (lb == first_link[fb] and kb == 0):
+                    continue
+                dd = pa - pb_
+                g.append(ca.dot(dd, dd) - (ra + rb + s.finger_gap) ** 2); lbg.append(0.0); ubg.append(ca.inf)
         # wrench balance and friction cones
         F = ca.SX.zeros(3)
         Tq = ca.SX.zeros(3)
@@ -148,7 +156,10 @@ class GraspNLP:
             fn = -ca.dot(fi_, n)
             ft = fi_ + fn * n
             g.append(fn); lbg.append(1.0); ubg.append(ca.inf)
-            g.append(s.mu**2 * fn * fn - ca.dot(ft, ft)); lbg.append(0.0); ubg.append(ca.inf)
+            # the circular cone is shrunk to lie strictly inside the 8-facet cone that Q1 uses, so an
+            # equilibrium found here is one of strictly interior forces (force closure, Q1 > 0)
+            mu_in = s.mu * np.cos(np.pi / 8) * 0.95
+            g.append(mu_in**2 * fn * fn - ca.dot(ft, ft)); lbg.append(0.0); ubg.append(ca.inf)
             F += fi_
             Tq += ca.cross(p - center, fi_) / s.torque_length
         for k in range(3):
@@ -169,7 +180,7 @@ class GraspNLP:
         self.lbx[6 : 6 + nq] = hand.lower[self.movable]
         self.ubx[6 : 6 + nq] = hand.upper[self.movable]
         self.n_x, self.nq = n_x, nq
-        self._contact_fn = ca.Function("contacts", [x, p_par], [ca.horzcat(*contact_pts).T if contact_pts else ca.SX.zeros(0, 3)])
+        self._contact_fn = ca.Function("contacts", [x, p_par], [ca.horzcat(*contact_pts).T, ca.horzcat(*normals).T])
 
     def solve(self, R0: np.ndarray, t0: np.ndarray, q0: np.ndarray, q_pref: np.ndarray) -> dict:
         """Solve from one start; returns grasp (31,), status, success, constraint violation, contacts."""
@@ -194,10 +205,10 @@ class GraspNLP:
         from ..rotations import matrix_to_rot6d
 
         grasp = np.concatenate([x[:3], matrix_to_rot6d(R), q])
-        contacts = np.asarray(self._contact_fn(x, p))
+        contacts, normals = (np.asarray(v) for v in self._contact_fn(x, p))
         forces = x[6 + self.nq :].reshape(-1, 3)
         status = stats.get("return_status", "unknown")
         return {
             "grasp": grasp, "status": status, "success": bool(stats.get("success", False)) and viol <= 1e-3,
-            "violation": viol, "iterations": int(stats.get("iter_count", -1)), "contacts": contacts, "forces": forces,
+            "violation": viol, "iterations": int(stats.get("iter_count", -1)), "contacts": contacts, "normals": normals, "forces": forces,
         }

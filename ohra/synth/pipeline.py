@@ -77,7 +77,7 @@ def synthesize_shard(name: str, params: Params, obj: ObjectModel, settings: Synt
         viol.append(r["violation"])
         iters.append(r["iterations"])
         raw.append(r["grasp"])
-        q1.append(ferrari_canny(r["contacts"], obj, settings.nlp.mu, settings.nlp.torque_length) if r["success"] else 0.0)
+        q1.append(ferrari_canny(r["contacts"], obj, settings.nlp.mu, settings.nlp.torque_length, normals=r["normals"]) if r["success"] else 0.0)
     solve_time = time.perf_counter() - t_solve
     raw_a = np.array(raw).reshape(-1, 31)
     solved = np.array([s < len(SUCCESS_STATUSES) for s in status]) & (np.array(viol) <= 1e-3)

@@ -20,17 +20,19 @@ def contact_normals(points: np.ndarray, obj: ObjectModel, h: float = 1e-3) -> np
     return grad / np.maximum(np.linalg.norm(grad, axis=1, keepdims=True), 1e-12)
 
 
-def ferrari_canny(points: np.ndarray, obj: ObjectModel, mu: float = 0.5, torque_length: float = 0.05, facets: int = 8) -> float:
+def ferrari_canny(points: np.ndarray, obj: ObjectModel, mu: float = 0.5, torque_length: float = 0.05, facets: int = 8,
+                  normals: np.ndarray | None = None) -> float:
     """Q1: radius of the largest origin-centred ball in the convex hull of the contact wrenches.
 
     Each contact's friction cone (unit normal force, inward) is linearised with ``facets`` edges;
-    torques are about the object's centre of mass, divided by ``torque_length`` [m]. Returns 0 when
-    the origin is not strictly inside the hull (no force closure).
+    torques are about the object's centre of mass, divided by ``torque_length`` [m]. ``normals``
+    (outward, unit) default to the SDF gradient at the points. Returns 0 when the origin is not
+    strictly inside the hull (no force closure).
     """
     p = np.asarray(points, dtype=float).reshape(-1, 3)
     if len(p) < 2:
         return 0.0
-    n = contact_normals(p, obj)
+    n = contact_normals(p, obj) if normals is None else np.asarray(normals, dtype=float).reshape(-1, 3)
     c = obj.center_mass
     wrenches = []
     for pi, ni in zip(p, n):
