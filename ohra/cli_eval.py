@@ -1,0 +1,126 @@
+"""``ohra eval``: run the six-direction test on a grasp file and report the success rate.
+
+    ohra eval GRASPS.npz --hand NAME --object MESH|builtin:NAME [--workers K] [--mode eval|filter]
+              [--strict] [--original] [--render SHEET.png] [--meshcat SCENE.html] [-o report.json]
+
+``GRASPS`` is an ``.npz`` (key ``grasps``, or its only array) or ``.npy`` of shape (N, 31):
+``[t, rot6d, q22]``, the canonical palm pose in the object's mesh frame and canonical joints. Bad
+input (shape, NaN, non-rotations, missing or empty meshes, unknown hands) is one line on stderr and
+exit code 2; outputs are written atomically only after the evaluation succeeded. Joints outside
+the limits are clamped, warned about and counted in the report.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from .errors import GraspError, ObjectError
+
+EPILOG = "Exit codes: 0 ok, 2 bad input. The report is JSON (success, displacements per phase, contacts, penetration)."
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("eval", help="evaluate grasps with the six-direction PyBullet test",
+                              description=__doc__.split("\n\n")[0], epilog=EPILOG)
+    p.add_argument("grasps", help="grasp file: .npz (key 'grasps' or its only array) or .npy, shape (N, 31)")
+    p.add_argument("--hand", required=True, help="registered hand, leap_XXXX, or a params JSON file")
+    p.add_argument("--object", required=True, help="mesh (.obj/.stl/.ply), object URDF or folder, or builtin:NAME")
+    p.add_argument("--key", default=None, help="array name inside the .npz (default: 'grasps' or the only array)")
+    p.add_argument("--workers", type=int, default=1, help="processes (default 1)")
+    p.add_argument("--mode", choices=("eval", "filter"), default="eval", help="filter also needs the object within 5 cm of the origin")
+    p.add_argument("--strict", action="store_true", help="strict preset: friction 1.0, gravity during the perturbations")
+    p.add_argument("--original", action="store_true", help="replay on the hand's original URDF (needs the hand assets)")
+    p.add_argument("--no-early-exit", action="store_true", help="simulate every grasp to the end")
+    p.add_argument("--limit", type=int, default=None, help="evaluate only the first N grasps")
+    p.add_argument("--render", metavar="PNG", default=None, help="write a contact sheet of the grasps (first 16)")
+    p.add_argument("--meshcat", metavar="HTML", default=None, help="write a meshcat scene of the first grasp as static HTML")
+    p.add_argument("-o", "--output", metavar="JSON", default=None, help="write the JSON report here")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def load_grasp_file(path: str | Path, key: str | None = None) -> np.ndarray:
+    """The (N, 31) array of a grasp file; :class:`GraspError` naming the file when unusable."""
+    path = Path(path)
+    if not path.is_file():
+        raise GraspError(f"grasp file not found: {path}")
+    try:
+        data = np.load(path, allow_pickle=False)
+    except Exception as exc:  # numpy raises several types for bad files
+        raise GraspError(f"{path}: cannot read as .npz/.npy ({exc})") from None
+    if isinstance(data, np.ndarray):
+        return data
+    with data:
+        names = list(data.keys())
+        if key is None:
+            key = "grasps" if "grasps" in names else (names[0] if len(names) == 1 else None)
+        if key is None or key not in names:
+            raise GraspError(f"{path}: no array {key or 'grasps'!r} (arrays: {', '.join(names) or 'none'}); use --key")
+        return np.asarray(data[key])
+
+
+def run(args: argparse.Namespace) -> int:
+    from .hands import get_hand
+    from .objects import resolve_objects
+    from .sim import GraspEvaluator, Protocol, SimHand
+
+    if args.workers < 1:
+        raise GraspError(f"--workers must be >= 1, got {args.workers}")
+    grasps = load_grasp_file(args.grasps, args.key)
+    if args.limit is not None:
+        grasps = grasps[: max(0, args.limit)]
+    objs = resolve_objects(args.object)
+    if len(objs) != 1:
+        raise ObjectError(f"--object must name one object, {args.object!r} names {len(objs)}")
+    obj = objs[0]
+    protocol = Protocol.strict() if args.strict else Protocol()
+    if args.no_early_exit:
+        from dataclasses import replace
+
+        protocol = replace(protocol, early_exit=False)
+    hand = SimHand.registered_original(args.hand) if args.original else SimHand.from_params(get_hand(args.hand), name=args.hand)
+    ev = GraspEvaluator(hand, obj, protocol)
+    g, out_of_limits = ev.check(grasps)  # validates before any simulation or output
+    if out_of_limits.any():
+        print(f"warning: {int(out_of_limits.sum())} grasp(s) have joints outside the limits; clamped", file=sys.stderr)
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # already reported above
+        rep = ev.evaluate(g, mode=args.mode, workers=args.workers, progress=not args.quiet)
+    wall = time.perf_counter() - t0
+    ev.close()
+    rep.meta.update({"grasp_file": str(args.grasps), "original_hand": bool(args.original), "wall_s": wall,
+                     "object_info": obj.describe()})
+    if args.output:
+        from .data import atomic_write_json
+
+        atomic_write_json(args.output, rep.to_dict())
+    if args.render:
+        from .sim.render import contact_sheet, render_grasps, write_png
+
+        k = min(16, len(g))
+        write_png(contact_sheet(render_grasps(hand, obj, g[:k]), rep.success[:k]), args.render)
+    if args.meshcat and len(g):
+        _meshcat(args, hand, obj, g[0])
+    n = len(rep.results)
+    print(f"{args.hand} on {obj.name}: {int(rep.success.sum())}/{n} succeeded ({100 * rep.success_rate:.1f} %), "
+          f"{rep.clamped_count} clamped, {wall:.1f} s ({n / wall if wall > 0 else 0:.1f} grasps/s)")
+    return 0
+
+
+def _meshcat(args: argparse.Namespace, hand, obj, grasp: np.ndarray) -> None:
+    if not hand.canonical:
+        raise GraspError("--meshcat draws canonical hands only; drop --original")
+    from .hands import get_hand
+    from .kinematics import HandModel
+    from .viz import add_grasp, new_visualizer, save_html
+
+    vis = new_visualizer()
+    add_grasp(vis, HandModel.from_params(get_hand(args.hand)), grasp, np.asarray(obj.mesh.vertices), np.asarray(obj.mesh.faces))
+    save_html(vis, args.meshcat)
