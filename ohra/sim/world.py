@@ -200,10 +200,18 @@ class World:
         elif len(pieces) == 1:
             self.obj_shape = pb.createCollisionShape(pb.GEOM_MESH, vertices=np.asarray(pieces[0].vertices).tolist(), physicsClientId=c)
         else:
+            # createCollisionShapeArray takes meshes only as files: one temporary OBJ per convex piece
             n = len(pieces)
-            self.obj_shape = pb.createCollisionShapeArray(
-                [pb.GEOM_MESH] * n, vertices=[np.asarray(p.vertices).tolist() for p in pieces],
-                collisionFramePositions=[[0, 0, 0]] * n, collisionFrameOrientations=[[0, 0, 0, 1]] * n, physicsClientId=c)
+            with tempfile.TemporaryDirectory() as tmp:
+                files = []
+                for k, piece in enumerate(pieces):
+                    f = Path(tmp) / f"piece{k}.obj"
+                    piece.export(str(f))
+                    files.append(str(f))
+                self.obj_shape = pb.createCollisionShapeArray(
+                    [pb.GEOM_MESH] * n, fileNames=files, meshScales=[[1, 1, 1]] * n,
+                    collisionFramePositions=[[0, 0, 0]] * n, collisionFrameOrientations=[[0, 0, 0, 1]] * n,
+                    physicsClientId=c)
         self.mass = o.volume * prot.density
         I = np.asarray(o.inertia, dtype=float) / o.density * prot.density  # about the COM, mesh axes
         w, V = np.linalg.eigh(0.5 * (I + I.T))
