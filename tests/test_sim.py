@@ -236,3 +236,30 @@ def test_report_is_json_with_null_for_phases_not_run(evaluator):
     assert set(d["grasps"][0]["displacement_m"]) == {"squeeze", "+x", "+y", "+z", "-x", "-y", "-z"}
     if d["grasps"][1]["early_exit"]:
         assert None in d["grasps"][1]["displacement_m"].values()
+
+
+def test_compound_ycb_object_loads_its_convex_pieces_with_protocol_mass(objects_dir):
+    from ohra.objects import ObjectModel
+
+    obj = ObjectModel.load(objects_dir / "ycb" / "MustardBottle" / "model.urdf")
+    ev = GraspEvaluator(pinch_hand(), obj)
+    w = ev.world
+    b = w.new_object()
+    assert len(pb.getCollisionShapeData(b, -1, physicsClientId=w.client)) == len(obj.convex_pieces()) > 1
+    assert pb.getDynamicsInfo(b, -1, physicsClientId=w.client)[0] == pytest.approx(obj.volume * 500.0)
+    # the object's mesh frame sits at the world origin (PyBullet reports the inertial frame)
+    assert np.allclose(w.object_frame(), np.eye(4), atol=1e-6)
+    ev.close()
+
+
+def test_heuristic_benchmark_grasps_are_seeded_and_valid():
+    from ohra.objects import ObjectModel
+    from ohra.rotations import check_grasps
+    from ohra.sim.heuristic import heuristic_grasps
+
+    hm = HandModel.from_params(pinch_hand())
+    obj = ObjectModel.builtin("box")
+    a = heuristic_grasps(hm, obj, 3, seed=5, samples=32)
+    assert np.array_equal(a, heuristic_grasps(hm, obj, 3, seed=5, samples=32))
+    check_grasps(a)
+    assert np.all((a[:, 9:] >= hm.lower) & (a[:, 9:] <= hm.upper))

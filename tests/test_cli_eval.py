@@ -1,0 +1,75 @@
+"""``ohra eval``: success line and JSON report; bad input is one line, exit 2, and no output file."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from ohra.cli import main
+
+from sim_fixtures import pinch_box, pinch_grasp, pinch_hand
+
+
+@pytest.fixture
+def setup(tmp_path):
+    hand = tmp_path / "pinch.json"
+    pinch_hand().to_json(hand)
+    mesh = tmp_path / "box.stl"
+    pinch_box().mesh.export(str(mesh))
+    grasps = tmp_path / "g.npz"
+    np.savez(grasps, grasps=np.array([pinch_grasp(), pinch_grasp(dx=0.03)]))
+    return tmp_path, hand, mesh, grasps
+
+
+def _run(capsys, *argv):
+    rc = main(["eval", *map(str, argv), "--quiet"])
+    out = capsys.readouterr()
+    return rc, out.out, out.err
+
+
+def test_eval_reports_success_rate_and_writes_json(setup, capsys):
+    tmp, hand, mesh, grasps = setup
+    rc, out, err = _run(capsys, grasps, "--hand", hand, "--object", mesh, "-o", tmp / "r.json", "--render", tmp / "s.png")
+    assert rc == 0 and "1/2 succeeded (50.0 %)" in out
+    rep = json.loads((tmp / "r.json").read_text())
+    assert rep["n"] == 2 and [g["success"] for g in rep["grasps"]] == [True, False]
+    assert rep["protocol"]["friction"] == 3.0 and rep["object_info"]["mass_kg"] > 0
+    assert (tmp / "s.png").read_bytes()[:4] == b"\x89PNG"
+
+
+@pytest.mark.parametrize("bad, match", [
+    (lambda g: g[:, :30], "shape"),
+    (lambda g: np.where(np.arange(31) == 4, np.nan, g), "NaN"),
+    (lambda g: np.where((np.arange(31) >= 3) & (np.arange(31) < 9), 0.0, g), "not a rotation"),
+])
+def test_bad_grasps_are_one_line_exit_2_and_leave_no_report(setup, capsys, bad, match):
+    tmp, hand, mesh, _ = setup
+    f = tmp / "bad.npz"
+    np.savez(f, grasps=bad(np.array([pinch_grasp(), pinch_grasp()])))
+    rc, _, err = _run(capsys, f, "--hand", hand, "--object", mesh, "-o", tmp / "r.json")
+    assert rc == 2 and match in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert not (tmp / "r.json").exists()
+    assert not list(tmp.glob(".r.json*"))
+
+
+def test_missing_or_empty_mesh_is_exit_2(setup, capsys):
+    tmp, hand, _, grasps = setup
+    rc, _, err = _run(capsys, grasps, "--hand", hand, "--object", tmp / "nope.obj", "-o", tmp / "r.json")
+    assert rc == 2 and "not found" in err
+    (tmp / "empty.obj").write_text("# no faces\n")
+    rc, _, err = _run(capsys, grasps, "--hand", hand, "--object", tmp / "empty.obj", "-o", tmp / "r.json")
+    assert rc == 2 and "no faces" in err
+    assert not (tmp / "r.json").exists()
+
+
+def test_joints_outside_limits_are_clamped_and_counted(setup, capsys):
+    tmp, hand, mesh, _ = setup
+    g = pinch_grasp()
+    g[9 + 6] = 3.0  # index flexion beyond its 1.5 rad limit
+    f = tmp / "oob.npz"
+    np.savez(f, grasps=g[None])
+    rc, out, err = _run(capsys, f, "--hand", hand, "--object", mesh, "-o", tmp / "r.json")
+    assert rc == 0 and "clamped" in err and "1 clamped" in out
+    assert json.loads((tmp / "r.json").read_text())["clamped_joints_grasps"] == 1
