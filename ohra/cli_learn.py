@@ -1,0 +1,204 @@
+"""``ohra train vae`` and ``ohra vae encode|decode|interpolate``: the morphology VAE from the shell.
+
+Plugged into :mod:`ohra.cli` through ``register(subparsers)``; every parser sets ``func(args) -> int``.
+torch is imported only when a command runs (a missing torch is a one-line error).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import OhraError
+
+
+def _subcommands(sub: Any, name: str, help_text: str, dest: str) -> Any:
+    """The sub-subparsers of top-level command ``name``, created if no other plugin made it yet
+    (so that ``ohra train`` can host ``vae`` here and e.g. ``grasp`` elsewhere)."""
+    parser = sub.choices.get(name)
+    if parser is None:
+        parser = sub.add_parser(name, help=help_text)
+        s = parser.add_subparsers(dest=dest, metavar="WHAT", parser_class=type(parser))
+        s.required = True
+        return s
+    for action in parser._actions:  # argparse keeps the subparsers action among the actions
+        if isinstance(action, argparse._SubParsersAction):
+            return action
+    raise RuntimeError(f"command {name!r} exists without subcommands")  # pragma: no cover
+
+
+def register(sub: Any) -> None:
+    from .learn.train_vae import TrainConfig
+
+    d = TrainConfig()
+    train = _subcommands(sub, "train", "train learned models (vae, ...)", "train_command")
+    p = train.add_parser("vae", help="train the morphology VAE on synthetic hands")
+    p.add_argument("--samples", type=int, default=d.samples, help=f"synthetic training hands (default {d.samples})")
+    p.add_argument("--epochs", type=int, default=d.epochs, help=f"epochs (default {d.epochs})")
+    p.add_argument("--seed", type=int, default=d.seed, help=f"seed of data, init and noise (default {d.seed})")
+    p.add_argument("--batch-size", type=int, default=d.batch_size, help=f"default {d.batch_size}")
+    p.add_argument("--threads", type=int, default=d.threads, help=f"torch CPU threads (default {d.threads})")
+    p.add_argument("--checkpoint-every", type=int, default=d.checkpoint_every, help="epochs between checkpoints")
+    p.add_argument("--heldout", type=int, default=d.heldout, help="held-out hands for the final metrics")
+    p.add_argument("-o", "--output", default="runs/vae", help="run directory (default runs/vae)")
+    p.add_argument("--resume", action="store_true", help="continue from OUTPUT/checkpoints/last.pt")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_train_vae)
+
+    vae = _subcommands(sub, "vae", "use the morphology VAE: encode, decode, interpolate hands", "vae_command")
+    model_help = "model directory or .pt file (default: the shipped model)"
+    p = vae.add_parser("encode", help="print the latent mean and log-variance of hands")
+    p.add_argument("hands", nargs="+", help="registered hands or base params JSON files")
+    p.add_argument("--model", help=model_help)
+    p.set_defaults(func=_cmd_encode)
+
+    p = vae.add_parser("decode", help="decode a latent vector into base params JSON")
+    p.add_argument("latent", help="comma-separated numbers, or a .json / .npy file with one latent")
+    p.add_argument("-o", "--output", help="params JSON path (default: stdout)")
+    p.add_argument("--urdf", help="also write the canonical URDF here")
+    p.add_argument("--model", help=model_help)
+    p.set_defaults(func=_cmd_decode)
+
+    p = vae.add_parser("interpolate", help="hands along the latent line between two hands: URDFs, PNG strip, HTML")
+    p.add_argument("hand_a")
+    p.add_argument("hand_b")
+    p.add_argument("-n", "--steps", type=int, default=8, help="number of hands, endpoints included (default 8)")
+    p.add_argument("-o", "--output", required=True, help="output directory")
+    p.add_argument("--model", help=model_help)
+    p.add_argument("--no-png", action="store_true", help="skip the PNG strip")
+    p.add_argument("--no-html", action="store_true", help="skip the meshcat HTML scene")
+    p.set_defaults(func=_cmd_interpolate)
+
+
+def run(args: argparse.Namespace) -> int:
+    return int(args.func(args) or 0)
+
+
+# -- commands ---------------------------------------------------------------------------------------
+def _positive(name: str, value: int) -> None:
+    if value <= 0:
+        raise OhraError(f"--{name} must be positive, got {value}")
+
+
+def _cmd_train_vae(args: argparse.Namespace) -> int:
+    from .learn import require_torch
+
+    require_torch()
+    from .learn.train_vae import TrainConfig, train
+
+    for name in ("samples", "epochs", "batch_size", "threads", "checkpoint_every"):
+        _positive(name.replace("_", "-"), getattr(args, name))
+    if args.heldout < 0:
+        raise OhraError(f"--heldout must be >= 0, got {args.heldout}")
+    cfg = TrainConfig(samples=args.samples, epochs=args.epochs, seed=args.seed, batch_size=args.batch_size,
+                      threads=args.threads, checkpoint_every=args.checkpoint_every, heldout=args.heldout)
+    out = Path(args.output)
+    if not args.resume and (out / "checkpoints" / "last.pt").exists():
+        raise OhraError(f"{out} already holds a training run; pass --resume to continue it or choose another -o")
+    res = train(cfg, out, resume=args.resume, progress=not args.quiet)
+    m = res.metrics
+    print(f"trained {m['epochs']} epochs ({m['steps']} steps) in {m['train_seconds_total']:.1f} s; final loss {m['final_losses'].get('total', float('nan')):.4f}")
+    if "heldout" in m:
+        h = m["heldout"]
+        print(f"held-out ({h['n']} hands): presence {100 * h['presence_accuracy']:.2f} %, thumb axes {100 * h['axis_accuracy']:.2f} %")
+    print(f"model: {out / 'model.pt'}  metrics: {out / 'metrics.json'}")
+    return 0
+
+
+def _load(model: str | None):
+    from .learn import require_torch
+
+    require_torch()
+    from .learn.morph import load_vae
+
+    return load_vae(model)
+
+
+def _warnings_to_stderr(caught: list) -> None:
+    for w in caught:
+        print(f"ohra: warning: {w.message}", file=sys.stderr)
+
+
+def _cmd_encode(args: argparse.Namespace) -> int:
+    vae = _load(args.model)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        rows = {}
+        for h in args.hands:
+            mu, logvar = vae.encode(h)
+            rows[h] = {"mu": [round(float(x), 6) for x in mu], "logvar": [round(float(x), 6) for x in logvar]}
+    _warnings_to_stderr(caught)
+    print(json.dumps(rows, indent=1))
+    return 0
+
+
+def _read_latent(text: str) -> np.ndarray:
+    p = Path(text)
+    if p.suffix in (".json", ".npy"):
+        if not p.is_file():
+            raise OhraError(f"latent file not found: {p}")
+        try:
+            data = np.load(p) if p.suffix == ".npy" else json.loads(p.read_text())
+        except (ValueError, OSError) as exc:
+            raise OhraError(f"{p}: cannot read a latent ({exc})") from None
+        if isinstance(data, dict):
+            data = data.get("z", data.get("mu"))
+        try:
+            return np.asarray(data, dtype=float)
+        except (TypeError, ValueError):
+            raise OhraError(f"{p}: expected a list of numbers") from None
+    try:
+        return np.array([float(x) for x in text.replace(" ", "").split(",") if x != ""])
+    except ValueError:
+        raise OhraError(f"latent: expected comma-separated numbers, got {text!r}") from None
+
+
+def _cmd_decode(args: argparse.Namespace) -> int:
+    vae = _load(args.model)
+    z = _read_latent(args.latent)
+    params = vae.decode(z)
+    if isinstance(params, list):
+        raise OhraError(f"latent: expected one vector of {vae.latent_dim} numbers, got shape {z.shape}")
+    if args.output:
+        params.to_json(args.output)
+        print(f"wrote {args.output}", file=sys.stderr)
+    else:
+        sys.stdout.write(params.to_json())
+    if args.urdf:
+        from .urdfgen import write
+
+        write(params, args.urdf)
+        print(f"wrote {args.urdf}", file=sys.stderr)
+    return 0
+
+
+def _cmd_interpolate(args: argparse.Namespace) -> int:
+    if args.steps < 2:
+        raise OhraError(f"-n must be at least 2, got {args.steps}")
+    vae = _load(args.model)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        interp = vae.interpolate(args.hand_a, args.hand_b, args.steps)
+    _warnings_to_stderr(caught)
+    out = Path(args.output)
+    paths = interp.write(out)
+    print(f"wrote {len(paths)} URDFs to {out}")
+    for p, params in zip(paths, interp.params):
+        print(f"  {p.name}: {params.num_fingers} fingers, {params.dof} dof, {params.handedness} hand")
+    if not args.no_png:
+        from .learn.strip import strip_png
+
+        png = strip_png(interp.params, out / "strip.png", labels=interp.labels())
+        print(f"wrote {png}")
+    if not args.no_html:
+        from .learn.strip import sequence_html
+
+        html = sequence_html(interp.params, out / "scene.html")
+        print(f"wrote {html}")
+    return 0

@@ -1,0 +1,74 @@
+"""Learning on canonical hands: the synthetic hand sampler, the 66-D morphology encoding and the
+morphology VAE (16-D latent space; encode, decode and interpolate hands).
+
+The sampler and the encoding need only numpy and import eagerly. Everything that needs torch
+(the VAE model, training, ``load_vae``, ``encode``/``decode``/``interpolate``) is imported on first
+use; without torch those names raise :class:`MissingDependencyError` telling you to install the
+``learn`` extra (``pip install ohra[learn]``).
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+from ..errors import OhraError
+from .encoding import (
+    AXIS_CATEGORIES,
+    CONT_DIM,
+    ENCODING_DIM,
+    AxisSnapWarning,
+    LatentError,
+    Standardizer,
+    decode_params,
+    decode_vectors,
+    encode_params,
+    encode_vectors,
+)
+from .sampler import SamplerConfig, sample_hand, sample_params, sample_vectors
+
+
+class MissingDependencyError(OhraError, ImportError):
+    """An optional dependency (torch, for ``ohra.learn``) is not installed."""
+
+
+def require_torch():
+    """The ``torch`` module, or :class:`MissingDependencyError` with the install hint."""
+    try:
+        import torch
+    except ImportError as exc:  # pragma: no cover - exercised only without torch
+        raise MissingDependencyError(
+            f"ohra.learn needs PyTorch for the VAE ({exc}); install it with `pip install ohra[learn]` "
+            "(on a CPU-only machine install the CPU wheel of torch first)"
+        ) from None
+    return torch
+
+
+# name -> submodule providing it (imported lazily, because they need torch)
+_LAZY = {
+    "MorphologyVAE": "vae",
+    "VAEConfig": "vae",
+    "vae_loss": "vae",
+    "TrainConfig": "train_vae",
+    "train": "train_vae",
+    "VAEBundle": "morph",
+    "load_vae": "morph",
+    "encode": "morph",
+    "decode": "morph",
+    "interpolate": "morph",
+    "Interpolation": "morph",
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        require_torch()
+        return getattr(importlib.import_module(f"{__name__}.{_LAZY[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+__all__ = [
+    "sample_vectors", "sample_params", "sample_hand", "SamplerConfig", "encode_vectors", "encode_params",
+    "decode_vectors", "decode_params", "Standardizer", "AxisSnapWarning", "LatentError", "ENCODING_DIM",
+    "CONT_DIM", "AXIS_CATEGORIES", "MissingDependencyError", "require_torch", *_LAZY,
+]

@@ -1,0 +1,252 @@
+"""Using a trained morphology VAE: load it, encode hands, decode latents, interpolate between hands.
+
+``load_vae()`` reads the model shipped with the package (``ohra/learn/models/vae_default``,
+through ``importlib.resources``, no network); ``load_vae(DIR)`` reads a run directory written by
+``ohra train vae -o DIR`` (its ``model.pt``, or ``checkpoints/last.pt`` if training is unfinished).
+
+Encoding is deterministic: the encoder runs in eval mode (BatchNorm running statistics) and
+``encode`` returns the mean and log-variance; interpolation uses the means (the reference sampled
+``z``, which makes the endpoints noisy). Decoding always yields valid :class:`BaseParams`
+(see :func:`ohra.learn.encoding.project_vectors`), for any finite or infinite latent.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from functools import lru_cache
+from importlib import resources
+from pathlib import Path
+from typing import Any, Sequence, Union
+
+import numpy as np
+import torch
+
+from ..errors import CheckpointError
+from ..params import BaseParams, ExtendedParams
+from ..urdfgen import render
+from .encoding import AXIS1, AXIS2, CONT, FLAGS, LatentError, Standardizer, as_base, decode_vectors, encode_vectors
+from .train_vae import CHECKPOINT_FORMAT, MODEL_FORMAT, load_torch_file
+from .vae import MorphologyVAE, VAEConfig
+
+HandLike = Union[str, Path, BaseParams, ExtendedParams]
+DEFAULT_MODEL = "vae_default"
+_BIG = 1e6  # replaces infinities in decoder outputs before projection (then clipped to the bounds)
+
+
+def default_model_dir() -> Path:
+    """Folder of the model shipped with the package."""
+    return Path(str(resources.files("ohra.learn").joinpath("models", DEFAULT_MODEL)))
+
+
+def resolve_hand(hand: HandLike) -> BaseParams:
+    """Base params of a registered hand name, a params JSON path, or params."""
+    if isinstance(hand, (BaseParams, ExtendedParams)):
+        return as_base(hand)
+    from ..hands import get_hand
+
+    return as_base(get_hand(str(hand), "base"))
+
+
+@dataclass
+class VAEBundle:
+    """A trained VAE in eval mode with its standardiser, training configuration and metrics."""
+
+    model: MorphologyVAE
+    standardizer: Standardizer
+    config: dict[str, Any] = field(default_factory=dict)
+    metrics: dict[str, Any] | None = None
+    path: Path | None = None
+
+    @property
+    def latent_dim(self) -> int:
+        return self.model.config.latent_dim
+
+    # -- encoding -----------------------------------------------------------------------------
+    def encode_encodings(self, x66: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Raw 66-D encodings (N, 66) -> (mu, logvar), each (N, latent_dim)."""
+        x = np.array(x66, dtype=float, copy=True)
+        x[:, CONT] = self.standardizer.transform(x[:, CONT])
+        with torch.no_grad():
+            mu, logvar = self.model.encode(torch.from_numpy(x.astype(np.float32)))
+        return mu.double().numpy(), logvar.double().numpy()
+
+    def encode(self, hands: HandLike | Sequence[HandLike]) -> tuple[np.ndarray, np.ndarray]:
+        """(mu, logvar) of one hand ((latent_dim,) each) or a sequence of hands ((N, latent_dim) each)."""
+        single = isinstance(hands, (str, Path, BaseParams, ExtendedParams))
+        items = [hands] if single else list(hands)
+        x = np.stack([encode_vectors(resolve_hand(h).to_vector()) for h in items])
+        mu, logvar = self.encode_encodings(x)
+        return (mu[0], logvar[0]) if single else (mu, logvar)
+
+    # -- decoding -----------------------------------------------------------------------------
+    def check_latent(self, z: Any) -> tuple[np.ndarray, bool]:
+        try:
+            arr = np.asarray(z, dtype=float)
+        except (TypeError, ValueError):
+            raise LatentError(f"latent: expected numbers, got {type(z).__name__}") from None
+        d = self.latent_dim
+        if arr.ndim not in (1, 2) or arr.shape[-1] != d:
+            raise LatentError(f"latent: expected shape ({d},) or (N, {d}), got {arr.shape}")
+        if np.isnan(arr).any():
+            raise LatentError("latent contains NaN")
+        return np.atleast_2d(arr), arr.ndim == 1
+
+    def decode_encodings(self, z: Any) -> np.ndarray:
+        """Latents (N, latent_dim) -> raw 66-D decoder outputs (continuous in raw units, axis logits,
+        presence probabilities)."""
+        zz, _ = self.check_latent(z)
+        zz = np.clip(zz, -1e30, 1e30)  # keep float32 finite; the projection clips the result anyway
+        with torch.no_grad():
+            out = self.model.decode(torch.from_numpy(zz.astype(np.float32)))
+        y = np.zeros((len(zz), 66))
+        cont = out["cont"].double().numpy()
+        y[:, CONT] = self.standardizer.inverse(np.nan_to_num(cont, nan=0.0, posinf=_BIG, neginf=-_BIG))
+        y[:, AXIS1] = np.nan_to_num(out["axis1"].double().numpy(), nan=0.0, posinf=_BIG, neginf=-_BIG)
+        y[:, AXIS2] = np.nan_to_num(out["axis2"].double().numpy(), nan=0.0, posinf=_BIG, neginf=-_BIG)
+        y[:, FLAGS] = np.nan_to_num(torch.sigmoid(out["presence"]).double().numpy(), nan=0.0)
+        y[:, CONT] = np.nan_to_num(y[:, CONT], nan=0.0, posinf=_BIG, neginf=-_BIG)
+        return y
+
+    def decode_vectors(self, z: Any, limits: Any = None) -> np.ndarray:
+        """Latents -> valid base vectors (N, 82) (or (82,) for one latent); see :func:`decode_vectors`."""
+        _, single = self.check_latent(z)
+        v = decode_vectors(self.decode_encodings(z), limits)
+        return v[0] if single else v
+
+    def decode(self, z: Any, limits: Any = None) -> BaseParams | list[BaseParams]:
+        """One latent -> :class:`BaseParams`; (N, latent_dim) -> list. ``limits`` as in
+        :func:`ohra.learn.encoding.decode_vectors` (default: ``[0, pi/2]`` for present joints)."""
+        v = self.decode_vectors(z, limits)
+        if v.ndim == 1:
+            return BaseParams.from_vector(v)
+        return [BaseParams.from_vector(row) for row in v]
+
+    def reconstruct(self, hand: HandLike, keep_limits: bool = True) -> BaseParams:
+        """Encode (mean) and decode one hand; with ``keep_limits`` the hand's own joint limits are kept."""
+        p = resolve_hand(hand)
+        mu, _ = self.encode(p)
+        return self.decode(mu, limits=p if keep_limits else None)  # type: ignore[return-value]
+
+    # -- interpolation ------------------------------------------------------------------------
+    def interpolate(self, a: HandLike, b: HandLike, n: int = 8) -> "Interpolation":
+        """``n`` hands on the straight line between the mean latents of ``a`` and ``b`` (endpoints
+        included), decoded with default limits [0, pi/2] for present joints."""
+        if int(n) < 2:
+            raise LatentError(f"interpolation needs at least 2 steps, got {n}")
+        n = int(n)
+        (mu_a, _), (mu_b, _) = self.encode(a), self.encode(b)
+        alphas = np.linspace(0.0, 1.0, n)
+        z = (1.0 - alphas)[:, None] * mu_a + alphas[:, None] * mu_b
+        params = self.decode(z)
+        assert isinstance(params, list)
+        names = [str(a) if isinstance(a, (str, Path)) else "hand_a", str(b) if isinstance(b, (str, Path)) else "hand_b"]
+        return Interpolation(alphas, z, params, [render(p, robot_name=f"vae_interp_{i}") for i, p in enumerate(params)],
+                             tuple(Path(x).stem for x in names))
+
+
+@dataclass
+class Interpolation:
+    """A latent interpolation: ``alphas`` (n,), latents ``z`` (n, d), decoded ``params`` and their ``urdfs``."""
+
+    alphas: np.ndarray
+    z: np.ndarray
+    params: list[BaseParams]
+    urdfs: list[str]
+    endpoints: tuple[str, str] = ("hand_a", "hand_b")
+
+    def __len__(self) -> int:
+        return len(self.params)
+
+    def labels(self) -> list[str]:
+        return [f"{i}: a={a:.2f}" for i, a in enumerate(self.alphas)]
+
+    def write(self, out_dir: str | Path, stem: str = "interp") -> list[Path]:
+        """Write ``<stem>_<i>.urdf`` and ``<stem>_<i>.json`` (params) for every step; returns the URDF paths."""
+        from .train_vae import atomic_write_text
+
+        out = Path(out_dir)
+        paths = []
+        for i, (p, text) in enumerate(zip(self.params, self.urdfs)):
+            path = out / f"{stem}_{i:02d}.urdf"
+            atomic_write_text(text, path)
+            atomic_write_text(p.to_json(), out / f"{stem}_{i:02d}.json")
+            paths.append(path)
+        summary = {"endpoints": list(self.endpoints), "alphas": self.alphas.tolist(), "z": self.z.tolist(),
+                   "dof": [p.dof for p in self.params], "fingers": [p.num_fingers for p in self.params]}
+        atomic_write_text(json.dumps(summary, indent=1) + "\n", out / f"{stem}.json")
+        return paths
+
+
+# -- loading ----------------------------------------------------------------------------------------
+def _read_json(path: Path) -> dict[str, Any] | None:
+    if not path.is_file():
+        return None
+    try:
+        return json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise CheckpointError(f"{path}: malformed JSON ({exc})") from None
+
+
+def bundle_from_payload(obj: dict[str, Any], where: str) -> tuple[MorphologyVAE, Standardizer]:
+    """Model and standardiser from a ``model.pt`` or checkpoint dict (:class:`CheckpointError` if broken)."""
+    try:
+        cfg = VAEConfig.from_dict(obj["vae_config"])
+        std = Standardizer.from_dict({k: np.asarray(v, dtype=float) for k, v in obj["standardizer"].items()})
+        model = MorphologyVAE(cfg)
+        model.load_state_dict(obj["model"])
+    except (KeyError, TypeError, ValueError, RuntimeError) as exc:
+        raise CheckpointError(f"{where}: incompatible VAE weights ({type(exc).__name__}: {str(exc).splitlines()[0][:160]})") from None
+    model.eval()
+    return model, std
+
+
+def load_vae(path: str | Path | None = None) -> VAEBundle:
+    """Load a VAE: the shipped model (``path=None``), a run/model directory, or a ``.pt`` file
+    (``model.pt`` or a training checkpoint). Raises :class:`CheckpointError` if missing or corrupt."""
+    if path is None:
+        return _load_default()
+    return _load(Path(path))
+
+
+@lru_cache(maxsize=1)
+def _load_default() -> VAEBundle:
+    d = default_model_dir()
+    if not (d / "model.pt").is_file():
+        raise CheckpointError(f"the shipped VAE model is missing ({d / 'model.pt'}); reinstall ohra or train one with `ohra train vae`")
+    return _load(d)
+
+
+def _load(p: Path) -> VAEBundle:
+    if p.is_dir():
+        folder = p
+        f = p / "model.pt"
+        if not f.is_file() and (p / "checkpoints" / "last.pt").is_file():
+            f = p / "checkpoints" / "last.pt"
+    else:
+        folder, f = p.parent, p
+    if not f.exists():
+        raise CheckpointError(f"no VAE model at {p} (expected model.pt or checkpoints/last.pt)")
+    try:
+        obj = load_torch_file(f, MODEL_FORMAT)
+    except CheckpointError:
+        obj = load_torch_file(f, CHECKPOINT_FORMAT)  # a training checkpoint works too
+    model, std = bundle_from_payload(obj, str(f))
+    config = _read_json(folder / "config.json") or dict(obj.get("config", {}))
+    return VAEBundle(model, std, config, _read_json(folder / "metrics.json"), f)
+
+
+# -- module-level shortcuts (shipped model unless ``vae`` is given) ----------------------------------
+def encode(hand: HandLike | Sequence[HandLike], vae: VAEBundle | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(mu, logvar) of a hand (name, params JSON path or params) as numpy arrays."""
+    return (vae or load_vae()).encode(hand)
+
+
+def decode(z: Any, vae: VAEBundle | None = None, limits: Any = None) -> BaseParams | list[BaseParams]:
+    """Valid :class:`BaseParams` for a latent (or a list for (N, d) latents)."""
+    return (vae or load_vae()).decode(z, limits)
+
+
+def interpolate(hand_a: HandLike, hand_b: HandLike, n: int = 8, vae: VAEBundle | None = None) -> Interpolation:
+    """Decoded hands (params + URDF texts) along the latent line from ``hand_a`` to ``hand_b``."""
+    return (vae or load_vae()).interpolate(hand_a, hand_b, n)

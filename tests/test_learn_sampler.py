@@ -1,0 +1,158 @@
+"""The synthetic hand sampler: valid, seeded, reference distributions with the quirks fixed."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from ohra.kinematics import HandModel
+from ohra.learn.encoding import segment_presence
+from ohra.learn.sampler import (
+    EXTRA, LENGTHS, THUMB_AXES, UPPERS, XYZ, mirror_vectors, sample_params, sample_vectors,
+)
+from ohra.params import BaseParams
+from ohra.urdfgen import render
+
+N = 10_000
+
+
+@pytest.fixture(scope="module")
+def samples():
+    v, right = sample_vectors(N, seed=7, return_handedness=True)
+    return v, right
+
+
+def _present(v):
+    return (v[:, 38:60] != 0) | (v[:, UPPERS] != 0)
+
+
+def test_same_seed_same_hands_and_different_seed_different_hands():
+    a, b, c = sample_vectors(500, 3), sample_vectors(500, 3), sample_vectors(500, 4)
+    assert np.array_equal(a, b)
+    assert not np.allclose(a, c)
+    # BaseParams objects carry exactly the sampled vectors, in canonical key order
+    assert all(np.array_equal(p.to_vector(), row) for p, row in zip(sample_params(500, 3), a))
+
+
+def test_every_one_of_10k_samples_validates(samples):
+    v, _ = samples
+    assert v.shape == (N, 82)
+    for row in v:
+        BaseParams.from_vector(row)  # raises ParamsError on any invalid value
+
+
+def test_a_seeded_subset_renders_to_urdfs_that_load_in_pinocchio_and_pybullet(samples):
+    import pybullet as pb
+
+    from ohra.bullet import load_urdf_text
+
+    v, _ = samples
+    idx = np.random.default_rng(0).choice(N, 300, replace=False)
+    cid = pb.connect(pb.DIRECT)
+    try:
+        for k, i in enumerate(idx):
+            p = BaseParams.from_vector(v[i])
+            hm = HandModel.from_params(p)
+            assert hm.nq == 22 and hm.present_fingers.sum() == p.num_fingers
+            if k < 60:
+                body = load_urdf_text(hm.urdf, cid)
+                assert pb.getNumJoints(body, physicsClientId=cid) >= 22
+                pb.removeBody(body, physicsClientId=cid)
+    finally:
+        pb.disconnect(cid)
+
+
+@pytest.mark.slow
+def test_all_10k_samples_render_and_load(samples):
+    v, _ = samples
+    for row in v:
+        HandModel.from_params(BaseParams.from_vector(row))
+
+
+def test_finger_and_joint_patterns_follow_the_reference(samples):
+    v, right = samples
+    present = _present(v)
+    seg_t, seg_f, fingers = segment_presence(present)
+    assert fingers[:, 0].all(), "the thumb is always present"
+    assert set(np.unique(fingers[:, 1:].sum(axis=1))) == {2, 3, 4}
+    assert present[:, 0].all(), "thumb_joint1 is in every thumb pattern"
+    # one joint pattern shared by all present non-thumb fingers
+    pats = [present[:, s : s + 4] for s in (5, 9, 13, 18)]
+    for i in range(N)[:2000]:
+        used = [p[i] for p, f in zip(pats, fingers[i, 1:]) if f]
+        assert all(np.array_equal(u, used[0]) for u in used)
+    assert (pats[0][:, 1:].sum(axis=1)[fingers[:, 1]] >= 2).all()
+    # little_joint0 only on full hands (>= 20 joints before it), ~80 % of them
+    full = present.sum(axis=1) - present[:, 17] >= 20
+    assert not present[~full, 17].any()
+    assert 0.7 < present[full, 17].mean() < 0.9
+    # joint-count histogram close to the reference's 20k-sample estimate (§7.1)
+    counts = np.bincount(present.sum(axis=1), minlength=23) / N
+    assert abs(counts[11] - 0.170) < 0.02 and abs(counts[8] - 0.113) < 0.02 and counts[:6].sum() == 0
+    assert 0.47 < right.mean() < 0.53
+
+
+def test_parts_without_geometry_are_zero(samples):
+    v, _ = samples
+    present = _present(v)
+    seg_t, seg_f, fingers = segment_presence(present)
+    xyz = v[:, XYZ].reshape(N, 5, 3)
+    assert not xyz[~fingers].any() and np.all(np.any(xyz[fingers] != 0, axis=1))
+    axes = v[:, THUMB_AXES].reshape(N, 2, 3)
+    assert not axes[~present[:, :2]].any()
+    assert np.allclose(np.abs(axes[present[:, :2]]).sum(axis=1), 1.0)
+    assert not v[~present[:, 17]][:, EXTRA].any() and v[present[:, 17]][:, EXTRA][:, 3].all()
+    lengths = v[:, LENGTHS].reshape(N, 2, 3)
+    seg = np.stack([seg_t, seg_f.any(axis=1)], axis=1)
+    assert not lengths[~seg].any() and (lengths[seg] > 0).all()
+
+
+def test_knuckles_do_not_overlap_and_stay_on_the_palm(samples):
+    v, right = samples
+    present = _present(v)
+    _, _, fingers = segment_presence(present)
+    R, r = v[:, 0], v[:, 1]
+    y = v[:, XYZ].reshape(N, 5, 3)[:, 1:, 1]
+    for i in range(N):
+        yi = y[i, fingers[i, 1:]]
+        # index -> little runs from the thumb side (+y on a right hand) to the other side
+        d = -np.diff(yi) if right[i] else np.diff(yi)
+        assert (d >= 2 * r[i] - 1e-12).all()
+        assert (np.abs(yi) <= R[i] - r[i] + 1e-12).all()
+
+
+def test_little_extra_joint_sits_on_the_little_fingers_side(samples):
+    """Reference quirk fixed: right hands get the metacarpal frame at -y (like Shadow/Sharpa right)."""
+    v, right = samples
+    present = _present(v)
+    e = v[present[:, 17]][:, EXTRA]
+    rr = right[present[:, 17]]
+    little_y = v[present[:, 17]][:, XYZ.start + 13]
+    assert (np.sign(e[:, 1]) == np.sign(little_y)).all()
+    assert (e[rr, 1] < 0).all() and (e[rr, 3] > 0).all()
+    assert (e[~rr, 1] > 0).all() and (e[~rr, 3] < 0).all()
+    thumb_y = v[:, XYZ.start + 1]
+    assert (thumb_y[right] >= 0).all() and (thumb_y[~right] <= 0).all()
+
+
+def test_right_and_mirrored_left_hands_have_the_same_distribution(samples):
+    v, right = samples
+    r, m = v[right], mirror_vectors(v[~right])
+    assert np.array_equal(mirror_vectors(mirror_vectors(v[:50])), v[:50])
+    for k in range(32):
+        a, b = r[:, k], m[:, k]
+        if np.ptp(a) == 0 and np.ptp(b) == 0:
+            assert a[0] == b[0]
+            continue
+        assert stats.ks_2samp(a, b).pvalue > 1e-3, f"continuous value {k} differs between right and mirrored left"
+    # joint presence patterns: same frequencies
+    pr, pm = _present(r).mean(axis=0), _present(m).mean(axis=0)
+    assert np.abs(pr - pm).max() < 0.03
+    # and the mirror is not vacuous: unmirrored left hands differ from right hands
+    assert stats.ks_2samp(r[:, XYZ.start + 1], v[~right][:, XYZ.start + 1]).pvalue < 1e-6
+
+
+def test_sampled_hand_urdf_is_deterministic():
+    p = sample_params(1, 11)[0]
+    assert render(p) == render(BaseParams.from_json(p.to_json()))
