@@ -251,7 +251,8 @@ def project_vectors(v82: np.ndarray, min_gap_tol: float = 1e-9) -> np.ndarray:
     3. present thumb axes are unit signed basis axes (the nearest one);
     4. every present segment is at least as long as its capsule's diameter;
     5. knuckles of present non-thumb fingers are spread along y so that neighbours (in index ->
-       little order) are at least one finger diameter apart, keeping their order and centroid;
+       little order) are at least one finger diameter apart, keeping their order (and their
+       centroid, unless that would leave the bounds);
     6. a present finger never sits exactly at the origin.
 
     A vector that already satisfies all of this is returned unchanged (bit for bit).
@@ -311,11 +312,14 @@ def _spread_knuckles(xyz: np.ndarray, fingers: np.ndarray, r: np.ndarray, tol: f
         if np.all(np.diff(u) >= d - tol):
             continue
         new = u.copy()
+        for k in range(1, new.size):  # push outward to at least d apart
+            new[k] = max(new[k], new[k - 1] + d)
+        new = np.clip(new + np.mean(u - new), -lim, lim)  # keep the centroid, stay in the bounds
         for k in range(1, new.size):
             new[k] = max(new[k], new[k - 1] + d)
-        new += np.mean(u - new)  # keep the centroid
-        new -= max(new.max() - lim, 0.0)  # stay inside the position bounds
-        new += max(-lim - new.min(), 0.0)
+        new[-1] = min(new[-1], lim)
+        for k in range(new.size - 2, -1, -1):  # feasible: 3 d <= 2 lim, so this keeps new >= -lim
+            new[k] = min(new[k], new[k + 1] - d)
         xyz[i, idx, 1] = sign * new
 
 

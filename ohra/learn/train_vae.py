@@ -211,6 +211,15 @@ def reconstruction_metrics(x_raw: np.ndarray, y: np.ndarray) -> dict[str, Any]:
     }
 
 
+def _peak_rss_mib() -> float | None:
+    """Peak resident memory of this process so far [MiB] (None where the platform has no getrusage)."""
+    try:
+        import resource
+    except ImportError:  # pragma: no cover - Windows
+        return None
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
 # -- training ---------------------------------------------------------------------------------------
 def _state(model, opt, epoch, step, gens, history, cfg, std, digest) -> dict[str, Any]:
     return {
@@ -342,6 +351,7 @@ def train(config: TrainConfig = TrainConfig(), run_dir: str | Path | None = None
             metrics["heldout"] = {"seed": cfg.seed + HELDOUT_SEED_OFFSET,
                                   **reconstruction_metrics(x_held, reconstruct(model, std, x_held))}
         metrics["wall_seconds"] = time.perf_counter() - t_start
+        metrics["peak_rss_mib"] = _peak_rss_mib()
     if run is not None:
         atomic_save(model_payload(model, std), run / "model.pt")
         atomic_write_text(json.dumps(metrics, indent=2) + "\n", run / "metrics.json")
