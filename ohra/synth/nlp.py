@@ -41,6 +41,7 @@ class NLPSettings:
     max_iter: int = 300
     sdf_cells: int = 40
     tol: float = 1e-6
+    palm_contact: bool = False  # also make the palm a contact for hands with three or more fingers
 
 
 def _rodrigues(w: ca.SX) -> ca.SX:
@@ -75,7 +76,7 @@ class GraspNLP:
         last = {f: max((c for c in caps if c[1] == f), key=lambda c: ("proximal", "middle", "distal").index(c[0].split("_")[1])) for f in fingers}
         self.contact_links = [last[f][0] for f in fingers]
         R_palm, depth = palm_geometry(hand.params)
-        self.palm_contact = len(fingers) < 3
+        self.palm_contact = len(fingers) < 3 or s.palm_contact
         n_c = len(fingers) + (1 if self.palm_contact else 0)
         self.n_contacts = n_c
 
