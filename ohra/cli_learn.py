@@ -34,7 +34,7 @@ def _subcommands(sub: Any, name: str, help_text: str, dest: str) -> Any:
 
 
 def register(sub: Any) -> None:
-    from .learn.train_vae import TrainConfig
+    from .learn.config import TrainConfig
 
     d = TrainConfig()
     train = _subcommands(sub, "train", "train learned models (vae, ...)", "train_command")
@@ -90,7 +90,8 @@ def _cmd_train_vae(args: argparse.Namespace) -> int:
     from .learn import require_torch
 
     require_torch()
-    from .learn.train_vae import TrainConfig, train
+    from .learn.config import TrainConfig
+    from .learn.train_vae import train
 
     for name in ("samples", "epochs", "batch_size", "threads", "checkpoint_every"):
         _positive(name.replace("_", "-"), getattr(args, name))

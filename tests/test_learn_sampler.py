@@ -9,7 +9,7 @@ from scipy import stats
 from ohra.kinematics import HandModel
 from ohra.learn.encoding import segment_presence
 from ohra.learn.sampler import (
-    EXTRA, LENGTHS, THUMB_AXES, UPPERS, XYZ, mirror_vectors, sample_params, sample_vectors,
+    EXTRA, LENGTHS, THUMB_AXES, UPPERS, XYZ, in_support, mirror_vectors, sample_params, sample_vectors,
 )
 from ohra.params import BaseParams
 from ohra.urdfgen import render
@@ -156,3 +156,12 @@ def test_right_and_mirrored_left_hands_have_the_same_distribution(samples):
 def test_sampled_hand_urdf_is_deterministic():
     p = sample_params(1, 11)[0]
     assert render(p) == render(BaseParams.from_json(p.to_json()))
+
+
+def test_every_sampled_pattern_is_in_the_documented_support(samples):
+    v, _ = samples
+    flags = v[:, 38:60] != v[:, 60:82]
+    assert all(in_support(f) for f in flags[:3000])
+    off = flags[0].copy()
+    off[0] = False  # a thumb without joint 1 (Barrett's pattern) is never sampled
+    assert not in_support(off)

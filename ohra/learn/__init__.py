@@ -25,6 +25,7 @@ from .encoding import (
     encode_params,
     encode_vectors,
 )
+from .config import TrainConfig
 from .sampler import SamplerConfig, sample_hand, sample_params, sample_vectors
 
 
@@ -49,7 +50,6 @@ _LAZY = {
     "MorphologyVAE": "vae",
     "VAEConfig": "vae",
     "vae_loss": "vae",
-    "TrainConfig": "train_vae",
     "train": "train_vae",
     "VAEBundle": "morph",
     "load_vae": "morph",
@@ -70,5 +70,5 @@ def __getattr__(name: str) -> Any:
 __all__ = [
     "sample_vectors", "sample_params", "sample_hand", "SamplerConfig", "encode_vectors", "encode_params",
     "decode_vectors", "decode_params", "Standardizer", "AxisSnapWarning", "LatentError", "ENCODING_DIM",
-    "CONT_DIM", "AXIS_CATEGORIES", "MissingDependencyError", "require_torch", *_LAZY,
+    "CONT_DIM", "AXIS_CATEGORIES", "TrainConfig", "MissingDependencyError", "require_torch", *_LAZY,
 ]

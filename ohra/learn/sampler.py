@@ -205,3 +205,22 @@ def mirror_vectors(v: np.ndarray) -> np.ndarray:
     m[:, THUMB_RPY.start] *= -1.0
     m[:, THUMB_RPY.start + 2] *= -1.0
     return m
+
+
+def in_support(flags: np.ndarray) -> bool:
+    """Whether a joint pattern (22 bools, e.g. the VAE flags) can come out of the sampler.
+
+    The sampler's patterns: thumb one of ``THUMB_PATTERNS``; 2-4 non-thumb fingers sharing one of
+    ``FINGER_PATTERNS``; ``little_joint0`` only with at least 20 other joints. Hands outside this support
+    (e.g. Barrett, whose "thumb" has no joint 1) are encoded fine but reconstructed less reliably.
+    """
+    f = np.asarray(flags, dtype=bool).reshape(22)
+    if not any(np.array_equal(f[0:5], t) for t in THUMB_PATTERNS):
+        return False
+    pats = [f[s : s + 4] for s in (5, 9, 13, 18)]
+    used = [p for p in pats if p.any()]
+    if len(used) < 2 or any(not np.array_equal(p, used[0]) for p in used):
+        return False
+    if not any(np.array_equal(used[0], p) for p in FINGER_PATTERNS):
+        return False
+    return not f[17] or int(f.sum()) - 1 >= 20

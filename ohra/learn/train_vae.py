@@ -23,7 +23,7 @@ import json
 import os
 import tempfile
 import time
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any, Callable, Iterator
 
@@ -33,50 +33,14 @@ import torch
 from ..errors import CheckpointError
 from .encoding import AXIS1, AXIS2, CONT, CONT_GROUPS, FLAGS, Standardizer, encode_vectors
 from .sampler import sample_vectors
-from .vae import MorphologyVAE, VAEConfig, make_optimizer, vae_loss
+from .config import TrainConfig
+from .vae import MorphologyVAE, make_optimizer, vae_loss
 
 CHECKPOINT_FORMAT = "ohra-vae-checkpoint"
 MODEL_FORMAT = "ohra-vae-model"
 FORMAT_VERSION = 1
 HELDOUT_SEED_OFFSET = 1_000_003  # held-out hands come from a different seed than the training set
 LOSS_TERMS = ("total", "mse", "ce_axis1", "ce_axis2", "bce", "kl")
-
-
-@dataclass(frozen=True)
-class TrainConfig:
-    """Training settings (paper values where the paper has one)."""
-
-    samples: int = 65536  # synthetic training hands, drawn once
-    epochs: int = 300
-    batch_size: int = 1024  # shuffled, last partial batch dropped
-    seed: int = 0
-    lr: float = 1e-4
-    betas: tuple[float, float] = (0.95, 0.999)
-    weight_decay: float = 1e-6
-    beta: float = 0.01  # KL weight
-    latent_dim: int = 16
-    checkpoint_every: int = 10  # epochs
-    threads: int = 2  # torch CPU threads (results are reproducible for a fixed value)
-    heldout: int = 8192  # held-out hands for the final metrics (0: none)
-
-    # fields that may differ between a checkpoint and the run that resumes it
-    RESUMABLE_CHANGES = ("epochs", "checkpoint_every", "heldout")
-
-    def to_dict(self) -> dict[str, Any]:
-        d = asdict(self)
-        d["betas"] = list(self.betas)
-        return d
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "TrainConfig":
-        names = {f.name for f in fields(cls)}
-        kw = {k: v for k, v in d.items() if k in names}
-        if "betas" in kw:
-            kw["betas"] = tuple(float(b) for b in kw["betas"])
-        return cls(**kw)
-
-    def vae_config(self) -> VAEConfig:
-        return VAEConfig(latent_dim=self.latent_dim, beta=self.beta)
 
 
 @dataclass
@@ -102,6 +66,13 @@ def _digest(x: torch.Tensor) -> str:
 
 
 # -- io ---------------------------------------------------------------------------------------------
+def _umask_mode() -> int:
+    """0o666 minus the process umask: what open() would give a new file (mkstemp gives 0o600)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
 def atomic_save(obj: Any, path: Path) -> None:
     """torch.save to a temporary file in the same folder, then rename over ``path``."""
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -111,6 +82,7 @@ def atomic_save(obj: Any, path: Path) -> None:
             torch.save(obj, fh)
             fh.flush()
             os.fsync(fh.fileno())
+        os.chmod(tmp, _umask_mode())
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
@@ -123,6 +95,7 @@ def atomic_write_text(text: str, path: Path) -> None:
     fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=str(path.parent))
     with os.fdopen(fd, "w") as fh:
         fh.write(text)
+    os.chmod(tmp, _umask_mode())
     os.replace(tmp, path)
 
 
