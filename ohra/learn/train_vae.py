@@ -244,7 +244,7 @@ def train(config: TrainConfig = TrainConfig(), run_dir: str | Path | None = None
     for ``epochs``, ``checkpoint_every`` and ``heldout``; the result equals an uninterrupted run).
     ``on_epoch(epoch, losses)`` is called after every epoch (e.g. to stop a run in a test).
     """
-    from tqdm.auto import tqdm
+    from tqdm import tqdm
 
     cfg = config
     if cfg.samples < cfg.batch_size:
