@@ -90,14 +90,20 @@ def smoothness(vae, steps: int = 16) -> list[dict]:
         except OhraError:
             continue
         T = [tips(p) for p in it.params]
-        jumps, changes = [], 0
+        jumps, same, changes = [], [], 0
         for t0, t1, p0, p1 in zip(T[:-1], T[1:], it.params[:-1], it.params[1:]):
             both = ~np.isnan(t0[:, 0]) & ~np.isnan(t1[:, 0])
             jumps.append(float(np.linalg.norm(t0[both] - t1[both], axis=1).max()) if both.any() else 0.0)
             changes += int(np.sum(p0.present_fingers != p1.present_fingers))
+            if np.array_equal(p0.present_joints, p1.present_joints):  # no joint appears or vanishes
+                d = np.linalg.norm(t0 - t1, axis=1)
+                same.append((float(d[0]), float(np.nanmax(d[1:]))))
         ends = float(np.linalg.norm(np.nan_to_num(T[0] - T[-1]), axis=1).max())
         out.append({"pair": f"{a} -> {b}", "steps": steps, "max_jump_mm": 1e3 * max(jumps), "mean_jump_mm": 1e3 * float(np.mean(jumps)),
-                    "finger_appearances": changes, "dof": [p.dof for p in it.params]})
+                    "finger_appearances": changes,
+                    "max_jump_same_structure_thumb_mm": 1e3 * max(j[0] for j in same) if same else None,
+                    "max_jump_same_structure_fingers_mm": 1e3 * max(j[1] for j in same) if same else None,
+                    "steps_same_structure": len(same), "dof": [p.dof for p in it.params]})
     return out
 
 
@@ -155,6 +161,9 @@ def main() -> None:
     for s in smooth:
         lines.append(f"| interpolation {s['pair']} ({s['steps']} steps): max / mean fingertip jump | "
                      f"{s['max_jump_mm']:.1f} / {s['mean_jump_mm']:.1f} mm | |")
+        if s["steps_same_structure"]:
+            lines.append(f"| ... steps with the same joints ({s['steps_same_structure']} of {s['steps'] - 1}): max jump thumb / other fingers | "
+                         f"{s['max_jump_same_structure_thumb_mm']:.1f} / {s['max_jump_same_structure_fingers_mm']:.1f} mm | |")
     tr = data["training"]
     if tr["seconds"] is not None:
         lines.append(f"| training: {tr['epochs']} epochs, {tr['steps']} steps, 65,536 hands, {tr['threads']} thread(s) | "
