@@ -46,7 +46,7 @@ def register(sub: Any) -> None:
     p.add_argument("--threads", type=int, default=d.threads, help=f"torch CPU threads (default {d.threads})")
     p.add_argument("--checkpoint-every", type=int, default=d.checkpoint_every, help="epochs between checkpoints")
     p.add_argument("--heldout", type=int, default=d.heldout, help="held-out hands for the final metrics")
-    p.add_argument("-o", "--output", default="runs/vae", help="run directory (default runs/vae)")
+    p.add_argument("-o", "--output", default="out/vae", help="run directory (default out/vae)")
     p.add_argument("--resume", action="store_true", help="continue from OUTPUT/checkpoints/last.pt")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_train_vae)
