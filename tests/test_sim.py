@@ -138,15 +138,29 @@ def test_strict_preset():
     p = Protocol.strict()
     assert p.friction == 1.0 and p.gravity_in_evaluation == pytest.approx(9.81)
     assert Protocol().friction == 3.0 and Protocol().gravity_in_evaluation == 0.0
-    assert p.total_steps == 700 and Protocol.preset("strict") == p
+    assert p.total_steps == 7 * 240 and Protocol.preset("strict") == p
+
+
+def test_default_step_is_240_hz_and_the_isaac_step_is_a_preset():
+    p = Protocol()
+    assert p.dt == pytest.approx(1 / 240) and p.substeps == 1 and p.solver_iterations == 100
+    isaac = Protocol.preset("isaac-step")
+    assert (isaac.dt, isaac.substeps, isaac.total_steps) == (0.01, 2, 700)
+    with pytest.raises(ValueError, match="isaac-step"):
+        Protocol.preset("nope")
 
 
 def test_strict_preset_is_harder_on_the_same_grasp():
-    """The pinch holds with friction 3 and no gravity; with friction 1 and gravity it slips."""
-    ev = GraspEvaluator(pinch_hand(), pinch_box(), Protocol.strict())
-    r = ev.evaluate(pinch_grasp()).results[0]
-    ev.close()
-    assert not r.success
+    """Friction 1 with gravity moves the squeezed box further than the reference's friction 3 without
+    gravity; with gravity and no friction at all the box falls out of the pinch."""
+    runs = {}
+    for name, prot in {"reference": Protocol(), "strict": Protocol.strict(),
+                       "frictionless": Protocol.strict(friction=0.0)}.items():
+        with GraspEvaluator(pinch_hand(), pinch_box(), prot) as ev:
+            runs[name] = ev.evaluate(pinch_grasp()).results[0]
+    assert runs["reference"].success and not runs["frictionless"].success
+    worst = {k: np.nanmax(r.displacement[1:]) for k, r in runs.items()}
+    assert worst["reference"] < worst["strict"] < worst["frictionless"]
 
 
 def test_squeeze_controller_opens_then_closes_past_the_grasp():
