@@ -98,7 +98,9 @@ def main(argv: list[str] | None = None) -> int:
         lines.append(f"| **all** | | {tot} | {100 * np.mean([r['pass_rate'] for r in rows]):.0f} % | | "
                      f"{'no' if all(r['early_exit_identical'] for r in rows) else 'YES'} | **{tot / t1:.1f}** | | **{tot / t2:.1f}** |")
     lines.append("")
-    lines.append(f"Reference protocol (dt 0.01 s, 2 substeps, 7 s). Peak memory {peak_self:.0f} MiB (main), "
+    prot = Protocol()
+    lines.append(f"Default protocol (dt 1/{1 / prot.dt:.0f} s, {prot.substeps} substep(s), {prot.solver_iterations} solver iterations, "
+                 f"{prot.squeeze_time + 6 * prot.direction_time:.0f} s). Peak memory {peak_self:.0f} MiB (main), "
                  f"{peak_children:.0f} MiB (largest worker). Grasps: seeded heuristic closures (bench_eval.py docstring).")
     lines += [f"Note: {n}" for n in notes]
     write_results("eval", {"rows": rows, "grasps_per_pair": args.grasps, "seed": args.seed, "peak_rss_mib": peak_self,
