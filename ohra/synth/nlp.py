@@ -49,6 +49,7 @@ class NLPSettings:
     # evaluation for a 4-finger hand; L-BFGS needs about as many iterations at a third of the time
     # and converged more often on YCB objects.
     hessian: str = "limited-memory"
+    mu_oracle: str = "probing"  # IPOPT's barrier update; converged on 24/24 YCB starts where "quality-function" did 21/24
 
 
 def sdf_bspline(grid) -> ca.Function:
@@ -167,7 +168,9 @@ class GraspNLP:
             normals.append(n)
         # different fingers keep apart: the thumb against every finger, other fingers against their
         # neighbours (non-neighbours cannot meet without passing through the finger between them);
-        # knuckle spheres (first sample of the first segment) sit at fixed spacing and are skipped
+        # knuckle spheres (first sample of the first segment) sit at fixed spacing and are skipped.
+        # End spheres alone let two long capsules cross between them (a few % of solutions; denser
+        # samples cost more than they save), so solutions are re-checked exactly with Coal afterwards
         order = [f for f in fingers if f != 0]
         neighbours = {(a, b) for a, b in zip(order, order[1:])} | {(0, f) for f in order}
         first_link = {f: min((c for c in caps if c[1] == f), key=lambda c: ("proximal", "middle", "distal").index(c[0].split("_")[1]))[0] for f in fingers}
@@ -208,7 +211,8 @@ class GraspNLP:
         x = ca.vertcat(t, w, qm, f)
         p_par = ca.vertcat(ca.reshape(R0, 9, 1), q_pref)
         opts = {"ipopt.print_level": 0, "print_time": 0, "ipopt.sb": "yes", "ipopt.max_iter": s.max_iter,
-                "ipopt.tol": s.tol, "ipopt.constr_viol_tol": 1e-4, "ipopt.mu_strategy": "adaptive"}
+                "ipopt.tol": s.tol, "ipopt.constr_viol_tol": 1e-4, "ipopt.mu_strategy": "adaptive",
+                "ipopt.mu_oracle": s.mu_oracle}
         if s.hessian != "exact":
             opts["ipopt.hessian_approximation"] = "limited-memory"
         self.solver = ca.nlpsol("grasp", "ipopt", {"x": x, "p": p_par, "f": J, "g": gvec}, opts)

@@ -32,8 +32,11 @@ from .nlp import GraspNLP, NLPSettings, SUCCESS_STATUSES
 from .quality import ferrari_canny
 
 Params = Union[BaseParams, ExtendedParams]
+# solver_status codes in the shards; "Self_Collision" marks a converged solution whose fingers
+# intersect in the exact (Coal) capsule check, which the NLP's sphere samples can miss
 STATUS_CODES = {s: i for i, s in enumerate(SUCCESS_STATUSES + ("Maximum_Iterations_Exceeded", "Infeasible_Problem_Detected",
-                                                                 "Restoration_Failed", "Error_In_Step_Computation", "other"))}
+                                                                 "Restoration_Failed", "Error_In_Step_Computation", "other",
+                                                                 "Self_Collision"))}
 
 
 @dataclass(frozen=True)
@@ -73,6 +76,8 @@ def synthesize_shard(name: str, params: Params, obj: ObjectModel, settings: Synt
     t_solve = time.perf_counter()
     for st in starts:
         r = nlp.solve(st["R0"], st["t0"], st["q0"], st["q_pref"])
+        if r["success"] and hand.self_collision(r["grasp"][9:]):
+            r["status"], r["success"] = "Self_Collision", False
         status.append(STATUS_CODES.get(r["status"], STATUS_CODES["other"]))
         viol.append(r["violation"])
         iters.append(r["iterations"])
