@@ -217,15 +217,13 @@ class ObjectModel:
             mesh = _load_mesh_file(mesh_path, scale)
             mesh.apply_transform(T_vis)
             if col is not None and col.is_file() and col != mesh_path:
-                cmesh = _load_mesh_file(col, scale)
-                cmesh.apply_transform(T_col)
-                pieces = _split_convex(cmesh)
+                pieces = [pc.apply_transform(T_col) for pc in load_convex_pieces(col, scale)]
             label = name or path.parent.name
         elif path.suffix.lower() in MESH_SUFFIXES:
             mesh = _load_mesh_file(path)
             sib = path.parent / "collision_vhacd.obj"
             if sib.is_file() and sib != path:
-                pieces = _split_convex(_load_mesh_file(sib))
+                pieces = load_convex_pieces(sib)
             label = name or (path.parent.name if path.stem.startswith("textured") else path.stem)
         else:
             raise ObjectError(f"{path}: unsupported object file type {path.suffix!r} (use .obj, .stl, .ply or .urdf)")
@@ -355,16 +353,20 @@ class ObjectModel:
 
     # -- convex pieces ---------------------------------------------------------------------------------
     def convex_pieces(self) -> list[trimesh.Trimesh]:
-        """Convex decomposition for simulation: a provided decomposition, the hull of a convex mesh,
-        or PyBullet's V-HACD (cached on disk by mesh hash)."""
-        if self._pieces is None:
-            self._pieces = self._decompose()
+        """Convex decomposition for simulation: the hull of a convex watertight mesh (exactly the
+        shape the SDF describes, preferred even over a provided decomposition, which for YCB boxes
+        is off by up to 7 mm), else a provided decomposition, else PyBullet's V-HACD (cached on disk
+        by mesh hash)."""
+        if not self.__dict__.get("_pieces_resolved", False):
+            hull = self.mesh.convex_hull
+            if self.watertight and abs(hull.volume - self.volume) <= 0.01 * hull.volume:
+                self._pieces = [hull]
+            elif self._pieces is None:
+                self._pieces = self._decompose()
+            self._pieces_resolved = True
         return self._pieces
 
     def _decompose(self) -> list[trimesh.Trimesh]:
-        hull = self.mesh.convex_hull
-        if self.watertight and abs(hull.volume - self.volume) <= 0.01 * hull.volume:
-            return [hull]
         out = cache_dir() / "vhacd" / f"{self.mesh_hash}.obj"
         if not out.is_file():
             import pybullet as pb
@@ -380,7 +382,7 @@ class ObjectModel:
                 pb.disconnect(client)
             tmp.replace(out)
             src.unlink(missing_ok=True)
-        return _split_convex(_load_mesh_file(out))
+        return load_convex_pieces(out)
 
     def describe(self) -> dict:
         """Summary for reports and manifests."""
@@ -392,12 +394,33 @@ class ObjectModel:
         }
 
 
-def _split_convex(mesh: trimesh.Trimesh) -> list[trimesh.Trimesh]:
-    parts = mesh.split(only_watertight=False)
-    out = [p.convex_hull for p in parts if len(p.faces) >= 4]
-    if not out:
-        out = [mesh.convex_hull]
-    return out
+def load_convex_pieces(path: Path, scale: np.ndarray | None = None) -> list[trimesh.Trimesh]:
+    """Convex pieces of a decomposition file (V-HACD / CoACD OBJ): one piece per ``o``/``g`` object,
+    or per connected component when the file has a single object; each piece is its convex hull."""
+    path = Path(path)
+    if not path.is_file():
+        raise ObjectError(f"convex decomposition not found: {path}")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # trimesh warns about texture-less materials
+            loaded = trimesh.load(str(path), process=False, group_material=False, split_object=True, maintain_order=True)
+    except Exception as exc:  # trimesh raises many types for bad files
+        raise ObjectError(f"{path}: cannot read convex decomposition ({exc})") from None
+    geoms = [g.copy() for g in (loaded.dump() if isinstance(loaded, trimesh.Scene) else [loaded]) if isinstance(g, trimesh.Trimesh)]
+    for g in geoms:
+        g.remove_unreferenced_vertices()  # an OBJ object may carry the whole file's vertex list
+    if len(geoms) == 1:
+        # unmerged vertices would split every triangle off: merge before splitting by connectivity
+        merged = geoms[0].copy()
+        merged.merge_vertices()
+        geoms = merged.split(only_watertight=False) or [merged]
+    pieces = [g.convex_hull for g in geoms if len(g.faces) >= 4 and float(np.ptp(g.vertices, axis=0).min()) > 0.0]
+    if not pieces:
+        raise ObjectError(f"{path}: convex decomposition holds no solid piece")
+    if scale is not None:
+        for pc in pieces:
+            pc.apply_scale(scale)
+    return pieces
 
 
 def farthest_point_sampling(points: np.ndarray, k: int, seed: int = 0) -> np.ndarray:

@@ -7,7 +7,7 @@ import pytest
 import trimesh
 
 from ohra import ObjectError
-from ohra.objects import ObjectModel, builtin_object_names, farthest_point_sampling
+from ohra.objects import ObjectModel, builtin_object_names, farthest_point_sampling, load_convex_pieces
 from ohra.objects_builtin import ANALYTIC_VOLUME
 
 
@@ -94,3 +94,33 @@ def test_sdf_grid_gradient_points_away_from_a_sphere():
     unit = pts / np.linalg.norm(pts, axis=1, keepdims=True)
     assert np.all((grad * unit).sum(axis=1) > 0.95)
     assert np.allclose(g.interpolant()(pts), g.query(pts), atol=1e-12)
+
+
+def test_a_decomposition_file_gives_one_convex_piece_per_object(tmp_path):
+    """V-HACD writes every piece as an OBJ object indexing one shared vertex list."""
+    a = trimesh.creation.box(extents=(0.02, 0.02, 0.02))
+    b = trimesh.creation.box(extents=(0.01, 0.04, 0.01))
+    b.apply_translation((0.05, 0.0, 0.0))
+    lines = [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in np.vstack([a.vertices, b.vertices])]
+    lines.append("o piece0")
+    lines += [f"f {i + 1} {j + 1} {k + 1}" for i, j, k in a.faces]
+    lines.append("o piece1")
+    lines += [f"f {i + 9} {j + 9} {k + 9}" for i, j, k in b.faces]
+    path = tmp_path / "collision_vhacd.obj"
+    path.write_text("\n".join(lines) + "\n")
+    pieces = load_convex_pieces(path)
+    assert sorted(round(p.volume * 1e6, 3) for p in pieces) == [4.0, 8.0]
+    with pytest.raises(ObjectError, match="not found"):
+        load_convex_pieces(tmp_path / "missing.obj")
+
+
+def test_ycb_decompositions_cover_the_mesh_where_the_simulator_needs_them(objects_dir):
+    """Concave YCB objects simulate as their provided pieces: together about the mesh's volume and bounds."""
+    for name in ("Scissors", "PowerDrill", "MustardBottle"):
+        o = ObjectModel.load(objects_dir / "ycb" / name)
+        pieces = o.convex_pieces()
+        assert len(pieces) > 1, name
+        lo = np.min([p.bounds[0] for p in pieces], axis=0)
+        hi = np.max([p.bounds[1] for p in pieces], axis=0)
+        assert np.abs(lo - o.mesh.bounds[0]).max() < 0.005 and np.abs(hi - o.mesh.bounds[1]).max() < 0.005, name
+        assert 0.9 < sum(p.volume for p in pieces) / o.volume < 1.6, name
