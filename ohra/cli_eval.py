@@ -1,7 +1,7 @@
 """``ohra eval``: run the six-direction test on a grasp file and report the success rate.
 
     ohra eval GRASPS.npz --hand NAME --object MESH|builtin:NAME [--workers K] [--mode eval|filter]
-              [--strict] [--original] [--render SHEET.png] [--meshcat SCENE.html] [-o report.json]
+              [--strict] [--isaac-step] [--original] [--render SHEET.png] [--meshcat SCENE.html] [-o report.json]
 
 ``GRASPS`` is an ``.npz`` (key ``grasps``, or its only array) or ``.npy`` of shape (N, 31):
 ``[t, rot6d, q22]``, the canonical palm pose in the object's mesh frame and canonical joints. Bad
@@ -35,6 +35,7 @@ def register(subparsers) -> None:
     p.add_argument("--workers", type=int, default=1, help="processes (default 1)")
     p.add_argument("--mode", choices=("eval", "filter"), default="eval", help="filter also needs the object within 5 cm of the origin")
     p.add_argument("--strict", action="store_true", help="strict preset: friction 1.0, gravity during the perturbations")
+    p.add_argument("--isaac-step", action="store_true", help="Isaac's literal time step (100 Hz x 2 substeps) instead of 240 Hz")
     p.add_argument("--original", action="store_true", help="replay on the hand's original URDF (needs the hand assets)")
     p.add_argument("--no-early-exit", action="store_true", help="simulate every grasp to the end")
     p.add_argument("--limit", type=int, default=None, help="evaluate only the first N grasps")
@@ -80,6 +81,10 @@ def run(args: argparse.Namespace) -> int:
         raise ObjectError(f"--object must name one object, {args.object!r} names {len(objs)}")
     obj = objs[0]
     protocol = Protocol.strict() if args.strict else Protocol()
+    if args.isaac_step:
+        from dataclasses import replace
+
+        protocol = replace(protocol, dt=0.01, substeps=2, solver_iterations=50)
     if args.no_early_exit:
         from dataclasses import replace
 

@@ -37,6 +37,14 @@ def test_eval_reports_success_rate_and_writes_json(setup, capsys):
     assert rep["n"] == 2 and [g["success"] for g in rep["grasps"]] == [True, False]
     assert rep["protocol"]["friction"] == 3.0 and rep["object_info"]["mass_kg"] > 0
     assert (tmp / "s.png").read_bytes()[:4] == b"\x89PNG"
+    assert rep["protocol"]["dt"] == pytest.approx(1 / 240)
+
+
+def test_isaac_step_option_runs_the_literal_reference_step(setup, capsys):
+    tmp, hand, mesh, grasps = setup
+    rc, out, err = _run(capsys, grasps, "--hand", hand, "--object", mesh, "--isaac-step", "-o", tmp / "r.json")
+    rep = json.loads((tmp / "r.json").read_text())
+    assert rc == 0 and (rep["protocol"]["dt"], rep["protocol"]["substeps"]) == (0.01, 2)
 
 
 @pytest.mark.parametrize("bad, match", [
