@@ -290,7 +290,8 @@ class GraspEvaluator:
             for i in range(len(g)):
                 yield i, run_grasp(world, g[i], mode)
             return
-        # fork: the hand and object reach the workers without pickling; 1 BLAS thread per worker
+        # fork: the hand and object reach the workers without pickling; PyBullet is single-threaded
+        # and the thread variables cover any pool first initialised inside a worker
         ctx = mp.get_context("fork")
         saved = {v: os.environ.get(v) for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
         os.environ.update({v: "1" for v in saved})
