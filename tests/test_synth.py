@@ -88,6 +88,11 @@ def test_pipeline_gives_valid_datasets_for_three_and_five_finger_hands(tmp_path,
     # a candidate counts as solved only if its fingers do not intersect (exact capsule check)
     for k in np.flatnonzero(shard["solver_success"]):
         assert not hm.self_collision(shard["raw"][k, 9:].astype(float), margin=-1e-4)
+    # per-grasp metrics: solved candidates touch the mesh (min distance ~0) without penetrating it
+    solved = shard["solver_success"]
+    assert np.all(np.abs(shard["min_distance"][solved]) <= 0.002)
+    assert np.all(shard["contacts"][solved] == params.num_fingers + (1 if params.num_fingers < 3 else 0))
+    assert np.all(shard["sim_contacts"][~solved] == 0)
 
 
 def test_dataset_rejects_a_tampered_shard(tmp_path):

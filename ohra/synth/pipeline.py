@@ -3,7 +3,9 @@
 Dataset layout (``ohra.data``): ``OUT/<hand>/<object>-<meshhash>.npz`` shards plus
 ``OUT/manifest.json``. A shard holds, over all solver candidates: ``raw`` (N,31) solutions,
 ``post`` (N,31) post-simulation grasps, ``sim_success`` (N,), solver status codes, constraint
-violation, penetration and simulated displacement; and ``grasps`` (M,31) float32 = the
+violation, iterations, Ferrari-Canny ``q1``, solver ``contacts``, ``min_distance`` (finger capsules to
+the mesh, negative = penetration), and from the simulator the initial ``penetration``, links in
+contact after the squeeze (``sim_contacts``) and the final displacement; and ``grasps`` (M,31) float32 = the
 post-simulation grasps that passed the filter (what the reference datasets store).
 """
 
@@ -26,6 +28,7 @@ from ..errors import OhraError
 from ..kinematics import HandModel
 from ..objects import ObjectModel
 from ..params import BaseParams, ExtendedParams
+from ..rotations import grasp_to_pose
 from ..sim import GraspEvaluator, Protocol
 from .init import initial_poses
 from .nlp import GraspNLP, NLPSettings, SUCCESS_STATUSES
@@ -60,6 +63,20 @@ def _shard_seed(seed: int, hand: str, obj_hash: str) -> int:
     return int.from_bytes(hashlib.sha256(f"{seed}:{hand}:{obj_hash}".encode()).digest()[:4], "little")
 
 
+def finger_object_distance(hand: HandModel, obj: ObjectModel, grasps: np.ndarray, per_capsule: int = 9) -> np.ndarray:
+    """(N,) smallest signed distance [m] from any finger capsule to the object surface at each grasp
+    (negative: penetration), measured against the mesh's dense surface samples, not the solver's grid."""
+    if len(grasps) == 0:
+        return np.zeros(0)
+    T, q = grasp_to_pose(np.asarray(grasps, dtype=float))
+    caps = hand.capsules(q)
+    s = np.linspace(0.0, 1.0, per_capsule)[:, None, None]
+    pts = caps.p0[:, None] + s * (caps.p1 - caps.p0)[:, None]  # (N, S, K, 3) palm frame
+    world = np.einsum("nij,nskj->nski", T[:, :3, :3], pts) + T[:, None, None, :3, 3]
+    d = obj.signed_distance(world.reshape(-1, 3)).reshape(world.shape[:3]) - caps.radius
+    return d.min(axis=(1, 2))
+
+
 def check_hand_for_synthesis(name: str, params: Params) -> None:
     if params.num_fingers < 2:
         raise OhraError(f"hand {name!r} has {params.num_fingers} finger(s); grasp synthesis needs at least two")
@@ -72,7 +89,7 @@ def synthesize_shard(name: str, params: Params, obj: ObjectModel, settings: Synt
     nlp = GraspNLP(hand, obj, settings.nlp)
     rng = np.random.default_rng(_shard_seed(settings.seed, name, obj.mesh_hash))
     starts = initial_poses(hand, obj, settings.grasps_per_object, rng)
-    raw, status, viol, q1, iters = [], [], [], [], []
+    raw, status, viol, q1, iters, n_contacts = [], [], [], [], [], []
     t_solve = time.perf_counter()
     for st in starts:
         r = nlp.solve(st["R0"], st["t0"], st["q0"], st["q_pref"])
@@ -83,11 +100,14 @@ def synthesize_shard(name: str, params: Params, obj: ObjectModel, settings: Synt
         iters.append(r["iterations"])
         raw.append(r["grasp"])
         q1.append(ferrari_canny(r["contacts"], obj, settings.nlp.mu, settings.nlp.torque_length, normals=r["normals"]) if r["success"] else 0.0)
+        n_contacts.append(len(r["contacts"]))
     solve_time = time.perf_counter() - t_solve
     raw_a = np.array(raw).reshape(-1, 31)
+    min_dist = finger_object_distance(hand, obj, raw_a)
     solved = np.array([s < len(SUCCESS_STATUSES) for s in status]) & (np.array(viol) <= 1e-3)
     post = np.full_like(raw_a, np.nan)
     sim_ok = np.zeros(len(raw_a), dtype=bool)
+    sim_contacts = np.zeros(len(raw_a), dtype=np.int16)
     disp = np.full(len(raw_a), np.nan)
     pen = np.full(len(raw_a), np.nan)
     t_sim = time.perf_counter()
@@ -101,6 +121,7 @@ def synthesize_shard(name: str, params: Params, obj: ObjectModel, settings: Synt
             sim_ok[k] = res.success
             disp[k] = res.displacement[-1] if np.isfinite(res.displacement[-1]) else np.inf
             pen[k] = res.initial_penetration
+            sim_contacts[k] = res.contacts
     elif not settings.filter:
         post[solved] = raw_a[solved]
         sim_ok[:] = solved
@@ -117,6 +138,9 @@ def synthesize_shard(name: str, params: Params, obj: ObjectModel, settings: Synt
         "sim_success": sim_ok,
         "sim_displacement": disp.astype(np.float32),
         "penetration": pen.astype(np.float32),
+        "min_distance": min_dist.astype(np.float32),
+        "contacts": np.array(n_contacts, dtype=np.int16),
+        "sim_contacts": sim_contacts,
         "_timing": {"total_s": time.perf_counter() - t0, "solve_s": solve_time, "sim_s": sim_time},
     }
 
