@@ -16,6 +16,7 @@ import argparse
 import sys
 import time
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -70,6 +71,7 @@ def run(args: argparse.Namespace) -> int:
     from .hands import get_hand
     from .objects import resolve_objects
     from .sim import GraspEvaluator, Protocol, SimHand
+    from .sim.protocol import ISAAC_STEP
 
     if args.workers < 1:
         raise GraspError(f"--workers must be >= 1, got {args.workers}")
@@ -82,12 +84,8 @@ def run(args: argparse.Namespace) -> int:
     obj = objs[0]
     protocol = Protocol.strict() if args.strict else Protocol()
     if args.isaac_step:
-        from dataclasses import replace
-
-        protocol = replace(protocol, dt=0.01, substeps=2, solver_iterations=50)
+        protocol = replace(protocol, **ISAAC_STEP)
     if args.no_early_exit:
-        from dataclasses import replace
-
         protocol = replace(protocol, early_exit=False)
     hand = SimHand.registered_original(args.hand) if args.original else SimHand.from_params(get_hand(args.hand), name=args.hand)
     ev = GraspEvaluator(hand, obj, protocol)

@@ -49,6 +49,11 @@ class SDFGrid:
     def shape(self) -> tuple[int, int, int]:
         return tuple(self.values.shape)  # type: ignore[return-value]
 
+    @property
+    def upper(self) -> np.ndarray:
+        """Coordinates of the last grid node (the grid spans ``origin`` .. ``upper``)."""
+        return self.origin + self.spacing * (np.array(self.values.shape) - 1)
+
     def axes(self) -> list[np.ndarray]:
         """Grid coordinates along x, y, z."""
         return [self.origin[d] + self.spacing * np.arange(n) for d, n in enumerate(self.values.shape)]
@@ -56,8 +61,7 @@ class SDFGrid:
     def query(self, points: np.ndarray) -> np.ndarray:
         """Trilinear signed distance at (N,3) points; outside the grid, distance to the grid box is added."""
         p = np.asarray(points, dtype=float).reshape(-1, 3)
-        upper = self.origin + self.spacing * (np.array(self.values.shape) - 1)
-        pc = np.clip(p, self.origin, upper)
+        pc = np.clip(p, self.origin, self.upper)
         extra = np.linalg.norm(p - pc, axis=1)
         g = (pc - self.origin) / self.spacing
         i0 = np.clip(np.floor(g).astype(int), 0, np.array(self.values.shape) - 2)
@@ -194,6 +198,7 @@ class ObjectModel:
         self.density = float(density)
         self.source = source
         self._pieces = convex_pieces
+        self._pieces_resolved = False  # convex_pieces() settles hull / provided / V-HACD once
         # exact solids for the simulator (built-ins only; see ohra.objects_builtin), else None
         self.primitives = primitives
 
@@ -357,7 +362,7 @@ class ObjectModel:
         shape the SDF describes, preferred even over a provided decomposition, which for YCB boxes
         is off by up to 7 mm), else a provided decomposition, else PyBullet's V-HACD (cached on disk
         by mesh hash)."""
-        if not self.__dict__.get("_pieces_resolved", False):
+        if not self._pieces_resolved:
             hull = self.mesh.convex_hull
             if self.watertight and abs(hull.volume - self.volume) <= 0.01 * hull.volume:
                 self._pieces = [hull]
@@ -411,7 +416,7 @@ def load_convex_pieces(path: Path, scale: np.ndarray | None = None) -> list[trim
         g.remove_unreferenced_vertices()  # an OBJ object may carry the whole file's vertex list
     if len(geoms) == 1:
         # unmerged vertices would split every triangle off: merge before splitting by connectivity
-        merged = geoms[0].copy()
+        merged = geoms[0]
         merged.merge_vertices()
         geoms = merged.split(only_watertight=False) or [merged]
     pieces = [g.convex_hull for g in geoms if len(g.faces) >= 4 and float(np.ptp(g.vertices, axis=0).min()) > 0.0]

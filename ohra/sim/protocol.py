@@ -19,6 +19,8 @@ import numpy as np
 # Perturbation order of the reference: +x, +y, +z, -x, -y, -z (object / world frame).
 DIRECTIONS = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [-1, 0, 0], [0, -1, 0], [0, 0, -1]], dtype=float)
 DIRECTION_NAMES = ("+x", "+y", "+z", "-x", "-y", "-z")
+# Isaac's literal stepping (dt s, substeps, solver iterations): Protocol.isaac_step(), ohra eval --isaac-step
+ISAAC_STEP = {"dt": 0.01, "substeps": 2, "solver_iterations": 50}
 
 
 @dataclass(frozen=True)
@@ -79,7 +81,7 @@ class Protocol:
     @classmethod
     def isaac_step(cls, **overrides) -> "Protocol":
         """The reference's literal Isaac step (100 Hz, 2 substeps, PyBullet's default 50 iterations)."""
-        return replace(cls(dt=0.01, substeps=2, solver_iterations=50), **overrides)
+        return replace(cls(**ISAAC_STEP), **overrides)
 
     @classmethod
     def preset(cls, name: str) -> "Protocol":

@@ -12,7 +12,7 @@ and torque balance, friction cones with the design friction ``mu`` (0.5, well be
 3.0) and a unit minimum normal force. Objective: small forces plus a posture prior. The object is a
 C2 cubic B-spline that interpolates its SDF grid (coefficients by scipy's prefilter, milliseconds).
 One solver per (hand, object) is reused across all restarts, which differ only in their parameters
-(``R0``, posture prior) and initial guesses; building one takes ~0.7 s for a 4-finger hand, so it is
+(``R0``, posture prior) and initial guesses; building one takes ~0.2 s for a 4-finger hand (~0.5 s for a hand's first object), so it is
 rebuilt per object rather than carrying a ~100k-coefficient SDF as an NLP parameter. IPOPT runs with
 an L-BFGS Hessian by default (see :class:`NLPSettings`).
 """
@@ -30,6 +30,7 @@ from ..urdfgen import palm_geometry
 from .fk import frame_transforms
 
 SUCCESS_STATUSES = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+_REACH_CACHE: dict[tuple, np.ndarray] = {}  # GraspNLP._pair_reach per hand (a few hands per process)
 
 
 @dataclass(frozen=True)
@@ -89,8 +90,7 @@ class GraspNLP:
         grid = obj.sdf(max_cells=s.sdf_cells)
         self.grid = grid
         sdf_fn = sdf_bspline(grid)
-        lo = grid.origin
-        hi = grid.origin + grid.spacing * (np.array(grid.shape) - 1)
+        lo, hi = grid.origin, grid.upper
 
         ps = ca.SX.sym("p", 3)
         pcl = ca.fmin(ca.fmax(ps, lo + 1e-6), hi - 1e-6)
@@ -239,10 +239,15 @@ class GraspNLP:
 
     @staticmethod
     def _pair_reach(hand: HandModel, samples: list[tuple[str, int]], n: int = 4096) -> np.ndarray:
-        """Smallest distance [m] between capsule end spheres over ``n`` seeded configurations within the
-        limits: pairs that stay far apart everywhere need no constraint (about half of them)."""
+        """Smallest distance [m] between capsule spheres over ``n`` seeded configurations within the
+        limits: pairs that stay far apart everywhere need no constraint (about half of them).
+
+        Depends only on the hand, so it is cached per hand params (it is ~half of a solver build)."""
         if not samples:
             return np.zeros((0, 0))
+        key = None if hand.params is None else (hand.params.to_json(), tuple(samples), n)
+        if key is not None and key in _REACH_CACHE:
+            return _REACH_CACHE[key]
         caps = hand.capsules(hand.random_configurations(n, seed=0))
         k_of = {name: k for k, name in enumerate(caps.link)}
         ends = {0: caps.p0, 1: caps.p1, 2: 0.5 * (caps.p0 + caps.p1)}  # start, end, middle of each core segment
@@ -250,6 +255,10 @@ class GraspNLP:
         d = np.full((len(samples), len(samples)), np.inf)
         for i in range(len(samples)):
             d[i] = np.linalg.norm(pts - pts[:, i : i + 1], axis=-1).min(axis=0)
+        if key is not None:
+            if len(_REACH_CACHE) >= 16:
+                _REACH_CACHE.pop(next(iter(_REACH_CACHE)))
+            _REACH_CACHE[key] = d
         return d
 
     def solve(self, R0: np.ndarray, t0: np.ndarray, q0: np.ndarray, q_pref: np.ndarray) -> dict:
