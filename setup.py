@@ -1,4 +1,4 @@
-"""Packaging for ohra. ``urdf/`` (templates and generated canonical URDFs) installs as ``ohra.urdf``."""
+"""Packaging for ohra. All package data lives under ``ohra/`` (``urdf/`` at the top is a link to ``ohra/urdf``)."""
 
 from pathlib import Path
 
@@ -13,11 +13,10 @@ setup(
     long_description=(HERE / "README.md").read_text(encoding="utf-8"),
     long_description_content_type="text/markdown",
     python_requires=">=3.10",
-    packages=find_packages(include=["ohra", "ohra.*"]) + ["ohra.urdf"],
-    package_dir={"ohra.urdf": "urdf"},
+    packages=find_packages(include=["ohra", "ohra.*"]),
     package_data={
-        "ohra.urdf": ["templates/*.j2", "*/*.urdf"],
-        "ohra.hands": ["*.yaml", "params/*.json", "params/*/*.json"],
+        "ohra": ["urdf/templates/*.j2", "urdf/*/*.urdf"],
+        "ohra.hands": ["specs/*.yaml", "params/*/*.json", "leap/*.yaml", "leap/*.json"],
         "ohra.learn": ["models/*/*"],
     },
     install_requires=[

@@ -16,11 +16,11 @@ import numpy as np  # noqa: E402
 import pinocchio as pin  # noqa: E402
 import pybullet as pb  # noqa: E402
 
-from ohra.bullet import load_urdf_text  # noqa: E402
+from ohra.sim.bullet import load_urdf_text  # noqa: E402
 from ohra.hands import get_hand, variant_names  # noqa: E402
-from ohra.hands.variants import _variant_vector  # noqa: E402
-from ohra.kinematics import HandModel  # noqa: E402
-from ohra.urdfgen import render  # noqa: E402
+from ohra.hands.leap.variants import _variant_vector  # noqa: E402
+from ohra.canonical.kinematics import HandModel  # noqa: E402
+from ohra.canonical.urdfgen import render  # noqa: E402
 
 
 def bench_variants() -> dict[str, float]:

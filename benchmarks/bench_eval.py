@@ -25,7 +25,7 @@ from _common import peak_rss_mib, write_results  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ohra import HandModel, get_hand  # noqa: E402
-from ohra.objects import ObjectModel  # noqa: E402
+from ohra.objects.model import ObjectModel  # noqa: E402
 from ohra.paths import objects_root  # noqa: E402
 from ohra.sim import GraspEvaluator, Protocol  # noqa: E402
 from ohra.sim.heuristic import heuristic_grasps  # noqa: E402

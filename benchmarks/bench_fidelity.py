@@ -16,7 +16,7 @@ import warnings
 
 from _common import write_results
 
-from ohra.fidelity import compare
+from ohra.original.fidelity import compare
 from ohra.hands import registry
 
 TARGET = {"base": 8.0, "extended": 2.0}

@@ -19,10 +19,10 @@ from _common import peak_rss_mib, write_results  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from ohra.data import GraspDataset  # noqa: E402
+from ohra.data.dataset import GraspDataset  # noqa: E402
 from ohra.errors import OhraError  # noqa: E402
 from ohra.hands import get_hand  # noqa: E402
-from ohra.objects import resolve_objects  # noqa: E402
+from ohra.objects.model import resolve_objects  # noqa: E402
 from ohra.paths import objects_root  # noqa: E402
 from ohra.rotations import grasp_to_pose  # noqa: E402
 from ohra.synth.pipeline import SynthSettings, synthesize  # noqa: E402

@@ -20,8 +20,8 @@ import torch  # noqa: E402
 
 import ohra  # noqa: E402
 from ohra.errors import OhraError  # noqa: E402
-from ohra.kinematics import HandModel  # noqa: E402
-from ohra.params import BaseParams  # noqa: E402
+from ohra.canonical.kinematics import HandModel  # noqa: E402
+from ohra.canonical.params import BaseParams  # noqa: E402
 from ohra.learn import encode_vectors, sample_vectors  # noqa: E402
 from ohra.learn.encoding import FLAGS  # noqa: E402
 from ohra.learn.morph import load_vae  # noqa: E402

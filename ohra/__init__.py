@@ -7,8 +7,8 @@ from __future__ import annotations
 
 __version__ = "0.1.0"
 
-from .action import ActionMap, SlotMap
-from .errors import (
+from ohra.original.action import ActionMap, SlotMap
+from ohra.errors import (
     AssetsNotFoundError,
     CheckpointError,
     DatasetError,
@@ -21,15 +21,15 @@ from .errors import (
     ParseError,
     SpecError,
 )
-from .hands import get_hand, list_hands
-from .kinematics import Capsules, HandModel
-from .params import FINGERS, JOINT_NAMES, BaseParams, ExtendedParams, load_params
-from .urdfgen import render, write
+from ohra.hands import get_hand, list_hands
+from ohra.canonical.kinematics import Capsules, HandModel
+from ohra.canonical.params import FINGERS, JOINT_NAMES, BaseParams, ExtendedParams, load_params
+from ohra.canonical.urdfgen import render, write
 
 
 def load_original(name: str):
     """The original (non-canonical) model of a registered hand; needs the hand assets."""
-    from .hands import registry  # the parser's registry owns original-hand loading
+    from ohra.hands import registry  # the parser's registry owns original-hand loading
 
     return registry.load_original(name)
 

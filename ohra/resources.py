@@ -1,7 +1,8 @@
-"""Locations of package data (templates, registered hands, shipped models).
+"""Locations of package data: URDF templates and generated URDFs, hand specs and params, models.
 
-``urdf/`` at the repository root is installed as the package ``ohra.urdf`` (see ``setup.py``); in a
-source checkout that is not installed, it is found next to the ``ohra`` folder.
+All package data lives in one tree under ``ohra/`` and is read through ``importlib.resources``, so an
+editable install and a wheel read the same files. The top-level ``urdf/`` folder of a checkout is a
+symbolic link to ``ohra/urdf`` (the user's layout asks for it); nothing is read through it.
 """
 
 from __future__ import annotations
@@ -9,18 +10,14 @@ from __future__ import annotations
 from importlib import resources
 from pathlib import Path
 
-_PKG_DIR = Path(__file__).resolve().parent
+
+def _pkg(sub: str) -> Path:
+    return Path(str(resources.files("ohra").joinpath(sub)))
 
 
 def urdf_dir() -> Path:
-    """Folder holding the URDF templates and the generated canonical URDFs."""
-    try:
-        p = Path(str(resources.files("ohra.urdf")))
-        if (p / "templates").is_dir():
-            return p
-    except (ModuleNotFoundError, TypeError):
-        pass
-    return _PKG_DIR.parent / "urdf"
+    """Folder holding ``templates/*.urdf.j2`` and the generated canonical URDFs ``{base,extended}/``."""
+    return _pkg("urdf")
 
 
 def templates_dir() -> Path:
@@ -28,5 +25,15 @@ def templates_dir() -> Path:
 
 
 def hands_data_dir() -> Path:
-    """Folder of hand specs (``*.yaml``) and registered params (``params/{base,extended}``)."""
-    return _PKG_DIR / "hands"
+    """Folder of the hand registry's data: ``specs/*.yaml``, ``params/{base,extended}/*.json``, ``leap/``."""
+    return _pkg("hands")
+
+
+def specs_dir() -> Path:
+    """Folder of the registered hands' spec files (one YAML per hand)."""
+    return hands_data_dir() / "specs"
+
+
+def leap_dir() -> Path:
+    """Folder of the LEAP template inputs (``template.yaml``) and the derived template (``template.json``)."""
+    return hands_data_dir() / "leap"

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .errors import GraspError
+from ohra.errors import GraspError
 
 GRASP_DIM = 31
 

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from .kinematics import HandModel
+from ohra.canonical.kinematics import HandModel
 
 HAND_COLOR = 0x66BFFF
 OBJECT_COLOR = 0xD9A066
@@ -152,7 +152,7 @@ def add_capsules(vis: Any, capsules: Any, T_world_palm: np.ndarray | None = None
 def add_original(vis: Any, hand: Any, q_orig: np.ndarray, T_world_root: np.ndarray | None = None,
                  path: str = "original", color: int = ORIGINAL_COLOR, opacity: float = 0.6,
                  links: list[str] | None = None, prefer: str = "collision") -> None:
-    """Draw an :class:`ohra.original.OriginalHand` at its joint vector ``q_orig`` (root pose ``T_world_root``)."""
+    """Draw an :class:`ohra.original.urdf.OriginalHand` at its joint vector ``q_orig`` (root pose ``T_world_root``)."""
     import warnings
 
     T0 = np.eye(4) if T_world_root is None else np.asarray(T_world_root, dtype=float)
@@ -172,9 +172,9 @@ def add_overlay(vis: Any, name: str, form: str = "base", q: np.ndarray | None = 
                 T_world_palm: np.ndarray | None = None, path: str = "overlay", original: bool = True) -> None:
     """The paper's Fig. 2 view: a registered hand's original meshes and canonical capsules at the same
     canonical configuration ``q`` (default 0 clamped into the limits), both in the palm frame."""
-    from .hands import registry
-    from .kinematics import HandModel
-    from .transforms import invert, xyzrpy_to_matrix
+    from ohra.hands import registry
+    from ohra.canonical.kinematics import HandModel
+    from ohra.transforms import invert, xyzrpy_to_matrix
 
     params = registry.registered_params(name, form)
     hm = HandModel.from_params(params)
@@ -195,8 +195,8 @@ def add_overlay(vis: Any, name: str, form: str = "base", q: np.ndarray | None = 
 
 def compare_html(name: str, form: str, out: str | Path, seed: int = 0, vis: Any = None) -> Path:
     """Static HTML with the overlay at q = 0 and at a random configuration (side by side, 0.3 m apart)."""
-    from .hands import registry
-    from .kinematics import HandModel
+    from ohra.hands import registry
+    from ohra.canonical.kinematics import HandModel
 
     hm = HandModel.from_params(registry.registered_params(name, form))
     own = vis is None
@@ -223,7 +223,7 @@ def show_hand(vis: Any, name: str, form: str = "base", q: np.ndarray | None = No
 def add_grasp(vis: Any, hand: HandModel, grasp: np.ndarray, vertices: np.ndarray | None = None, faces: np.ndarray | None = None,
               path: str = "grasp") -> None:
     """Draw a grasp (31-vector, palm pose in the object frame) with its object mesh at the origin."""
-    from .rotations import grasp_to_pose
+    from ohra.rotations import grasp_to_pose
 
     T, q = grasp_to_pose(np.asarray(grasp, dtype=float))
     if vertices is not None and faces is not None:
@@ -241,7 +241,7 @@ def grasp_png(hand: HandModel, grasp: np.ndarray, vertices: np.ndarray, faces: n
     import matplotlib.pyplot as plt
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-    from .rotations import grasp_to_pose
+    from ohra.rotations import grasp_to_pose
 
     T, q = grasp_to_pose(np.asarray(grasp, dtype=float))
     caps = hand.capsules(q)

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ohra.params import BaseParams, ExtendedParams, load_params
+from ohra.canonical.params import BaseParams, ExtendedParams, load_params
 from ohra.paths import hands_root, objects_root
 
 DATA = Path(__file__).parent / "data"

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-from ohra.objects import ObjectModel
-from ohra.params import BaseParams
+from ohra.objects.model import ObjectModel
+from ohra.canonical.params import BaseParams
 from ohra.rotations import pose_to_grasp
 
 R_F = 0.01  # finger radius [m]

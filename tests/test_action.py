@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from ohra import MappingError
-from ohra.action import ActionMap, SlotMap, original_joint_names
+from ohra.original.action import ActionMap, SlotMap, original_joint_names
 from ohra.transforms import xyzrpy_to_matrix
 
 URDF = """<robot name="toy">

@@ -8,8 +8,8 @@ import sys
 
 import pytest
 
-from ohra.cli import main
-from ohra.params import load_params
+from ohra.cli.main import main
+from ohra.canonical.params import load_params
 
 
 def test_render_to_file_and_stdout(tmp_path, capsys):

@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from ohra.cli import main
+from ohra.cli.main import main
 
 from sim_fixtures import pinch_box, pinch_grasp, pinch_hand
 

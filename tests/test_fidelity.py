@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from ohra import cli
-from ohra.fidelity import Stats, compare
+from ohra.original.fidelity import Stats, compare
 from ohra.hands import registry
-from ohra.parse import parse
+from ohra.original.parse import parse
 
 pytestmark = pytest.mark.assets
 

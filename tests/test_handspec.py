@@ -5,9 +5,9 @@ from __future__ import annotations
 import pytest
 
 from ohra.errors import SpecError
-from ohra.handspec import load_spec
+from ohra.original.spec import load_spec
 from ohra.hands import registry
-from ohra.resources import hands_data_dir
+from ohra.resources import leap_dir
 
 MINIMAL = """
 name: toy
@@ -81,5 +81,5 @@ def test_check_joints_names_the_missing_joint():
 
 def test_spec_files_are_not_confused_with_other_yaml():
     # leap_template.yaml is the LEAP-variant input, not a hand spec
-    assert (hands_data_dir() / "leap_template.yaml").is_file()
+    assert (leap_dir() / "template.yaml").is_file()
     assert "leap_template" not in registry.registered_hands()

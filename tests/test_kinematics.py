@@ -8,7 +8,7 @@ import pytest
 
 from ohra import OhraError
 from ohra.hands import get_hand
-from ohra.kinematics import HandModel
+from ohra.canonical.kinematics import HandModel
 
 
 def test_fingertips_match_published_golden_values(shadow_base, allegro_ext):

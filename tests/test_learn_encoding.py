@@ -17,7 +17,7 @@ from ohra.learn.encoding import (
     encode_params, encode_vectors, project_vectors, segment_presence,
 )
 from ohra.learn.sampler import BASIS_AXES, sample_vectors
-from ohra.params import BaseParams, ExtendedParams
+from ohra.canonical.params import BaseParams, ExtendedParams
 
 # Reference §3.1, verbatim: the published Shadow right hand (basis thumb axes).
 SHADOW_REF = {

@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from ohra.kinematics import HandModel
+from ohra.canonical.kinematics import HandModel
 from ohra.learn.encoding import segment_presence
 from ohra.learn.sampler import (
     EXTRA, LENGTHS, THUMB_AXES, UPPERS, XYZ, in_support, mirror_vectors, sample_params, sample_vectors,
 )
-from ohra.params import BaseParams
-from ohra.urdfgen import render
+from ohra.canonical.params import BaseParams
+from ohra.canonical.urdfgen import render
 
 N = 10_000
 
@@ -45,7 +45,7 @@ def test_every_one_of_10k_samples_validates(samples):
 def test_a_seeded_subset_renders_to_urdfs_that_load_in_pinocchio_and_pybullet(samples):
     import pybullet as pb
 
-    from ohra.bullet import load_urdf_text
+    from ohra.sim.bullet import load_urdf_text
 
     v, _ = samples
     idx = np.random.default_rng(0).choice(N, 300, replace=False)

@@ -12,16 +12,16 @@ import pytest
 torch = pytest.importorskip("torch")
 
 import ohra  # noqa: E402
-from ohra.cli import main as cli_main  # noqa: E402
+from ohra.cli.main import main as cli_main  # noqa: E402
 from ohra.errors import CheckpointError, OhraError  # noqa: E402
-from ohra.kinematics import HandModel  # noqa: E402
+from ohra.canonical.kinematics import HandModel  # noqa: E402
 from ohra.learn import encode_vectors, sample_vectors  # noqa: E402
 from ohra.learn.encoding import FLAGS, LatentError  # noqa: E402
 from ohra.learn.sampler import in_support  # noqa: E402
 from ohra.learn.morph import Interpolation, default_model_dir, load_vae  # noqa: E402
 from ohra.learn.train_vae import TrainConfig, reconstruct, reconstruction_metrics, train  # noqa: E402
 from ohra.learn.vae import MorphologyVAE, VAEConfig, make_optimizer, vae_loss  # noqa: E402
-from ohra.params import BaseParams  # noqa: E402
+from ohra.canonical.params import BaseParams  # noqa: E402
 
 SMALL = TrainConfig(samples=2048, batch_size=256, epochs=4, threads=1, heldout=256, checkpoint_every=1)
 

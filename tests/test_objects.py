@@ -7,8 +7,8 @@ import pytest
 import trimesh
 
 from ohra import ObjectError
-from ohra.objects import ObjectModel, builtin_object_names, farthest_point_sampling, load_convex_pieces
-from ohra.objects_builtin import ANALYTIC_VOLUME
+from ohra.objects.model import ObjectModel, builtin_object_names, farthest_point_sampling, load_convex_pieces
+from ohra.objects.builtin import ANALYTIC_VOLUME
 
 
 @pytest.mark.parametrize("name", list(ANALYTIC_VOLUME))

@@ -11,8 +11,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from ohra import ParamsError
-from ohra.params import JOINT_NAMES, BaseParams, ExtendedParams, load_params
-from ohra.urdfgen import render
+from ohra.canonical.params import JOINT_NAMES, BaseParams, ExtendedParams, load_params
+from ohra.canonical.urdfgen import render
 
 
 # -- round trips ------------------------------------------------------------------------------

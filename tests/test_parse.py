@@ -10,13 +10,13 @@ import pytest
 
 from ohra import cli
 from ohra.errors import ParseError, SpecError
-from ohra.handspec import load_spec
+from ohra.original.spec import load_spec
 from ohra.hands import registry
-from ohra.kinematics import HandModel
-from ohra.original import MissingMeshWarning, load_urdf
-from ohra.parse import ParseWarning, canonical_keypoints, ext_arrays, ext_arrays_from_base, parse
-from ohra.params import BaseParams
-from ohra.urdfgen import render
+from ohra.canonical.kinematics import HandModel
+from ohra.original.urdf import MissingMeshWarning, load_urdf
+from ohra.original.parse import ParseWarning, canonical_keypoints, ext_arrays, ext_arrays_from_base, parse
+from ohra.canonical.params import BaseParams
+from ohra.canonical.urdfgen import render
 
 pytestmark = pytest.mark.assets
 

@@ -12,7 +12,7 @@ import pytest
 
 from ohra import ActionMap, GraspError, HandModel, JOINT_NAMES
 from ohra.sim import GraspEvaluator, Protocol, SimHand, closes_positive, squeeze_targets
-from ohra.urdfgen import DUMMY_MASS, render
+from ohra.canonical.urdfgen import DUMMY_MASS, render
 
 from sim_fixtures import L, R_F, pinch_box, pinch_grasp, pinch_hand
 
@@ -253,7 +253,7 @@ def test_report_is_json_with_null_for_phases_not_run(evaluator):
 
 
 def test_compound_ycb_object_loads_its_convex_pieces_with_protocol_mass(objects_dir):
-    from ohra.objects import ObjectModel
+    from ohra.objects.model import ObjectModel
 
     obj = ObjectModel.load(objects_dir / "ycb" / "MustardBottle" / "model.urdf")
     ev = GraspEvaluator(pinch_hand(), obj)
@@ -267,7 +267,7 @@ def test_compound_ycb_object_loads_its_convex_pieces_with_protocol_mass(objects_
 
 
 def test_heuristic_benchmark_grasps_are_seeded_and_valid():
-    from ohra.objects import ObjectModel
+    from ohra.objects.model import ObjectModel
     from ohra.rotations import check_grasps
     from ohra.sim.heuristic import heuristic_grasps
 

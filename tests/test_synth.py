@@ -9,10 +9,10 @@ import sys
 import numpy as np
 import pytest
 
-from ohra.data import GraspDataset
+from ohra.data.dataset import GraspDataset
 from ohra.hands import get_hand
-from ohra.kinematics import HandModel
-from ohra.objects import ObjectModel
+from ohra.canonical.kinematics import HandModel
+from ohra.objects.model import ObjectModel
 from ohra.rotations import grasp_to_pose
 from ohra.synth.init import initial_poses
 from ohra.synth.nlp import GraspNLP

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from ohra.hands import get_hand
-from ohra.kinematics import HandModel
+from ohra.canonical.kinematics import HandModel
 from ohra.synth.fk import fk_function
 
 

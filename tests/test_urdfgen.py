@@ -10,10 +10,10 @@ import pinocchio as pin
 import pybullet as pb
 import pytest
 
-from ohra.bullet import captured_c_output, load_urdf_text
+from ohra.sim.bullet import captured_c_output, load_urdf_text
 from ohra.hands import get_hand, variant_names
-from ohra.params import JOINT_NAMES
-from ohra.urdfgen import DUMMY_MASS, capsule_inertia, palm_geometry, palm_inertia, render, write
+from ohra.canonical.params import JOINT_NAMES
+from ohra.canonical.urdfgen import DUMMY_MASS, capsule_inertia, palm_geometry, palm_inertia, render, write
 
 
 def test_render_is_deterministic(shadow_base, allegro_ext, tmp_path):
@@ -121,7 +121,7 @@ def test_pybullet_dummy_links_carry_their_small_declared_mass(shadow_base):
 
 def test_pinocchio_fk_equals_pybullet_fk(shadow_base, allegro_ext):
     """World link frames from PyBullet getLinkState equal Pinocchio frame placements to 1e-6 m."""
-    from ohra.kinematics import HandModel
+    from ohra.canonical.kinematics import HandModel
 
     client = pb.connect(pb.DIRECT)
     try:

@@ -7,8 +7,8 @@ import pytest
 
 from ohra import HandNotFoundError
 from ohra.hands import get_hand, variant_names
-from ohra.hands.leap_template import derive_leap_template, load_leap_template
-from ohra.params import FINGER_SLICES
+from ohra.hands.leap.template import derive_leap_template, load_leap_template
+from ohra.canonical.params import FINGER_SLICES
 
 
 def test_there_are_256_variants():

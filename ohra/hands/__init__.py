@@ -9,20 +9,18 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Union
 
-from ..errors import HandNotFoundError, ParamsError
-from ..params import BaseParams, ExtendedParams, load_params
-from .variants import is_variant, leap_variant, variant_names
+from ohra.errors import HandNotFoundError, ParamsError
+from ohra.canonical.params import BaseParams, ExtendedParams, load_params
+from ohra.hands.leap.variants import is_variant, leap_variant, variant_names
 
 Params = Union[BaseParams, ExtendedParams]
 FORMS = ("base", "extended")
 
 
 def _registry():
-    """The registered-hands module, when present (specs and committed params of real hands)."""
-    try:
-        from . import registry
-    except ImportError:  # pragma: no cover - registry arrives with the parser
-        return None
+    """The registered-hands module (specs and committed params of real hands); imported on use."""
+    from ohra.hands import registry
+
     return registry
 
 

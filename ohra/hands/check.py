@@ -10,9 +10,9 @@ import numpy as np
 import pinocchio as pin
 import pybullet as pb
 
-from ..bullet import captured_c_output, load_urdf_text
-from ..urdfgen import render
-from . import get_hand
+from ohra.sim.bullet import captured_c_output, load_urdf_text
+from ohra.canonical.urdfgen import render
+from ohra.hands import get_hand
 
 
 @dataclass(frozen=True)
@@ -77,6 +77,6 @@ def check_hands(names: Iterable[tuple[str, str | None]]) -> list[HandCheck]:
 
 def fingertip_table(name: str, form: str | None = None) -> np.ndarray:
     """(5,3) fingertip positions at q=0 (NaN for absent fingers)."""
-    from ..kinematics import HandModel
+    from ohra.canonical.kinematics import HandModel
 
     return HandModel.from_params(get_hand(name, form)).fingertips(np.zeros(22))

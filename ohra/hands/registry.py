@@ -1,8 +1,8 @@
-"""Registered real hands: specs (``ohra/hands/<name>.yaml``), committed params and canonical URDFs.
+"""Registered real hands: specs (``ohra/hands/specs/<name>.yaml``), committed params and canonical URDFs.
 
 Each registered hand has a spec and, per form it is registered in, the parser's output committed as
 ``ohra/hands/params/{base,extended}/<name>.json`` and the rendered canonical URDF as
-``urdf/{base,extended}/<name>.urdf``. Regenerate everything after changing a spec, the parser or
+``ohra/urdf/{base,extended}/<name>.urdf``. Regenerate everything after changing a spec, the parser or
 the templates with::
 
     python -m ohra.hands.registry            # all hands (needs the hand assets)
@@ -17,24 +17,27 @@ from pathlib import Path
 
 import yaml
 
-from ..errors import AssetsNotFoundError, HandNotFoundError
-from ..params import BaseParams, ExtendedParams, load_params
-from ..resources import hands_data_dir, urdf_dir
+from ohra.errors import AssetsNotFoundError, HandNotFoundError, SpecError
+from ohra.canonical.params import BaseParams, ExtendedParams, load_params
+from ohra.resources import hands_data_dir, specs_dir, urdf_dir
 
 FORMS = ("base", "extended")
 
 
 @lru_cache(maxsize=1)
 def _spec_files() -> dict[str, Path]:
-    """Registered hand name -> spec file (YAML files with a joint mapping)."""
+    """Registered hand name -> spec file (every ``specs/*.yaml``; one that does not parse is an error)."""
     out = {}
-    for p in sorted(hands_data_dir().glob("*.yaml")):
+    for p in sorted(specs_dir().glob("*.yaml")):
         try:
             d = yaml.safe_load(p.read_text())
-        except yaml.YAMLError:
-            continue
-        if isinstance(d, dict) and "joints" in d and "urdf" in d:
-            out[str(d.get("name", p.stem))] = p
+        except yaml.YAMLError as exc:
+            mark = getattr(exc, "problem_mark", None)
+            where = f" line {mark.line + 1}" if mark is not None else ""
+            raise SpecError(f"{p}:{where} invalid YAML: {getattr(exc, 'problem', None) or exc}") from None
+        if not isinstance(d, dict) or "joints" not in d or "urdf" not in d:
+            raise SpecError(f"{p}: not a hand spec (expected a mapping with 'urdf' and 'joints' keys)")
+        out[str(d.get("name", p.stem))] = p
     return out
 
 
@@ -56,8 +59,8 @@ def registered_forms(name: str) -> list[str]:
 
 
 def spec(name: str):
-    """The :class:`ohra.handspec.HandSpec` of a registered hand."""
-    from ..handspec import load_spec
+    """The :class:`ohra.original.spec.HandSpec` of a registered hand."""
+    from ohra.original.spec import load_spec
 
     files = _spec_files()
     if name not in files:
@@ -78,11 +81,11 @@ def registered_params(name: str, form: str | None = None) -> BaseParams | Extend
 
 
 def load_original(name: str, hands_root: str | Path | None = None):
-    """The original hand model (:class:`ohra.original.OriginalHand`) of a registered hand.
+    """The original hand model (:class:`ohra.original.urdf.OriginalHand`) of a registered hand.
 
     Needs the hand assets; raises :class:`ohra.AssetsNotFoundError` naming the expected path.
     """
-    from ..original import load_urdf
+    from ohra.original.urdf import load_urdf
 
     sp = spec(name)
     path = sp.urdf_path(hands_root)
@@ -95,8 +98,8 @@ def load_original(name: str, hands_root: str | Path | None = None):
 
 def generate(name: str, form: str, write: bool = True):
     """Parse (with fit and overrides) and optionally write params JSON + canonical URDF; returns the ParseResult."""
-    from .. import urdfgen
-    from ..parse import parse
+    from ohra.canonical import urdfgen
+    from ohra.original.parse import parse
 
     sp = spec(name)
     res = parse(sp, form, fit_params=True)

@@ -12,8 +12,8 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-from ..errors import OhraError
-from .encoding import (
+from ohra.errors import OhraError
+from ohra.learn.encoding import (
     AXIS_CATEGORIES,
     CONT_DIM,
     ENCODING_DIM,
@@ -25,8 +25,8 @@ from .encoding import (
     encode_params,
     encode_vectors,
 )
-from .config import TrainConfig
-from .sampler import SamplerConfig, sample_hand, sample_params, sample_vectors
+from ohra.learn.config import TrainConfig
+from ohra.learn.sampler import SamplerConfig, sample_hand, sample_params, sample_vectors
 
 
 class MissingDependencyError(OhraError, ImportError):

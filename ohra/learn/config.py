@@ -41,6 +41,6 @@ class TrainConfig:
 
     def vae_config(self):
         """The :class:`ohra.learn.vae.VAEConfig` of this run (imports torch)."""
-        from .vae import VAEConfig
+        from ohra.learn.vae import VAEConfig
 
         return VAEConfig(latent_dim=self.latent_dim, beta=self.beta)

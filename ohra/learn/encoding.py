@@ -1,6 +1,6 @@
 """The 66-D morphology encoding of base-form hands, and decoding back to valid hands.
 
-Layout (reference §7.2, canonical key order of :class:`ohra.params.BaseParams`):
+Layout (reference §7.2, canonical key order of :class:`ohra.canonical.params.BaseParams`):
 
 =========  ====  ================================================================================
 slice      size  content
@@ -35,9 +35,9 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ..errors import OhraError, ParamsError
-from ..params import MAX_ANGLE, BaseParams, ExtendedParams
-from .sampler import BASIS_AXES, EXTRA, FINGER_RADIUS, LENGTHS, LOWERS, PALM, THUMB_AXES, THUMB_RPY, UPPERS, XYZ
+from ohra.errors import OhraError, ParamsError
+from ohra.canonical.params import MAX_ANGLE, BaseParams, ExtendedParams
+from ohra.learn.sampler import BASIS_AXES, EXTRA, FINGER_RADIUS, LENGTHS, LOWERS, PALM, THUMB_AXES, THUMB_RPY, UPPERS, XYZ
 
 ENCODING_DIM = 66
 CONT_DIM = 32

@@ -22,12 +22,12 @@ from typing import Any, Sequence, Union
 import numpy as np
 import torch
 
-from ..errors import CheckpointError
-from ..params import BaseParams, ExtendedParams
-from ..urdfgen import render
-from .encoding import AXIS1, AXIS2, CONT, FLAGS, LatentError, Standardizer, as_base, decode_vectors, encode_vectors
-from .train_vae import CHECKPOINT_FORMAT, MODEL_FORMAT, load_torch_file
-from .vae import MorphologyVAE, VAEConfig
+from ohra.errors import CheckpointError
+from ohra.canonical.params import BaseParams, ExtendedParams
+from ohra.canonical.urdfgen import render
+from ohra.learn.encoding import AXIS1, AXIS2, CONT, FLAGS, LatentError, Standardizer, as_base, decode_vectors, encode_vectors
+from ohra.learn.train_vae import CHECKPOINT_FORMAT, MODEL_FORMAT, load_torch_file
+from ohra.learn.vae import MorphologyVAE, VAEConfig
 
 HandLike = Union[str, Path, BaseParams, ExtendedParams]
 DEFAULT_MODEL = "vae_default"
@@ -43,7 +43,7 @@ def resolve_hand(hand: HandLike) -> BaseParams:
     """Base params of a registered hand name, a params JSON path, or params."""
     if isinstance(hand, (BaseParams, ExtendedParams)):
         return as_base(hand)
-    from ..hands import get_hand
+    from ohra.hands import get_hand
 
     return as_base(get_hand(str(hand), "base"))
 
@@ -163,7 +163,7 @@ class Interpolation:
 
     def write(self, out_dir: str | Path, stem: str = "interp") -> list[Path]:
         """Write ``<stem>_<i>.urdf`` and ``<stem>_<i>.json`` (params) for every step; returns the URDF paths."""
-        from .train_vae import atomic_write_text
+        from ohra.learn.train_vae import atomic_write_text
 
         out = Path(out_dir)
         paths = []

@@ -11,7 +11,7 @@ The distributions follow the reference sampler (``ohra_reference.md`` §7.1) wit
   ``finger_xyz = 0``, absent thumb joints 1/2 have a zero axis, the little extra origin is zero when
   ``little_joint0`` is absent, and segments without geometry have length 0. (None of these numbers
   changes the rendered hand; zeroing makes every hand's vector unique.)
-* vectors are in the canonical key order of :class:`ohra.params.BaseParams` (82 numbers).
+* vectors are in the canonical key order of :class:`ohra.canonical.params.BaseParams` (82 numbers).
 
 Kept from the reference on purpose (they define the training distribution of the paper's VAE): one
 joint pattern shared by all non-thumb fingers, one knuckle ``x`` shared by all non-thumb fingers,
@@ -28,8 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import ParamsError
-from ..params import BaseParams
+from ohra.errors import ParamsError
+from ohra.canonical.params import BaseParams
 
 # Slices of the flat (82,) base vector (canonical key order, reference §3.1).
 PALM = 0

@@ -12,8 +12,8 @@ from typing import Sequence
 
 import numpy as np
 
-from ..kinematics import HandModel
-from ..params import BaseParams, ExtendedParams
+from ohra.canonical.kinematics import HandModel
+from ohra.canonical.params import BaseParams, ExtendedParams
 
 PALM_COLOR = "#9fb7c9"
 FINGER_COLORS = ("#d9534f", "#5b9bd5", "#70ad47", "#ffc000", "#8064a2")  # thumb, index, middle, ring, little
@@ -109,7 +109,7 @@ def sequence_html(params: Sequence[BaseParams | ExtendedParams], path: str | Pat
     import contextlib
     import io
 
-    from .. import viz
+    from ohra import viz
 
     with contextlib.redirect_stdout(io.StringIO()):  # meshcat prints its server URL
         vis = viz.new_visualizer()

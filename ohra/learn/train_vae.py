@@ -30,11 +30,11 @@ from typing import Any, Callable, Iterator
 import numpy as np
 import torch
 
-from ..errors import CheckpointError
-from .encoding import AXIS1, AXIS2, CONT, CONT_GROUPS, FLAGS, Standardizer, encode_vectors
-from .sampler import sample_vectors
-from .config import TrainConfig
-from .vae import MorphologyVAE, make_optimizer, vae_loss
+from ohra.errors import CheckpointError
+from ohra.learn.encoding import AXIS1, AXIS2, CONT, CONT_GROUPS, FLAGS, Standardizer, encode_vectors
+from ohra.learn.sampler import sample_vectors
+from ohra.learn.config import TrainConfig
+from ohra.learn.vae import MorphologyVAE, make_optimizer, vae_loss
 
 CHECKPOINT_FORMAT = "ohra-vae-checkpoint"
 MODEL_FORMAT = "ohra-vae-model"

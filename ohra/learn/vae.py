@@ -20,7 +20,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from .encoding import AXIS1, AXIS2, CONT, CONT_DIM, ENCODING_DIM, FLAGS
+from ohra.learn.encoding import AXIS1, AXIS2, CONT, CONT_DIM, ENCODING_DIM, FLAGS
 
 
 @dataclass(frozen=True)

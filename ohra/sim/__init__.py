@@ -1,9 +1,9 @@
 """PyBullet simulation: the six-direction grasp evaluator (canonical and original hands)."""
 
-from .controller import closes_positive, squeeze_targets
-from .evaluator import PHASES, EvalReport, GraspEvaluator, GraspResult, evaluate_grasps, run_grasp
-from .hands import SimHand
-from .protocol import DIRECTION_NAMES, DIRECTIONS, Protocol
+from ohra.sim.controller import closes_positive, squeeze_targets
+from ohra.sim.evaluator import PHASES, EvalReport, GraspEvaluator, GraspResult, evaluate_grasps, run_grasp
+from ohra.sim.hands import SimHand
+from ohra.sim.protocol import DIRECTION_NAMES, DIRECTIONS, Protocol
 
 __all__ = [
     "GraspEvaluator", "Protocol", "EvalReport", "GraspResult", "SimHand", "DIRECTIONS", "DIRECTION_NAMES", "PHASES",

@@ -31,14 +31,14 @@ from typing import Iterable, Sequence, Union
 import numpy as np
 import pybullet as pb
 
-from ..errors import GraspError
-from ..objects import ObjectModel
-from ..params import BaseParams, ExtendedParams
-from ..rotations import check_grasps, grasp_to_pose, pose_to_grasp
-from .controller import closes_positive, squeeze_targets
-from .hands import SimHand
-from .protocol import DIRECTION_NAMES, DIRECTIONS, Protocol
-from .world import World
+from ohra.errors import GraspError
+from ohra.objects.model import ObjectModel
+from ohra.canonical.params import BaseParams, ExtendedParams
+from ohra.rotations import check_grasps, grasp_to_pose, pose_to_grasp
+from ohra.sim.controller import closes_positive, squeeze_targets
+from ohra.sim.hands import SimHand
+from ohra.sim.protocol import DIRECTION_NAMES, DIRECTIONS, Protocol
+from ohra.sim.world import World
 
 Params = Union[BaseParams, ExtendedParams]
 PHASES = ("squeeze",) + DIRECTION_NAMES
@@ -226,7 +226,7 @@ class GraspEvaluator:
 
     def __init__(self, hand: Params | SimHand | str, obj: ObjectModel, protocol: Protocol | None = None):
         if isinstance(hand, str):
-            from ..hands import get_hand
+            from ohra.hands import get_hand
 
             hand = SimHand.from_params(get_hand(hand), name=hand)
         elif isinstance(hand, (BaseParams, ExtendedParams)):

@@ -21,9 +21,9 @@ from typing import Union
 
 import numpy as np
 
-from ..errors import GraspError
-from ..params import FINGER_SLICES, FINGERS, JOINT_NAMES, BaseParams, ExtendedParams
-from ..transforms import matrix_to_rpy, xyzrpy_to_matrix
+from ohra.errors import GraspError
+from ohra.canonical.params import FINGER_SLICES, FINGERS, JOINT_NAMES, BaseParams, ExtendedParams
+from ohra.transforms import matrix_to_rpy, xyzrpy_to_matrix
 
 Params = Union[BaseParams, ExtendedParams]
 MOVABLE = ("revolute", "continuous", "prismatic")
@@ -88,7 +88,7 @@ class SimHand:
     @classmethod
     def from_params(cls, params: Params, name: str = "canonical_hand") -> "SimHand":
         """A canonical hand: the driven joints are its movable canonical joints."""
-        from ..urdfgen import render
+        from ohra.canonical.urdfgen import render
 
         if not isinstance(params, (BaseParams, ExtendedParams)):
             raise TypeError(f"expected BaseParams or ExtendedParams, got {type(params).__name__}")
@@ -156,8 +156,8 @@ class SimHand:
     @classmethod
     def registered_original(cls, name: str, form: str | None = None) -> "SimHand":
         """The original hand of a registered hand (needs the hand assets and the registry)."""
-        from ..hands import get_hand
-        from ..hands import registry
+        from ohra.hands import get_hand
+        from ohra.hands import registry
 
         sp = registry.spec(name)
         oh = registry.load_original(name)
@@ -169,8 +169,8 @@ class SimHand:
 
 
 def _absolute_text(oh) -> str:
-    """The cleaned URDF text of an :class:`ohra.original.OriginalHand` with absolute mesh paths."""
-    from ..original import resolve_mesh_path
+    """The cleaned URDF text of an :class:`ohra.original.urdf.OriginalHand` with absolute mesh paths."""
+    from ohra.original.urdf import resolve_mesh_path
 
     root = ET.fromstring(oh.urdf_text)
     base = oh.path.parent if oh.path is not None else Path.cwd()
@@ -242,7 +242,7 @@ def prepare_urdf(text: str, locked: dict[str, float], capsules: bool = True, bas
         for link in root.iter("link"):
             _capsulise(link)
     if base_dir is not None:
-        from ..original import resolve_mesh_path
+        from ohra.original.urdf import resolve_mesh_path
 
         for m in root.iter("mesh"):
             m.set("filename", str(resolve_mesh_path(m.get("filename", ""), base_dir)))

@@ -15,9 +15,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kinematics import HandModel
-from ..objects import ObjectModel
-from ..rotations import pose_to_grasp
+from ohra.canonical.kinematics import HandModel
+from ohra.objects.model import ObjectModel
+from ohra.rotations import pose_to_grasp
 
 _AXIS_SAMPLES = np.linspace(0.0, 1.0, 5)  # points along each capsule's core segment
 
@@ -40,7 +40,7 @@ def closing_direction(hm: HandModel, T: np.ndarray, q: np.ndarray, target: np.nd
     The link direction is the child frame's +z (canonical links extend along +z), as in the squeeze
     controller of the evaluation protocol.
     """
-    from ..params import JOINT_NAMES
+    from ohra.canonical.params import JOINT_NAMES
 
     child = [hm.tree.frame_names[int(np.flatnonzero(hm.tree.frame_joint == hm.tree.joint_names.index(n))[0])]
              for n in JOINT_NAMES]
@@ -55,7 +55,7 @@ def closing_direction(hm: HandModel, T: np.ndarray, q: np.ndarray, target: np.nd
 def heuristic_grasps(hm: HandModel, obj: ObjectModel, n: int, seed: int = 0, standoff: tuple[float, float] = (0.0, 0.01),
                      samples: int = 256) -> np.ndarray:
     """``n`` seeded grasps ``(n, 31)`` of ``hm`` around ``obj`` from random directions (see module doc)."""
-    from ..params import FINGER_SLICES, FINGERS
+    from ohra.canonical.params import FINGER_SLICES, FINGERS
 
     rng = np.random.default_rng(seed)
     caps = hm.capsule_specs
@@ -104,7 +104,7 @@ def heuristic_grasps(hm: HandModel, obj: ObjectModel, n: int, seed: int = 0, sta
 
 
 def _finger_of(j: int) -> int:
-    from ..params import FINGER_SLICES, FINGERS
+    from ohra.canonical.params import FINGER_SLICES, FINGERS
 
     for k, f in enumerate(FINGERS):
         if FINGER_SLICES[f].start <= j < FINGER_SLICES[f].stop:

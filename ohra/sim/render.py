@@ -13,10 +13,10 @@ from pathlib import Path
 import numpy as np
 import pybullet as pb
 
-from ..bullet import captured_c_output
-from ..objects import ObjectModel
-from ..rotations import grasp_to_pose, matrix_to_quat
-from .hands import SimHand
+from ohra.sim.bullet import captured_c_output
+from ohra.objects.model import ObjectModel
+from ohra.rotations import grasp_to_pose, matrix_to_quat
+from ohra.sim.hands import SimHand
 
 
 def render_grasps(hand: SimHand, obj: ObjectModel, grasps: np.ndarray, size: int = 256,

@@ -24,11 +24,11 @@ from pathlib import Path
 import numpy as np
 import pybullet as pb
 
-from ..bullet import captured_c_output
-from ..objects import ObjectModel
-from ..rotations import matrix_to_quat, quat_to_matrix
-from .hands import SimHand
-from .protocol import Protocol
+from ohra.sim.bullet import captured_c_output
+from ohra.objects.model import ObjectModel
+from ohra.rotations import matrix_to_quat, quat_to_matrix
+from ohra.sim.hands import SimHand
+from ohra.sim.protocol import Protocol
 
 PALM_BIT = 1 << 5
 OBJECT_BIT = 1 << 6

@@ -1,6 +1,6 @@
 """Grasp synthesis for any canonical hand: CasADi/IPOPT force-closure NLP + PyBullet filter."""
 
-from .nlp import GraspNLP, NLPSettings
-from .pipeline import SynthSettings, synthesize, synthesize_shard
+from ohra.synth.nlp import GraspNLP, NLPSettings
+from ohra.synth.pipeline import SynthSettings, synthesize, synthesize_shard
 
 __all__ = ["GraspNLP", "NLPSettings", "SynthSettings", "synthesize", "synthesize_shard"]

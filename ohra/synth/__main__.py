@@ -1,5 +1,5 @@
 import sys
 
-from .cli import run
+from ohra.cli.synth import run
 
 sys.exit(run())

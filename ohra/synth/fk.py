@@ -13,7 +13,7 @@ from typing import Sequence
 import casadi as ca
 import numpy as np
 
-from ..kinematics import HandModel
+from ohra.canonical.kinematics import HandModel
 
 
 def _rot(axis: np.ndarray, angle: ca.SX) -> ca.SX:

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kinematics import HandModel
-from ..objects import ObjectModel
-from ..urdfgen import palm_geometry
+from ohra.canonical.kinematics import HandModel
+from ohra.objects.model import ObjectModel
+from ohra.canonical.urdfgen import palm_geometry
 
 
 def fibonacci_sphere(n: int) -> np.ndarray:

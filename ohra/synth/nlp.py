@@ -24,10 +24,10 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from ..kinematics import HandModel
-from ..objects import ObjectModel
-from ..urdfgen import palm_geometry
-from .fk import frame_transforms
+from ohra.canonical.kinematics import HandModel
+from ohra.objects.model import ObjectModel
+from ohra.canonical.urdfgen import palm_geometry
+from ohra.synth.fk import frame_transforms
 
 SUCCESS_STATUSES = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 _REACH_CACHE: dict[tuple, np.ndarray] = {}  # GraspNLP._pair_reach per hand (a few hands per process)
@@ -281,7 +281,7 @@ class GraspNLP:
         q = np.clip(np.zeros(22), self.hand.lower, self.hand.upper)
         # IPOPT may relax bounds by ~1e-8; clip so the grasp is exactly within the limits
         q[self.movable] = np.clip(x[6 : 6 + self.nq], self.hand.lower[self.movable], self.hand.upper[self.movable])
-        from ..rotations import matrix_to_rot6d
+        from ohra.rotations import matrix_to_rot6d
 
         grasp = np.concatenate([x[:3], matrix_to_rot6d(R), q])
         contacts, normals = (np.asarray(v) for v in self._contact_fn(x, p))

@@ -1,6 +1,6 @@
 """Grasp dataset synthesis: NLP multistarts per (hand, object), PyBullet filter, atomic shards.
 
-Dataset layout (``ohra.data``): ``OUT/<hand>/<object>-<meshhash>.npz`` shards plus
+Dataset layout (``ohra.data.dataset``): ``OUT/<hand>/<object>-<meshhash>.npz`` shards plus
 ``OUT/manifest.json``. A shard holds, over all solver candidates: ``raw`` (N,31) solutions,
 ``post`` (N,31) post-simulation grasps, ``sim_success`` (N,), solver status codes, constraint
 violation, iterations, Ferrari-Canny ``q1``, solver ``contacts``, ``min_distance`` (finger capsules to
@@ -22,17 +22,17 @@ from typing import Union
 
 import numpy as np
 
-from .. import __version__
-from ..data import atomic_write_json, atomic_write_npz, shard_name
-from ..errors import OhraError
-from ..kinematics import HandModel
-from ..objects import ObjectModel
-from ..params import BaseParams, ExtendedParams
-from ..rotations import grasp_to_pose
-from ..sim import GraspEvaluator, Protocol
-from .init import initial_poses
-from .nlp import GraspNLP, NLPSettings, SUCCESS_STATUSES
-from .quality import ferrari_canny
+from ohra import __version__
+from ohra.data.dataset import atomic_write_json, atomic_write_npz, shard_name
+from ohra.errors import OhraError
+from ohra.canonical.kinematics import HandModel
+from ohra.objects.model import ObjectModel
+from ohra.canonical.params import BaseParams, ExtendedParams
+from ohra.rotations import grasp_to_pose
+from ohra.sim import GraspEvaluator, Protocol
+from ohra.synth.init import initial_poses
+from ohra.synth.nlp import GraspNLP, NLPSettings, SUCCESS_STATUSES
+from ohra.synth.quality import ferrari_canny
 
 Params = Union[BaseParams, ExtendedParams]
 # solver_status codes in the shards; "Self_Collision" marks a converged solution whose fingers

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
-from ..objects import ObjectModel
+from ohra.objects.model import ObjectModel
 
 
 def contact_normals(points: np.ndarray, obj: ObjectModel, h: float = 1e-3) -> np.ndarray:

@@ -1,6 +1,6 @@
 """The 256 LEAP variants ``leap_ABCD``: digits = links kept on the thumb, index, middle and little finger.
 
-Each variant is the LEAP template (``leap_template.py``) with fingers shortened to their first
+Each variant is the LEAP template (``template.py``) with fingers shortened to their first
 A, B, C, D links (0-3); the ring finger is always absent. Rules (reference §10.2): a finger with 0
 links loses its radius, lengths, origins and axes; lengths beyond the kept links are zeroed; a
 thumb with one link also drops its j3 origin. Joint limits are kept only for these slots:
@@ -15,9 +15,9 @@ from functools import lru_cache
 
 import numpy as np
 
-from ..errors import HandNotFoundError
-from ..params import EXT_ROW_START, EXT_ROWS_PER_FINGER, FINGER_SLICES, ExtendedParams
-from .leap_template import load_leap_template
+from ohra.errors import HandNotFoundError
+from ohra.canonical.params import EXT_ROW_START, EXT_ROWS_PER_FINGER, FINGER_SLICES, ExtendedParams
+from ohra.hands.leap.template import load_leap_template
 
 VARIANT_RE = re.compile(r"^leap_([0-3])([0-3])([0-3])([0-3])$")
 # (finger index, canonical slot offsets within the finger kept for 1, 2, 3 links)

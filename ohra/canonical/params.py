@@ -21,8 +21,8 @@ from typing import Any, ClassVar, Mapping, Union
 
 import numpy as np
 
-from .errors import ParamsError
-from .transforms import inverse_rpy
+from ohra.errors import ParamsError
+from ohra.transforms import inverse_rpy
 
 FINGERS: tuple[str, ...] = ("thumb", "index", "middle", "ring", "little")
 JOINTS_PER_FINGER: tuple[int, ...] = (5, 4, 4, 4, 5)

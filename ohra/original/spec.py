@@ -1,6 +1,6 @@
 """HandSpec: the minimal manual input that brings an original hand into the canonical form.
 
-A spec is a small YAML file (the registered hands' specs live in ``ohra/hands/<name>.yaml``)::
+A spec is a small YAML file (the registered hands' specs live in ``ohra/hands/specs/<name>.yaml``)::
 
     name: shadow_hand_right                  # registry name (default: the file stem)
     urdf: shadow_hand/shadow_hand_right.urdf  # original URDF (.urdf / .xacro), relative to the
@@ -22,7 +22,7 @@ A spec is a small YAML file (the registered hands' specs live in ``ohra/hands/<n
       - {key: "finger_lengths[0][2]", value: 0.03, reason: "..."}   # indexed key; form omitted = all
     fit: {samples: 96, seed: 0}               # optional least-squares fit settings
 
-Canonical slots are the 22 names of :data:`ohra.params.JOINT_NAMES`. Each original joint drives at
+Canonical slots are the 22 names of :data:`ohra.canonical.params.JOINT_NAMES`. Each original joint drives at
 most one slot per form (a duplicate is an error), a slot is either mapped or fixed, and every
 named original joint must be a movable joint of the URDF (checked by :meth:`HandSpec.check_joints`).
 Malformed specs raise :class:`ohra.SpecError` naming the file and the key.
@@ -38,10 +38,10 @@ from typing import Any, Mapping
 import numpy as np
 import yaml
 
-from .action import ActionMap, SlotMap
-from .errors import SpecError
-from .params import JOINT_INDEX, JOINT_NAMES
-from .paths import hands_root
+from ohra.original.action import ActionMap, SlotMap
+from ohra.errors import SpecError
+from ohra.canonical.params import JOINT_INDEX, JOINT_NAMES
+from ohra.paths import hands_root
 
 FORMS = ("base", "extended")
 _KEY_RE = re.compile(r"^([a-z_]+)((?:\[\d+\])*)$")

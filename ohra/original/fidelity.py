@@ -29,9 +29,9 @@ from typing import Any
 
 import numpy as np
 
-from .kinematics import HandModel
-from .params import FINGER_SLICES, FINGERS, JOINT_NAMES
-from .parse import Measurement, ParseResult, line_distance, measure, original_keypoints, sample_original
+from ohra.canonical.kinematics import HandModel
+from ohra.canonical.params import FINGER_SLICES, FINGERS, JOINT_NAMES
+from ohra.original.parse import Measurement, ParseResult, line_distance, measure, original_keypoints, sample_original
 
 
 @dataclass(frozen=True)
@@ -265,7 +265,7 @@ def compare(
         res = hand
         name = res.spec.name
     else:
-        from .hands import registry
+        from ohra.hands import registry
 
         name = hand
         sp = registry.spec(name)

@@ -1,6 +1,6 @@
 """``ohra hand parse | compare | show``: parse a user's hand, measure fidelity, view original vs canonical.
 
-Plugs into :mod:`ohra.cli` through :func:`register_hand` (sub-commands of ``ohra hand``).
+Plugs into :mod:`ohra.cli.main` through :func:`register_hand` (sub-commands of ``ohra hand``).
 """
 
 from __future__ import annotations
@@ -14,9 +14,9 @@ import numpy as np
 
 
 def _cmd_parse(args: argparse.Namespace) -> int:
-    from .fidelity import compare
-    from .handspec import load_spec
-    from .parse import parse
+    from ohra.original.fidelity import compare
+    from ohra.original.spec import load_spec
+    from ohra.original.parse import parse
 
     spec = load_spec(args.spec)
     form = "extended" if args.extended else "base"
@@ -46,7 +46,7 @@ def _cmd_parse(args: argparse.Namespace) -> int:
 
 
 def _cmd_compare(args: argparse.Namespace) -> int:
-    from .fidelity import compare
+    from ohra.original.fidelity import compare
 
     form = "extended" if args.extended else "base"
     with warnings.catch_warnings():
@@ -57,7 +57,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     else:
         print(rep.table())
     if args.html:
-        from . import viz
+        from ohra import viz
 
         path = viz.compare_html(args.hand, form, args.html)
         print(f"wrote {path}", file=sys.stderr)
@@ -65,7 +65,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
 
 
 def _cmd_show(args: argparse.Namespace) -> int:  # pragma: no cover - starts a server
-    from . import viz
+    from ohra import viz
 
     form = "extended" if args.extended else "base"
     q = None
@@ -81,7 +81,7 @@ def _cmd_show(args: argparse.Namespace) -> int:  # pragma: no cover - starts a s
 
 def register_hand(hsub) -> None:
     p = hsub.add_parser("parse", help="parse an original hand URDF from a hand spec (YAML) into canonical params")
-    p.add_argument("spec", help="hand spec YAML (see ohra.handspec)")
+    p.add_argument("spec", help="hand spec YAML (see ohra.original.spec)")
     p.add_argument("-o", "--output", help="write params JSON here (default: stdout)")
     p.add_argument("--extended", action="store_true", help="extended form (default: base)")
     p.add_argument("--fit", action="store_true", help="refine by least squares against the original kinematics")

@@ -21,9 +21,9 @@ from typing import Any, Union
 import jinja2
 import numpy as np
 
-from .params import BaseParams, ExtendedParams
-from .resources import templates_dir
-from .transforms import inverse_rpy, rpy_to_matrix
+from ohra.canonical.params import BaseParams, ExtendedParams
+from ohra.resources import templates_dir
+from ohra.transforms import inverse_rpy, rpy_to_matrix
 
 DENSITY = 1000.0  # kg/m^3, finger and palm material
 DUMMY_MASS = 1e-3  # kg, geometry-free links (bases, knuckles, tips)

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import GraspError, ObjectError
+from ohra.errors import GraspError, ObjectError
 
 EPILOG = "Exit codes: 0 ok, 2 bad input. The report is JSON (success, displacements per phase, contacts, penetration)."
 
@@ -68,10 +68,10 @@ def load_grasp_file(path: str | Path, key: str | None = None) -> np.ndarray:
 
 
 def run(args: argparse.Namespace) -> int:
-    from .hands import get_hand
-    from .objects import resolve_objects
-    from .sim import GraspEvaluator, Protocol, SimHand
-    from .sim.protocol import ISAAC_STEP
+    from ohra.hands import get_hand
+    from ohra.objects.model import resolve_objects
+    from ohra.sim import GraspEvaluator, Protocol, SimHand
+    from ohra.sim.protocol import ISAAC_STEP
 
     if args.workers < 1:
         raise GraspError(f"--workers must be >= 1, got {args.workers}")
@@ -101,11 +101,11 @@ def run(args: argparse.Namespace) -> int:
     rep.meta.update({"grasp_file": str(args.grasps), "original_hand": bool(args.original), "wall_s": wall,
                      "object_info": obj.describe()})
     if args.output:
-        from .data import atomic_write_json
+        from ohra.data.dataset import atomic_write_json
 
         atomic_write_json(args.output, rep.to_dict())
     if args.render:
-        from .sim.render import contact_sheet, render_grasps, write_png
+        from ohra.sim.render import contact_sheet, render_grasps, write_png
 
         k = min(16, len(g))
         write_png(contact_sheet(render_grasps(hand, obj, g[:k]), rep.success[:k]), args.render)
@@ -120,9 +120,9 @@ def run(args: argparse.Namespace) -> int:
 def _meshcat(args: argparse.Namespace, hand, obj, grasp: np.ndarray) -> None:
     if not hand.canonical:
         raise GraspError("--meshcat draws canonical hands only; drop --original")
-    from .hands import get_hand
-    from .kinematics import HandModel
-    from .viz import add_grasp, new_visualizer, save_html
+    from ohra.hands import get_hand
+    from ohra.canonical.kinematics import HandModel
+    from ohra.viz import add_grasp, new_visualizer, save_html
 
     vis = new_visualizer()
     add_grasp(vis, HandModel.from_params(get_hand(args.hand)), grasp, np.asarray(obj.mesh.vertices), np.asarray(obj.mesh.faces))

@@ -19,9 +19,9 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from .errors import MappingError
-from .params import JOINT_INDEX, JOINT_NAMES
-from .transforms import invert, xyzrpy_to_matrix
+from ohra.errors import MappingError
+from ohra.canonical.params import JOINT_INDEX, JOINT_NAMES
+from ohra.transforms import invert, xyzrpy_to_matrix
 
 MOVABLE_TYPES = ("revolute", "continuous", "prismatic")
 

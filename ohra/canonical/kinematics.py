@@ -6,7 +6,7 @@ kinematic tree for batches of configurations, and Coal capsule geometry for coll
 
 All poses are 4x4 homogeneous matrices in the canonical palm frame (the URDF root; +x palm normal,
 +y thumb side of a right hand, +z finger-forward), in metres. Configurations are always the 22-D
-canonical joint vector (``ohra.params.JOINT_NAMES`` order) in radians; absent joints must be 0.
+canonical joint vector (``ohra.canonical.params.JOINT_NAMES`` order) in radians; absent joints must be 0.
 """
 
 from __future__ import annotations
@@ -20,9 +20,9 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from .errors import OhraError, ParamsError
-from .params import FINGERS, JOINT_NAMES, BaseParams, ExtendedParams, load_params
-from .urdfgen import palm_geometry, render
+from ohra.errors import OhraError, ParamsError
+from ohra.canonical.params import FINGERS, JOINT_NAMES, BaseParams, ExtendedParams, load_params
+from ohra.canonical.urdfgen import palm_geometry, render
 
 Params = Union[BaseParams, ExtendedParams]
 SEGMENTS = ("proximal", "middle", "distal")
@@ -384,7 +384,7 @@ class HandModel:
         penetration depth (GJK/EPA). For a triangle mesh (``coal.BVHModel``) Coal's distance is
         unsigned: a colliding shape reports ``-depth`` taken from the deepest contact of a collision
         query, which is exact for shallow contacts but underestimates deep ones (the mesh has no
-        inside); use an SDF (``ohra.objects``) when deep signed values matter.
+        inside); use an SDF (``ohra.objects.model``) when deep signed values matter.
         """
         To = np.eye(4) if T_palm_object is None else np.asarray(T_palm_object, dtype=float)
         obj = coal.CollisionObject(geometry, _se3(To))
@@ -432,6 +432,6 @@ def load_hand_model(hand: str | Params) -> HandModel:
     """HandModel of a registered hand name, a params JSON path or params."""
     if isinstance(hand, (BaseParams, ExtendedParams)):
         return HandModel.from_params(hand)
-    from .hands import get_hand
+    from ohra.hands import get_hand
 
     return HandModel.from_params(get_hand(hand))

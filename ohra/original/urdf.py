@@ -28,8 +28,8 @@ from typing import Sequence
 
 import numpy as np
 
-from .errors import ParseError
-from .transforms import xyzrpy_to_matrix
+from ohra.errors import ParseError
+from ohra.transforms import xyzrpy_to_matrix
 
 MOVABLE_TYPES = ("revolute", "continuous", "prismatic")
 KNOWN_TYPES = MOVABLE_TYPES + ("fixed", "floating", "planar")

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 from typing import Sequence
 
-from ..errors import OhraError
+from ohra.errors import OhraError
 
 
 class _Parser(argparse.ArgumentParser):
@@ -30,7 +30,7 @@ def build_parser(prog: str = "python -m ohra.synth") -> argparse.ArgumentParser:
 
 
 def _hands(spec: str):
-    from ..hands import get_hand, variant_names
+    from ohra.hands import get_hand, variant_names
 
     if spec == "all-leap":
         return [(n, get_hand(n)) for n in variant_names() if get_hand(n).num_fingers >= 2]
@@ -48,8 +48,8 @@ def run(argv: Sequence[str] | None = None, prog: str = "python -m ohra.synth") -
         out = Path(args.out)
         if out.exists() and not out.is_dir():
             raise OhraError(f"--out {out} exists and is not a directory")
-        from ..objects import resolve_objects
-        from .pipeline import SynthSettings, synthesize
+        from ohra.objects.model import resolve_objects
+        from ohra.synth.pipeline import SynthSettings, synthesize
 
         hands = _hands(args.hand)
         objects = resolve_objects(args.objects)

@@ -1,7 +1,7 @@
 """The LEAP-variant template: canonical extended parameters (LEAP flavour) of the full right LEAP hand.
 
 The template is derived from the original URDF by :func:`derive_leap_template` and committed as
-``params/leap_template.json`` so that variants need no external data. Non-thumb fingers flex at the
+``ohra/hands/leap/template.json`` so that variants need no external data. Non-thumb fingers flex at the
 palm (j1, axis +y) and abduct 38 mm up the proximal link (j2, axis +x); the ring finger is absent.
 """
 
@@ -12,14 +12,14 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from ..errors import AssetsNotFoundError
-from ..params import ExtendedParams
-from ..paths import hands_root
-from ..resources import hands_data_dir
-from ..transforms import matrix_to_rpy, xyzrpy_to_matrix
+from ohra.errors import AssetsNotFoundError
+from ohra.canonical.params import ExtendedParams
+from ohra.paths import hands_root
+from ohra.resources import leap_dir
+from ohra.transforms import matrix_to_rpy, xyzrpy_to_matrix
 
-TEMPLATE_JSON = "params/leap_template.json"
-INPUTS_YAML = "leap_template.yaml"
+TEMPLATE_JSON = "template.json"
+INPUTS_YAML = "template.yaml"
 
 
 def _round_axis(a: np.ndarray) -> np.ndarray:
@@ -32,7 +32,7 @@ def derive_leap_template(urdf: str | Path | None = None) -> ExtendedParams:
     """Measure the LEAP template from the right LEAP hand URDF (Pinocchio forward kinematics at q=0)."""
     import pinocchio as pin
 
-    cfg = yaml.safe_load((hands_data_dir() / INPUTS_YAML).read_text())
+    cfg = yaml.safe_load((leap_dir() / INPUTS_YAML).read_text())
     path = Path(urdf) if urdf is not None else hands_root() / cfg["urdf"]
     if not path.is_file():
         raise AssetsNotFoundError(f"LEAP hand URDF not found: {path} (set OHRA_HANDS_ROOT)")
@@ -103,4 +103,4 @@ def derive_leap_template(urdf: str | Path | None = None) -> ExtendedParams:
 
 def load_leap_template() -> ExtendedParams:
     """The committed LEAP template (no external data needed)."""
-    return ExtendedParams.from_json(hands_data_dir() / TEMPLATE_JSON)
+    return ExtendedParams.from_json(leap_dir() / TEMPLATE_JSON)

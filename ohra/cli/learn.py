@@ -1,6 +1,6 @@
 """``ohra train vae`` and ``ohra vae encode|decode|interpolate``: the morphology VAE from the shell.
 
-Plugged into :mod:`ohra.cli` through ``register(subparsers)``; every parser sets ``func(args) -> int``.
+Plugged into :mod:`ohra.cli.main` through ``register(subparsers)``; every parser sets ``func(args) -> int``.
 torch is imported only when a command runs (a missing torch is a one-line error).
 """
 
@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import OhraError
+from ohra.errors import OhraError
 
 
 def _subcommands(sub: Any, name: str, help_text: str, dest: str) -> Any:
@@ -34,7 +34,7 @@ def _subcommands(sub: Any, name: str, help_text: str, dest: str) -> Any:
 
 
 def register(sub: Any) -> None:
-    from .learn.config import TrainConfig
+    from ohra.learn.config import TrainConfig
 
     d = TrainConfig()
     train = _subcommands(sub, "train", "train learned models (vae, ...)", "train_command")
@@ -87,11 +87,11 @@ def _positive(name: str, value: int) -> None:
 
 
 def _cmd_train_vae(args: argparse.Namespace) -> int:
-    from .learn import require_torch
+    from ohra.learn import require_torch
 
     require_torch()
-    from .learn.config import TrainConfig
-    from .learn.train_vae import train
+    from ohra.learn.config import TrainConfig
+    from ohra.learn.train_vae import train
 
     for name in ("samples", "epochs", "batch_size", "threads", "checkpoint_every"):
         _positive(name.replace("_", "-"), getattr(args, name))
@@ -113,10 +113,10 @@ def _cmd_train_vae(args: argparse.Namespace) -> int:
 
 
 def _load(model: str | None):
-    from .learn import require_torch
+    from ohra.learn import require_torch
 
     require_torch()
-    from .learn.morph import load_vae
+    from ohra.learn.morph import load_vae
 
     return load_vae(model)
 
@@ -172,7 +172,7 @@ def _cmd_decode(args: argparse.Namespace) -> int:
     else:
         sys.stdout.write(params.to_json())
     if args.urdf:
-        from .urdfgen import write
+        from ohra.canonical.urdfgen import write
 
         write(params, args.urdf)
         print(f"wrote {args.urdf}", file=sys.stderr)
@@ -193,12 +193,12 @@ def _cmd_interpolate(args: argparse.Namespace) -> int:
     for p, params in zip(paths, interp.params):
         print(f"  {p.name}: {params.num_fingers} fingers, {params.dof} dof, {params.handedness} hand")
     if not args.no_png:
-        from .learn.strip import strip_png
+        from ohra.learn.strip import strip_png
 
         png = strip_png(interp.params, out / "strip.png", labels=interp.labels())
         print(f"wrote {png}")
     if not args.no_html:
-        from .learn.strip import sequence_html
+        from ohra.learn.strip import sequence_html
 
         html = sequence_html(interp.params, out / "scene.html")
         print(f"wrote {html}")

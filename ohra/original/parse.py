@@ -1,4 +1,4 @@
-"""Parse an original hand URDF + :class:`~ohra.handspec.HandSpec` into canonical parameters.
+"""Parse an original hand URDF + :class:`~ohra.original.spec.HandSpec` into canonical parameters.
 
 Everything is measured in the canonical palm frame (``T_palm = T_root @ T(palm_origin)``) with the
 original hand at the configuration that maps to canonical ``q = 0`` (``ActionMap.to_original(0)``).
@@ -40,11 +40,11 @@ from typing import Any
 import numpy as np
 from scipy.optimize import least_squares
 
-from .action import ActionMap
-from .errors import ParamsError, SpecError, ParseError
-from .handspec import HandSpec, load_spec
-from .original import OriginalHand, load_urdf
-from .params import (
+from ohra.original.action import ActionMap
+from ohra.errors import ParamsError, SpecError, ParseError
+from ohra.original.spec import HandSpec, load_spec
+from ohra.original.urdf import OriginalHand, load_urdf
+from ohra.canonical.params import (
     EXT_ROW_JOINTS,
     EXT_ROW_START,
     FINGER_SLICES,
@@ -55,7 +55,7 @@ from .params import (
     ExtendedParams,
     link_presence,
 )
-from .transforms import invert, inverse_rpy, matrix_to_rpy, rpy_to_matrix, xyzrpy_to_matrix
+from ohra.transforms import invert, inverse_rpy, matrix_to_rpy, rpy_to_matrix, xyzrpy_to_matrix
 
 Params = BaseParams | ExtendedParams
 DECIMALS = 6  # committed numbers: micrometres / microradians
@@ -950,7 +950,7 @@ class ParseResult:
 def load_original_for(spec: HandSpec, hands_root: str | Path | None = None) -> OriginalHand:
     path = spec.urdf_path(hands_root)
     if not path.is_file():
-        from .errors import AssetsNotFoundError
+        from ohra.errors import AssetsNotFoundError
 
         raise AssetsNotFoundError(f"{spec.source}: original URDF not found at {path} (set OHRA_HANDS_ROOT)")
     hand = load_urdf(path)

@@ -15,9 +15,9 @@ from typing import Sequence
 
 import numpy as np
 
-from .errors import OhraError
+from ohra.errors import OhraError
 
-PLUGINS = ("cli_hand_parse", "cli_eval", "cli_learn", "cli_synth")
+PLUGINS = ("parse", "eval", "learn")
 EXIT_USAGE = 2
 
 
@@ -29,7 +29,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _cmd_hand_list(args: argparse.Namespace) -> int:
-    from .hands import get_hand, list_hands
+    from ohra.hands import get_hand, list_hands
 
     names = list_hands(include_variants=args.variants)
     for n in names:
@@ -50,8 +50,8 @@ def _cmd_hand_list(args: argparse.Namespace) -> int:
 
 
 def _resolve(name: str, extended: bool):
-    from .hands import get_hand
-    from .params import BaseParams
+    from ohra.hands import get_hand
+    from ohra.canonical.params import BaseParams
 
     params = get_hand(name, "extended" if extended else None)
     if extended and isinstance(params, BaseParams):
@@ -60,7 +60,7 @@ def _resolve(name: str, extended: bool):
 
 
 def _cmd_hand_render(args: argparse.Namespace) -> int:
-    from .urdfgen import render, write
+    from ohra.canonical.urdfgen import render, write
 
     params = _resolve(args.hand, args.extended)
     if args.output:
@@ -72,8 +72,8 @@ def _cmd_hand_render(args: argparse.Namespace) -> int:
 
 
 def _cmd_hand_info(args: argparse.Namespace) -> int:
-    from .kinematics import HandModel
-    from .params import FINGERS, JOINT_NAMES
+    from ohra.canonical.kinematics import HandModel
+    from ohra.canonical.params import FINGERS, JOINT_NAMES
 
     params = _resolve(args.hand, args.extended)
     hm = HandModel.from_params(params)
@@ -102,8 +102,8 @@ def _cmd_hand_info(args: argparse.Namespace) -> int:
 
 
 def _cmd_hand_check(args: argparse.Namespace) -> int:
-    from .hands import list_hands, variant_names
-    from .hands.check import check_hands
+    from ohra.hands import list_hands, variant_names
+    from ohra.hands.check import check_hands
 
     jobs: list[tuple[str, str | None]] = []
     for n in args.hands or list_hands():
@@ -112,7 +112,7 @@ def _cmd_hand_check(args: argparse.Namespace) -> int:
             continue
         for form in ("base", "extended"):
             try:
-                from .hands import get_hand
+                from ohra.hands import get_hand
 
                 get_hand(n, form)
                 jobs.append((n, form))
@@ -134,7 +134,7 @@ def _cmd_hand_check(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from . import __version__
+    from ohra import __version__
 
     parser = _Parser(prog="ohra", description="Canonical dexterous hands: render, inspect, parse, evaluate, synthesise, learn.")
     parser.add_argument("--version", action="version", version=f"ohra {__version__}")
@@ -167,12 +167,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_hand_check)
 
     for name in PLUGINS:
-        try:
-            mod = importlib.import_module(f"ohra.{name}")
-        except ModuleNotFoundError as exc:
-            if exc.name == f"ohra.{name}":
-                continue
-            raise
+        mod = importlib.import_module(f"ohra.cli.{name}")
         if hasattr(mod, "register_hand"):
             mod.register_hand(hsub)
         if hasattr(mod, "register"):

@@ -16,7 +16,7 @@ from typing import Iterator
 
 import numpy as np
 
-from .errors import DatasetError
+from ohra.errors import DatasetError
 
 
 def shard_name(obj_name: str, mesh_hash: str) -> str:

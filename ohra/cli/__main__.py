@@ -1,0 +1,5 @@
+import sys
+
+from ohra.cli.main import main
+
+sys.exit(main())
