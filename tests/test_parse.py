@@ -34,14 +34,15 @@ def _quiet_parse(*args, **kwargs):
 def test_parse_reproduces_committed_params(hands_dir, name, form):
     res = _quiet_parse(registry.spec(name), form, fit_params=True)
     committed = registry.registered_params(name, form)
-    assert res.params.isclose(committed, atol=1e-6)
+    # 1e-4 (0.1 mm, 0.1 mrad): the least-squares fit lands ~3e-5 apart on different BLAS builds.
+    assert res.params.isclose(committed, atol=1e-4)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name, form", [j for j in JOBS if j not in FAST])
 def test_parse_reproduces_committed_params_all(hands_dir, name, form):
     res = _quiet_parse(registry.spec(name), form, fit_params=True)
-    assert res.params.isclose(registry.registered_params(name, form), atol=1e-6)
+    assert res.params.isclose(registry.registered_params(name, form), atol=1e-4)
 
 
 @pytest.mark.parametrize("name, form", JOBS)
