@@ -108,17 +108,10 @@ def static_html(vis: Any) -> str:
 
 
 def save_html(vis: Any, path: str | Path) -> Path:
-    """Write :func:`static_html` to ``path`` (atomically)."""
-    import os
-    import tempfile
+    """Write :func:`static_html` to ``path`` (atomically, mode from the umask; see :mod:`ohra.io`)."""
+    from ohra.io import write_text
 
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=str(path.parent), suffix=".tmp")
-    with os.fdopen(fd, "w") as fh:
-        fh.write(static_html(vis))
-    os.replace(tmp, path)
-    return path
+    return write_text(path, static_html(vis))
 
 
 # -- original vs canonical overlays (parser / fidelity) ----------------------------------------------
@@ -265,8 +258,10 @@ def grasp_png(hand: HandModel, grasp: np.ndarray, vertices: np.ndarray, faces: n
         ax.view_init(elev, azim)
         ax.set_xlabel("x [m]"); ax.set_ylabel("y [m]"); ax.set_zlabel("z [m]")
     fig.tight_layout()
+    from ohra.io import atomic_path
+
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=80)
+    with atomic_path(path, suffix=path.suffix or ".png") as tmp:  # savefig picks the format from the name
+        fig.savefig(tmp, dpi=80)
     plt.close(fig)
     return path

@@ -22,6 +22,7 @@ from typing import Any, ClassVar, Mapping, Union
 import numpy as np
 
 from ohra.errors import ParamsError
+from ohra.io import write_text
 from ohra.transforms import inverse_rpy
 
 FINGERS: tuple[str, ...] = ("thumb", "index", "middle", "ring", "little")
@@ -240,7 +241,7 @@ class _ParamsMixin:
         lines.append("}")
         text = "\n".join(lines) + "\n"
         if path is not None:
-            Path(path).write_text(text)
+            write_text(path, text)  # atomic, mode from the umask
         return text
 
     @classmethod

@@ -11,8 +11,6 @@ parameters always give byte-identical text.
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -22,6 +20,7 @@ import jinja2
 import numpy as np
 
 from ohra.canonical.params import BaseParams, ExtendedParams
+from ohra.io import write_text
 from ohra.resources import templates_dir
 from ohra.transforms import inverse_rpy, rpy_to_matrix
 
@@ -187,16 +186,4 @@ def render(params: Params, robot_name: str = "canonical_hand") -> str:
 
 def write(params: Params, path: str | Path, robot_name: str = "canonical_hand") -> Path:
     """Render and write atomically to ``path``; returns the path."""
-    text = render(params, robot_name)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=str(path.parent))
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
+    return write_text(path, render(params, robot_name))

@@ -8,15 +8,14 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import re
-import tempfile
 from pathlib import Path
 from typing import Iterator
 
 import numpy as np
 
 from ohra.errors import DatasetError
+from ohra.io import write_json, write_npz
 
 
 def shard_name(obj_name: str, mesh_hash: str) -> str:
@@ -24,25 +23,14 @@ def shard_name(obj_name: str, mesh_hash: str) -> str:
     return f"{safe}-{mesh_hash[:8]}.npz"
 
 
-def _atomic(path: Path, write) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=str(path.parent), prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            write(fh)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def atomic_write_npz(path: str | Path, arrays: dict[str, np.ndarray]) -> None:
-    """Write ``arrays`` to ``path`` via a temporary file and a rename (never a partial shard)."""
-    _atomic(Path(path), lambda fh: np.savez_compressed(fh, **arrays))
+    """Write ``arrays`` to ``path`` atomically (never a partial shard); see :mod:`ohra.io`."""
+    write_npz(path, arrays)
 
 
 def atomic_write_json(path: str | Path, data: dict) -> None:
-    _atomic(Path(path), lambda fh: fh.write((json.dumps(data, indent=1, default=str) + "\n").encode()))
+    """Write ``data`` as JSON atomically (a manifest is whole or absent); see :mod:`ohra.io`."""
+    write_json(path, data, indent=1)
 
 
 class GraspDataset:

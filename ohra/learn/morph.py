@@ -163,18 +163,18 @@ class Interpolation:
 
     def write(self, out_dir: str | Path, stem: str = "interp") -> list[Path]:
         """Write ``<stem>_<i>.urdf`` and ``<stem>_<i>.json`` (params) for every step; returns the URDF paths."""
-        from ohra.learn.train_vae import atomic_write_text
+        from ohra.io import write_text
 
         out = Path(out_dir)
         paths = []
         for i, (p, text) in enumerate(zip(self.params, self.urdfs)):
             path = out / f"{stem}_{i:02d}.urdf"
-            atomic_write_text(text, path)
-            atomic_write_text(p.to_json(), out / f"{stem}_{i:02d}.json")
+            write_text(path, text)
+            write_text(out / f"{stem}_{i:02d}.json", p.to_json())
             paths.append(path)
         summary = {"endpoints": list(self.endpoints), "alphas": self.alphas.tolist(), "z": self.z.tolist(),
                    "dof": [p.dof for p in self.params], "fingers": [p.num_fingers for p in self.params]}
-        atomic_write_text(json.dumps(summary, indent=1) + "\n", out / f"{stem}.json")
+        write_text(out / f"{stem}.json", json.dumps(summary, indent=1) + "\n")
         return paths
 
 

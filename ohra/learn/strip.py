@@ -97,9 +97,11 @@ def strip_png(params: Sequence[BaseParams | ExtendedParams], path: str | Path, l
             label = f"{i}: {p.num_fingers} fingers, {p.dof} dof"
         draw_hand(axes[0, i], p, q, title=label)
     fig.tight_layout()
+    from ohra.io import atomic_path
+
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=dpi)
+    with atomic_path(path, suffix=path.suffix or ".png") as tmp:  # savefig picks the format from the name
+        fig.savefig(tmp, dpi=dpi)
     plt.close(fig)
     return path
 

@@ -20,8 +20,6 @@ import contextlib
 import hashlib
 import io
 import json
-import os
-import tempfile
 import time
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -31,6 +29,7 @@ import numpy as np
 import torch
 
 from ohra.errors import CheckpointError
+from ohra.io import atomic_write, write_text
 from ohra.learn.encoding import AXIS1, AXIS2, CONT, CONT_GROUPS, FLAGS, Standardizer, encode_vectors
 from ohra.learn.sampler import sample_vectors
 from ohra.learn.config import TrainConfig
@@ -66,37 +65,9 @@ def _digest(x: torch.Tensor) -> str:
 
 
 # -- io ---------------------------------------------------------------------------------------------
-def _umask_mode() -> int:
-    """0o666 minus the process umask: what open() would give a new file (mkstemp gives 0o600)."""
-    mask = os.umask(0)
-    os.umask(mask)
-    return 0o666 & ~mask
-
-
 def atomic_save(obj: Any, path: Path) -> None:
-    """torch.save to a temporary file in the same folder, then rename over ``path``."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=str(path.parent))
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            torch.save(obj, fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.chmod(tmp, _umask_mode())
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise
-
-
-def atomic_write_text(text: str, path: Path) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=str(path.parent))
-    with os.fdopen(fd, "w") as fh:
-        fh.write(text)
-    os.chmod(tmp, _umask_mode())
-    os.replace(tmp, path)
+    """torch.save to a temporary file in the same folder, then rename over ``path`` (see :mod:`ohra.io`)."""
+    atomic_write(path, lambda fh: torch.save(obj, fh))
 
 
 def load_torch_file(path: Path, expected_format: str) -> dict[str, Any]:
@@ -279,7 +250,7 @@ def train(config: TrainConfig = TrainConfig(), run_dir: str | Path | None = None
             epoch, step, history = int(ckpt["epoch"]), int(ckpt["step"]), list(ckpt["history"])
             elapsed_before = float(history[-1]["elapsed_s"]) if history else 0.0
         if run is not None:
-            atomic_write_text(json.dumps(cfg.to_dict(), indent=2) + "\n", run / "config.json")
+            write_text(run / "config.json", json.dumps(cfg.to_dict(), indent=2) + "\n")
 
         model.train()
         n_batches = len(x) // cfg.batch_size
@@ -327,6 +298,6 @@ def train(config: TrainConfig = TrainConfig(), run_dir: str | Path | None = None
         metrics["peak_rss_mib"] = _peak_rss_mib()
     if run is not None:
         atomic_save(model_payload(model, std), run / "model.pt")
-        atomic_write_text(json.dumps(metrics, indent=2) + "\n", run / "metrics.json")
+        write_text(run / "metrics.json", json.dumps(metrics, indent=2) + "\n")
     model.eval()
     return TrainResult(model, std, metrics, run)

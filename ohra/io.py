@@ -1,0 +1,88 @@
+"""Atomic file writes that honour the umask: every file ``ohra`` writes for a user goes through here.
+
+A write goes to a temporary file in the target's folder (so the final rename never crosses a file
+system), is flushed and fsync'ed, gets the mode a plain ``open(path, "w")`` would give
+(``0o666 & ~umask``), and is renamed over the target with :func:`os.replace`. A reader therefore sees
+either the old file or the complete new one, never a partial file; a write that fails (an exception
+in the writer, a full disk, Ctrl-C) leaves the target untouched and removes the temporary file.
+
+The mode matters because :func:`tempfile.mkstemp` creates files 0600: renamed as they are, datasets,
+URDFs and HTML written by one user would be unreadable to the others.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import IO, Any, Callable, Iterator, Mapping
+
+import numpy as np
+
+
+def umask_mode() -> int:
+    """The mode bits of a newly created regular file: ``0o666`` minus the process umask.
+
+    The umask can only be read by setting it; it is restored at once (process-wide, so not meant to
+    race with threads creating files at the same instant).
+    """
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | Path, suffix: str = ".tmp") -> Iterator[Path]:
+    """A temporary path beside ``path`` to write to; on a clean exit it replaces ``path``.
+
+    For writers that need a file name rather than a handle (``savefig``, ``imsave``, external tools).
+    ``suffix`` lets such writers infer the format from the name (e.g. ``".png"``). Parent folders are
+    created. On an exception the temporary file is removed and ``path`` is left as it was.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp_name = tempfile.mkstemp(dir=str(path.parent), prefix=f".{path.name}.", suffix=suffix)
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        yield tmp
+        with open(tmp, "rb+") as fh:  # the writer may have closed its own handle: sync through ours
+            os.fsync(fh.fileno())
+        os.chmod(tmp, umask_mode())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def atomic_write(path: str | Path, write: Callable[[IO[bytes]], Any]) -> Path:
+    """Call ``write(fh)`` on a binary handle to a temporary file, then replace ``path``; returns ``path``."""
+    path = Path(path)
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        write(fh)
+    return path
+
+
+def write_bytes(path: str | Path, data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically."""
+    return atomic_write(path, lambda fh: fh.write(data))
+
+
+def write_text(path: str | Path, text: str, encoding: str = "utf-8") -> Path:
+    """Write ``text`` to ``path`` atomically (``encoding`` default UTF-8, newlines as given)."""
+    return write_bytes(path, text.encode(encoding))
+
+
+def write_json(path: str | Path, data: Any, indent: int | None = 1) -> Path:
+    """Write ``data`` as JSON plus a final newline; values JSON cannot hold are written with ``str``."""
+    return write_text(path, json.dumps(data, indent=indent, default=str) + "\n")
+
+
+def write_npz(path: str | Path, arrays: Mapping[str, np.ndarray]) -> Path:
+    """Write ``arrays`` as a compressed ``.npz`` atomically (the name is used as given, no ``.npz`` added)."""
+    return atomic_write(path, lambda fh: np.savez_compressed(fh, **arrays))
+
+
+__all__ = ["umask_mode", "atomic_path", "atomic_write", "write_bytes", "write_text", "write_json", "write_npz"]
