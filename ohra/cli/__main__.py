@@ -1,3 +1,5 @@
+"""``python -m ohra.cli``: the ``ohra`` command."""
+
 import sys
 
 from ohra.cli.main import main

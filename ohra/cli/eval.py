@@ -101,9 +101,9 @@ def run(args: argparse.Namespace) -> int:
     rep.meta.update({"grasp_file": str(args.grasps), "original_hand": bool(args.original), "wall_s": wall,
                      "object_info": obj.describe()})
     if args.output:
-        from ohra.data.dataset import atomic_write_json
+        from ohra.io import write_json
 
-        atomic_write_json(args.output, rep.to_dict())
+        write_json(args.output, rep.to_dict())
     if args.render:
         from ohra.sim.render import contact_sheet, render_grasps, write_png
 

@@ -1,6 +1,7 @@
 """``ohra train vae`` and ``ohra vae encode|decode|interpolate``: the morphology VAE from the shell.
 
-Plugged into :mod:`ohra.cli.main` through ``register(subparsers)``; every parser sets ``func(args) -> int``.
+Plugged into :mod:`ohra.cli.main` through ``register(subparsers)``; ``train`` is a group other modules may
+add to (:func:`ohra.cli.main.subcommand_group`).
 torch is imported only when a command runs (a missing torch is a one-line error).
 """
 
@@ -11,33 +12,19 @@ import json
 import sys
 import warnings
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
+from ohra.cli.main import subcommand_group
 from ohra.errors import OhraError
 
 
-def _subcommands(sub: Any, name: str, help_text: str, dest: str) -> Any:
-    """The sub-subparsers of top-level command ``name``, created if no other plugin made it yet
-    (so that ``ohra train`` can host ``vae`` here and e.g. ``grasp`` elsewhere)."""
-    parser = sub.choices.get(name)
-    if parser is None:
-        parser = sub.add_parser(name, help=help_text)
-        s = parser.add_subparsers(dest=dest, metavar="WHAT", parser_class=type(parser))
-        s.required = True
-        return s
-    for action in parser._actions:  # argparse keeps the subparsers action among the actions
-        if isinstance(action, argparse._SubParsersAction):
-            return action
-    raise RuntimeError(f"command {name!r} exists without subcommands")  # pragma: no cover
-
-
-def register(sub: Any) -> None:
+def register(sub) -> None:
+    """Add ``train vae`` and ``vae encode|decode|interpolate`` to the top-level subparsers ``sub``."""
     from ohra.learn.config import TrainConfig
 
     d = TrainConfig()
-    train = _subcommands(sub, "train", "train learned models (vae, ...)", "train_command")
+    train = subcommand_group(sub, "train", "train learned models (vae, ...)", "train_command")
     p = train.add_parser("vae", help="train the morphology VAE on synthetic hands")
     p.add_argument("--samples", type=int, default=d.samples, help=f"synthetic training hands (default {d.samples})")
     p.add_argument("--epochs", type=int, default=d.epochs, help=f"epochs (default {d.epochs})")
@@ -51,7 +38,7 @@ def register(sub: Any) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_train_vae)
 
-    vae = _subcommands(sub, "vae", "use the morphology VAE: encode, decode, interpolate hands", "vae_command")
+    vae = subcommand_group(sub, "vae", "use the morphology VAE: encode, decode, interpolate hands", "vae_command")
     model_help = "model directory or .pt file (default: the shipped model)"
     p = vae.add_parser("encode", help="print the latent mean and log-variance of hands")
     p.add_argument("hands", nargs="+", help="registered hands or base params JSON files")
@@ -74,10 +61,6 @@ def register(sub: Any) -> None:
     p.add_argument("--no-png", action="store_true", help="skip the PNG strip")
     p.add_argument("--no-html", action="store_true", help="skip the meshcat HTML scene")
     p.set_defaults(func=_cmd_interpolate)
-
-
-def run(args: argparse.Namespace) -> int:
-    return int(args.func(args) or 0)
 
 
 # -- commands ---------------------------------------------------------------------------------------

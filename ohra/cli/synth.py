@@ -1,32 +1,55 @@
-"""``python -m ohra.synth``: synthesise a filtered grasp dataset for one or more hands."""
+"""``ohra synth`` (also ``python -m ohra.synth``): synthesise a filtered grasp dataset for one or more hands.
+
+    ohra synth --hand NAME|all-leap [--objects builtin|builtin:NAME|FILE|FOLDER ...] [--grasps-per-object K]
+               [--workers K] [--seed S] [--out DIR] [--no-filter] [--resume] [--quiet]
+
+Both spellings build their arguments with :func:`configure` and run through
+:func:`ohra.cli.main.execute`, so they accept the same options and fail the same way (one line on
+stderr, exit code 2).
+"""
 
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 from typing import Sequence
 
+from ohra.cli.main import Parser, execute
 from ohra.errors import OhraError
 
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:  # type: ignore[override]
-        self.exit(2, f"{self.prog}: error: {message}\n")
+DESCRIPTION = "Synthesise force-closure grasps (CasADi/IPOPT) and filter them in PyBullet."
+EPILOG = "Exit codes: 0 ok, 2 bad input. The dataset is a directory with manifest.json and one .npz shard per (hand, object)."
 
 
-def build_parser(prog: str = "python -m ohra.synth") -> argparse.ArgumentParser:
-    p = _Parser(prog=prog, description="Synthesise force-closure grasps (CasADi/IPOPT) and filter them in PyBullet.")
+def configure(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """Add the synth options to ``p`` and make :func:`run` its command; returns ``p``."""
     p.add_argument("--hand", required=True, help="registered hand, leap_XXXX, a params JSON, or all-leap")
     p.add_argument("--objects", nargs="+", default=["builtin"], help="builtin | builtin:NAME | mesh/URDF file | folder (default: builtin)")
     p.add_argument("--grasps-per-object", type=int, default=8, help="solver restarts per object (default 8)")
     p.add_argument("--workers", type=int, default=1, help="worker processes (default 1)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seed of the solver starts (default 0)")
     p.add_argument("--out", default="out/grasps", help="dataset directory (default out/grasps)")
     p.add_argument("--no-filter", action="store_true", help="skip the PyBullet filter")
     p.add_argument("--resume", action="store_true", help="skip shards that are complete")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
     return p
+
+
+def register(sub) -> None:
+    """Add ``synth`` to the top-level subparsers ``sub``."""
+    configure(sub.add_parser("synth", help="synthesise a filtered grasp dataset (CasADi/IPOPT + PyBullet)",
+                             description=DESCRIPTION, epilog=EPILOG))
+
+
+def build_parser(prog: str = "python -m ohra.synth") -> argparse.ArgumentParser:
+    """The stand-alone parser of ``python -m ohra.synth`` (the same options as ``ohra synth``)."""
+    return configure(Parser(prog=prog, description=DESCRIPTION, epilog=EPILOG))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``python -m ohra.synth``."""
+    return execute(build_parser().parse_args(argv))
 
 
 def _hands(spec: str):
@@ -38,26 +61,22 @@ def _hands(spec: str):
     return [(name, get_hand(spec))]
 
 
-def run(argv: Sequence[str] | None = None, prog: str = "python -m ohra.synth") -> int:
-    args = build_parser(prog).parse_args(argv)
-    try:
-        if args.workers < 1:
-            raise OhraError(f"--workers must be >= 1, got {args.workers}")
-        if args.grasps_per_object < 1:
-            raise OhraError(f"--grasps-per-object must be >= 1, got {args.grasps_per_object}")
-        out = Path(args.out)
-        if out.exists() and not out.is_dir():
-            raise OhraError(f"--out {out} exists and is not a directory")
-        from ohra.objects.model import resolve_objects
-        from ohra.synth.pipeline import SynthSettings, synthesize
+def run(args: argparse.Namespace) -> int:
+    """Check the arguments, synthesise, print one summary line per hand."""
+    if args.workers < 1:
+        raise OhraError(f"--workers must be >= 1, got {args.workers}")
+    if args.grasps_per_object < 1:
+        raise OhraError(f"--grasps-per-object must be >= 1, got {args.grasps_per_object}")
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise OhraError(f"--out {out} exists and is not a directory")
+    from ohra.objects.model import resolve_objects
+    from ohra.synth.pipeline import SynthSettings, synthesize
 
-        hands = _hands(args.hand)
-        objects = resolve_objects(args.objects)
-        settings = SynthSettings(grasps_per_object=args.grasps_per_object, seed=args.seed, filter=not args.no_filter)
-        man = synthesize(hands, objects, out, settings, workers=args.workers, resume=args.resume, progress=not args.quiet)
-    except OhraError as exc:
-        print(f"ohra.synth: error: {exc}", file=sys.stderr)
-        return 2
+    hands = _hands(args.hand)
+    objects = resolve_objects(args.objects)
+    settings = SynthSettings(grasps_per_object=args.grasps_per_object, seed=args.seed, filter=not args.no_filter)
+    man = synthesize(hands, objects, out, settings, workers=args.workers, resume=args.resume, progress=not args.quiet)
     for name, entry in man["hands"].items():
         c = entry["counts"]
         rate = c["grasps"] / max(c["solved"], 1)

@@ -17,17 +17,11 @@ Params = Union[BaseParams, ExtendedParams]
 FORMS = ("base", "extended")
 
 
-def _registry():
-    """The registered-hands module (specs and committed params of real hands); imported on use."""
-    from ohra.hands import registry
-
-    return registry
-
-
 def list_hands(include_variants: bool = False) -> list[str]:
     """Registered hand names (plus the 256 ``leap_XXXX`` variants if asked)."""
-    reg = _registry()
-    names = sorted(reg.registered_hands()) if reg is not None else []
+    from ohra.hands import registry  # imported on use; an error in it surfaces here, never hidden
+
+    names = sorted(registry.registered_hands())
     if include_variants:
         names += variant_names()
     return names
@@ -46,9 +40,10 @@ def get_hand(name: str | Path, form: str | None = None) -> Params:
         if form == "base":
             raise HandNotFoundError(f"{key} exists only in the extended form (LEAP flavour)")
         return leap_variant(key)
-    reg = _registry()
-    if reg is not None and key in reg.registered_hands():
-        return reg.registered_params(key, form)
+    from ohra.hands import registry
+
+    if key in registry.registered_hands():
+        return registry.registered_params(key, form)
     p = Path(key)
     if p.suffix == ".json" or p.is_file():
         if not p.is_file():

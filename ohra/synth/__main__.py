@@ -1,5 +1,7 @@
+"""``python -m ohra.synth``: the same command as ``ohra synth`` (see :mod:`ohra.cli.synth`)."""
+
 import sys
 
-from ohra.cli.synth import run
+from ohra.cli.synth import main
 
-sys.exit(run())
+sys.exit(main())

@@ -1,0 +1,249 @@
+"""``ohra hand ...``: list, render, info, check, parse, compare and show canonical hands.
+
+    ohra hand list [--variants]
+    ohra hand render HAND [-o URDF] [--extended]
+    ohra hand info HAND [--extended] [--neutral] [--json]
+    ohra hand check [HAND ...] [--all]
+    ohra hand parse SPEC.yaml [-o PARAMS.json] [--extended] [--fit] [--no-fidelity]
+    ohra hand compare HAND [--extended] [--samples N] [--no-surface] [--json] [--html OUT.html]
+    ohra hand show HAND [--extended] [--original] [--q Q] [--no-wait]
+
+``HAND`` is a registered hand, a LEAP variant ``leap_XXXX`` or a params JSON file. Plugged into
+:mod:`ohra.cli.main` through :func:`register`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import warnings
+
+import numpy as np
+
+HAND_HELP = "registered hand, leap_XXXX, or a params JSON file"
+
+
+def register(sub) -> None:
+    """Add ``hand`` and its actions to the top-level subparsers ``sub``."""
+    hand = sub.add_parser("hand", help="canonical hands: list, render, info, check, parse, compare, show",
+                          description="List, render, inspect, check, parse, compare and show canonical hands.")
+    hsub = hand.add_subparsers(dest="hand_command", metavar="ACTION", parser_class=type(hand))
+    hsub.required = True
+
+    p = hsub.add_parser("list", help="registered hands and LEAP variants")
+    p.add_argument("--variants", action="store_true", help="list all 256 leap_XXXX variants")
+    p.set_defaults(func=_cmd_list)
+
+    p = hsub.add_parser("render", help="write the canonical URDF of a hand")
+    p.add_argument("hand", help=HAND_HELP)
+    p.add_argument("-o", "--output", help="output URDF path (default: stdout)")
+    p.add_argument("--extended", action="store_true", help="use the extended form")
+    p.set_defaults(func=_cmd_render)
+
+    p = hsub.add_parser("info", help="DoF, fingers, limits and fingertip positions")
+    p.add_argument("hand", help=HAND_HELP)
+    p.add_argument("--extended", action="store_true", help="use the extended form")
+    p.add_argument("--neutral", action="store_true", help="fingertips at 0 clamped into the limits")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(func=_cmd_info)
+
+    p = hsub.add_parser("check", help="render every hand and load it in Pinocchio and PyBullet")
+    p.add_argument("hands", nargs="*", help="hands to check (default: all registered hands and LEAP variants)")
+    p.add_argument("--all", action="store_true", help="print every LEAP variant too")
+    p.set_defaults(func=_cmd_check)
+
+    p = hsub.add_parser("parse", help="parse an original hand URDF from a hand spec (YAML) into canonical params")
+    p.add_argument("spec", help="hand spec YAML (see ohra.original.spec)")
+    p.add_argument("-o", "--output", help="write params JSON here (default: stdout)")
+    p.add_argument("--extended", action="store_true", help="extended form (default: base)")
+    p.add_argument("--fit", action="store_true", help="refine by least squares against the original kinematics")
+    p.add_argument("--no-fidelity", action="store_true", help="skip the fidelity table")
+    p.set_defaults(func=_cmd_parse)
+
+    p = hsub.add_parser("compare", help="canonical vs original fidelity of a registered hand")
+    p.add_argument("hand", help="registered hand")
+    p.add_argument("--extended", action="store_true", help="use the extended form")
+    p.add_argument("--samples", type=int, default=200, help="random configurations (default 200)")
+    p.add_argument("--no-surface", action="store_true", help="skip the surface distance (faster)")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.add_argument("--html", help="also write a static HTML overlay (original meshes + canonical capsules)")
+    p.set_defaults(func=_cmd_compare)
+
+    p = hsub.add_parser("show", help="meshcat viewer of a hand (canonical, optionally over the original)")
+    p.add_argument("hand", help=HAND_HELP)
+    p.add_argument("--extended", action="store_true", help="use the extended form")
+    p.add_argument("--original", action="store_true", help="overlay the original meshes")
+    p.add_argument("--q", help="22 canonical joint values (comma or space separated)")
+    p.add_argument("--no-wait", action="store_true", help="print the URL and exit")
+    p.set_defaults(func=_cmd_show)
+
+
+def _form(args: argparse.Namespace) -> str:
+    return "extended" if args.extended else "base"
+
+
+def _resolve(name: str, extended: bool):
+    """Params of ``name``; with ``extended`` a base-form hand is converted to the extended form."""
+    from ohra.canonical.params import BaseParams
+    from ohra.hands import get_hand
+
+    params = get_hand(name, "extended" if extended else None)
+    if extended and isinstance(params, BaseParams):
+        params = params.to_extended()
+    return params
+
+
+def _jobs(names: list[str]) -> list[tuple[str, str | None]]:
+    """(hand, form) pairs to check: each registered form of a registered hand, else the hand as named.
+
+    An unknown name raises :class:`ohra.HandNotFoundError` here, before anything runs.
+    """
+    from ohra.hands import get_hand, registry
+    from ohra.hands.leap.variants import is_variant
+
+    registered = set(registry.registered_hands())
+    jobs: list[tuple[str, str | None]] = []
+    for n in names:
+        if n in registered:
+            jobs += [(n, f) for f in registry.registered_forms(n)]
+        else:
+            if not is_variant(n):
+                get_hand(n)  # a params file: fails here on an unknown name, naming it
+            jobs.append((n, None))
+    return jobs
+
+
+# -- commands ---------------------------------------------------------------------------------------
+def _cmd_list(args: argparse.Namespace) -> int:
+    from ohra.hands import registry, variant_names
+
+    for n in registry.registered_hands():
+        print(f"{n:24s} {'/'.join(registry.registered_forms(n))}")
+    if args.variants:
+        print("\n".join(variant_names()))
+    else:
+        print("leap_0000 .. leap_3333     extended (LEAP flavour; --variants lists all 256)")
+    return 0
+
+
+def _cmd_render(args: argparse.Namespace) -> int:
+    from ohra.canonical.urdfgen import render, write
+
+    params = _resolve(args.hand, args.extended)
+    if args.output:
+        path = write(params, args.output)
+        print(f"wrote {path}", file=sys.stderr)
+    else:
+        sys.stdout.write(render(params))
+    return 0
+
+
+def _cmd_info(args: argparse.Namespace) -> int:
+    from ohra.canonical.kinematics import HandModel
+    from ohra.canonical.params import FINGERS, JOINT_NAMES
+
+    params = _resolve(args.hand, args.extended)
+    hm = HandModel.from_params(params)
+    tips = hm.fingertips(np.zeros(22) if not args.neutral else hm.neutral())
+    info = {
+        "hand": args.hand,
+        "form": params.form if params.form == "base" else getattr(params, "template", "extended"),
+        "handedness": params.handedness,
+        "dof": int(params.dof),
+        "present_fingers": [f for f, p in zip(FINGERS, params.present_fingers) if p],
+        "movable_joints": [n for n, m in zip(JOINT_NAMES, params.movable_joints) if m],
+        "limits": {n: [float(lo), float(up)] for n, lo, up, m in zip(JOINT_NAMES, hm.lower, hm.upper, params.present_joints) if m},
+        "fingertips_q0_m": {f: [round(float(x), 6) for x in tips[i]] for i, f in enumerate(FINGERS) if params.present_fingers[i]},
+    }
+    if args.json:
+        print(json.dumps(info, indent=2))
+        return 0
+    print(f"{info['hand']}  form={info['form']}  {info['handedness']} hand  dof={info['dof']}  fingers={','.join(info['present_fingers'])}")
+    print("joint limits [rad]:")
+    for n, (lo, up) in info["limits"].items():
+        print(f"  {n:16s} [{lo:+.4f}, {up:+.4f}]")
+    print(f"fingertips at q={'neutral' if args.neutral else '0'} [m, palm frame]:")
+    for f, p in info["fingertips_q0_m"].items():
+        print(f"  {f:7s} ({p[0]:+.4f}, {p[1]:+.4f}, {p[2]:+.4f})")
+    return 0
+
+
+def _cmd_check(args: argparse.Namespace) -> int:
+    from ohra.hands import list_hands, variant_names
+    from ohra.hands.check import check_hands
+
+    jobs = _jobs(args.hands or list_hands() + variant_names())
+    results = check_hands(jobs)
+    bad = [r for r in results if not r.ok]
+    few = ("leap_3333", "leap_3303", "leap_0000")  # without --all, three LEAP variants stand for the 256
+    shown = results if args.all else [r for r in results if not r.name.startswith("leap_") or r.name in few]
+    print(f"{'hand':22s} {'form':9s} {'fingers':>7s} {'dof':>4s} {'pin nq':>6s} {'bullet j':>8s} {'ms':>7s}  status")
+    for r in shown:
+        print(f"{r.name:22s} {r.form:9s} {r.fingers:7d} {r.dof:4d} {r.pinocchio_nq:6d} {r.bullet_joints:8d} "
+              f"{1e3 * r.seconds:7.1f}  {'ok' if r.ok else 'FAIL ' + r.warnings[:60]}")
+    if len(shown) < len(results):
+        print(f"... and {len(results) - len(shown)} more LEAP variants (--all shows them)")
+    total = sum(r.seconds for r in results)
+    print(f"{len(results)} hands rendered and loaded in Pinocchio and PyBullet in {total:.2f} s; {len(bad)} failed")
+    return 1 if bad else 0
+
+
+def _cmd_parse(args: argparse.Namespace) -> int:
+    from ohra.original.fidelity import compare
+    from ohra.original.parse import parse
+    from ohra.original.spec import load_spec
+
+    spec = load_spec(args.spec)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = parse(spec, _form(args), fit_params=args.fit)
+    for w in caught:
+        print(f"warning: {w.message}", file=sys.stderr)
+    if args.output:
+        res.params.to_json(args.output)  # atomic, see ohra.io
+        print(f"wrote {args.output}", file=sys.stderr)
+    else:
+        sys.stdout.write(res.params.to_json())
+    if res.fit is not None:
+        print(f"fit: keypoint rms {res.fit.initial_rms_mm:.2f} -> {res.fit.final_rms_mm:.2f} mm "
+              f"({res.fit.samples} configurations, {res.fit.iterations} evaluations)", file=sys.stderr)
+    print("measured: palm radius, finger radii, lengths, joint positions/axes, limits from the URDF", file=sys.stderr)
+    for n in res.notes:
+        print(n, file=sys.stderr)
+    if not args.no_fidelity:
+        print(compare(res, _form(args), samples=100, surface=False).table(), file=sys.stderr)
+    return 0
+
+
+def _cmd_compare(args: argparse.Namespace) -> int:
+    from ohra.original.fidelity import compare
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the original URDF's mesh warnings are not this command's output
+        rep = compare(args.hand, _form(args), samples=args.samples, surface=not args.no_surface)
+    print(json.dumps(rep.to_dict(), indent=2) if args.json else rep.table())
+    if args.html:
+        from ohra import viz
+
+        path = viz.compare_html(args.hand, _form(args), args.html)
+        print(f"wrote {path}", file=sys.stderr)
+    return 0
+
+
+def _cmd_show(args: argparse.Namespace) -> int:  # pragma: no cover - starts a server
+    from ohra import viz
+    from ohra.errors import OhraError
+
+    q = None
+    if args.q:
+        try:
+            q = np.array([float(x) for x in args.q.replace(",", " ").split()])
+        except ValueError:
+            raise OhraError(f"--q: expected 22 numbers separated by commas or spaces, got {args.q!r}") from None
+    vis = viz.new_visualizer()
+    viz.show_hand(vis, args.hand, _form(args), q=q, original=args.original)
+    print(vis.url())
+    if not args.no_wait:
+        input("press Enter to stop the viewer ")
+    return 0
