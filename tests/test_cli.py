@@ -1,14 +1,22 @@
-"""The `ohra` command: hand list/render/info/check, and one-line errors with exit code 2."""
+"""The `ohra` command: hand list/render/info/check, every command group registered, one-line errors with exit code 2."""
 
 from __future__ import annotations
 
+import argparse
+import importlib
 import json
+import re
+import shlex
 import subprocess
 import sys
+import types
+from pathlib import Path
 
 import pytest
 
-from ohra.cli.main import main
+from ohra.cli.main import build_parser, main
+
+cli_main = importlib.import_module("ohra.cli.main")  # the module (ohra.cli.main the attribute is the function)
 from ohra.canonical.params import load_params
 
 
@@ -76,3 +84,93 @@ def test_bad_input_is_one_line_exit_2_nothing_written(tmp_path, argv, message, s
 def test_check_command_loads_hands_cleanly(capsys):
     assert main(["hand", "check", "leap_3333", "leap_0000"]) == 0
     assert "0 failed" in capsys.readouterr().out
+
+
+# -- the command package: every group registered, ohra synth == python -m ohra.synth -----------------
+def _run(*argv: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, *argv], capture_output=True, text=True)
+
+
+def _stderr_lines(proc: subprocess.CompletedProcess) -> list[str]:
+    return [l for l in proc.stderr.splitlines() if l.strip() and "pybullet build time" not in l]
+
+
+def _options(help_text: str) -> list[str]:
+    """Option strings in the 'options:' section of an argparse help text, in order."""
+    section = help_text.split("options:", 1)[1]
+    return re.findall(r"^\s+(-{1,2}[\w-]+(?:, --[\w-]+)?)", section, flags=re.M)
+
+
+def test_help_lists_every_command_group():
+    proc = _run("-m", "ohra.cli", "--help")
+    assert proc.returncode == 0, proc.stderr
+    listed = re.findall(r"^    (\w+)\s", proc.stdout, flags=re.M)
+    assert listed == ["hand", "eval", "synth", "train", "vae"], proc.stdout
+
+
+def test_every_command_module_is_registered():
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    assert list(sub.choices) == ["hand", "eval", "synth", "train", "vae"]
+    hand = next(a for a in sub.choices["hand"]._actions if isinstance(a, argparse._SubParsersAction))
+    assert list(hand.choices) == ["list", "render", "info", "check", "parse", "compare", "show"]
+
+
+def test_missing_or_broken_command_module_is_an_error(monkeypatch):
+    monkeypatch.setattr(cli_main, "COMMANDS", (*cli_main.COMMANDS, "no_such_group"))
+    with pytest.raises(ModuleNotFoundError, match="ohra.cli.no_such_group"):
+        build_parser()
+    monkeypatch.setattr(cli_main, "COMMANDS", ("hand", "without_register"))
+    monkeypatch.setitem(sys.modules, "ohra.cli.without_register", types.ModuleType("ohra.cli.without_register"))
+    with pytest.raises(TypeError, match="without_register has no register"):
+        build_parser()
+
+
+def test_synth_help_exits_0():
+    proc = _run("-m", "ohra.cli", "synth", "--help")
+    assert proc.returncode == 0 and proc.stdout.startswith("usage: ohra synth"), proc.stderr
+    assert "--grasps-per-object" in proc.stdout
+
+
+def test_synth_with_a_bad_hand_is_one_line_exit_2(tmp_path):
+    proc = _run("-m", "ohra.cli", "synth", "--hand", "no_such_hand", "--out", str(tmp_path / "ds"), "--quiet")
+    lines = _stderr_lines(proc)
+    assert proc.returncode == 2 and len(lines) == 1 and "unknown hand 'no_such_hand'" in lines[0], proc.stderr
+    assert not (tmp_path / "ds").exists()
+
+
+def test_ohra_synth_and_python_m_ohra_synth_take_the_same_options():
+    a = _run("-m", "ohra.cli", "synth", "--help")
+    b = _run("-m", "ohra.synth", "--help")
+    assert a.returncode == 0 and b.returncode == 0, a.stderr + b.stderr
+    assert len(_options(a.stdout)) == 10 and _options(a.stdout) == _options(b.stdout)
+    assert a.stdout.split("options:", 1)[1] == b.stdout.split("options:", 1)[1]  # help texts too
+
+
+def test_check_names_an_unknown_hand_instead_of_checking_nothing(capsys):
+    assert main(["hand", "check", "no_such_hand"]) == 2
+    assert "unknown hand 'no_such_hand'" in capsys.readouterr().err
+
+
+def _readme_commands() -> list[list[str]]:
+    """Every ``ohra ...`` and ``python -m ohra.synth ...`` line of the README's shell blocks, as argv."""
+    text = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    blocks = re.findall(r"```bash\n(.*?)```", text, flags=re.S)
+    lines = " \n".join(blocks).replace("\\\n", " ").splitlines()
+    out = []
+    for line in lines:
+        line = re.sub(r"\s#.*$", "", line).strip()
+        line = line.replace("[", " ").replace("]", " ")  # optional flags are shown in brackets: parse them too
+        if line.startswith("ohra "):
+            out.append(shlex.split(line)[1:])
+        elif line.startswith("python -m ohra.synth") or "&& python -m ohra.synth" in line:
+            out.append(["synth", *shlex.split(line.split("python -m ohra.synth", 1)[1])])
+    return out
+
+
+def test_every_readme_command_parses():
+    commands = _readme_commands()
+    assert len(commands) >= 15 and {c[0] for c in commands} >= {"hand", "eval", "synth", "train", "vae"}
+    parser = build_parser()
+    for argv in commands:
+        args = parser.parse_args(argv)
+        assert callable(args.func), argv

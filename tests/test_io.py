@@ -1,0 +1,130 @@
+"""Files written by ohra honour the umask and appear whole or not at all (``ohra.io``)."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import os
+import stat
+
+import numpy as np
+import pytest
+
+import ohra
+from ohra import viz
+from ohra.canonical.kinematics import HandModel
+from ohra.cli.main import main
+from ohra.data import atomic_write_json, atomic_write_npz
+from ohra.io import atomic_path, atomic_write, umask_mode, write_json, write_npz, write_text
+
+
+@pytest.fixture(params=[(0o022, 0o644), (0o077, 0o600), (0o002, 0o664)], ids=["umask022", "umask077", "umask002"])
+def umask(request):
+    """Run the test under a umask; yields the mode a new file must get."""
+    mask, mode = request.param
+    old = os.umask(mask)
+    try:
+        yield mode
+    finally:
+        os.umask(old)
+
+
+@pytest.fixture(scope="module")
+def scene():
+    """A meshcat scene with a canonical hand in it; the server it starts is stopped afterwards."""
+    with contextlib.redirect_stdout(io.StringIO()):  # meshcat prints its URL
+        vis = viz.new_visualizer()
+    viz.add_hand(vis, HandModel.from_params(ohra.get_hand("leap_3303")), np.zeros(22))
+    yield vis
+    proc = vis.window.server_proc
+    proc.kill()
+    proc.wait()
+
+
+def _mode(path) -> int:
+    return stat.S_IMODE(os.stat(path).st_mode)
+
+
+def _leftovers(folder, keep: set[str]) -> list[str]:
+    return sorted(p.name for p in folder.iterdir() if p.name not in keep)
+
+
+def test_umask_mode_is_what_open_gives(tmp_path, umask):
+    assert umask_mode() == umask
+    with open(tmp_path / "plain", "w"):
+        pass
+    assert _mode(tmp_path / "plain") == umask
+
+
+def test_dataset_shard_and_manifest_honour_the_umask(tmp_path, umask):
+    shard = tmp_path / "ds" / "leap_3303" / "box-0123abcd.npz"
+    atomic_write_npz(shard, {"grasps": np.zeros((2, 31), np.float32)})
+    atomic_write_json(tmp_path / "ds" / "manifest.json", {"version": 1, "hands": {}})
+    assert _mode(shard) == umask and _mode(tmp_path / "ds" / "manifest.json") == umask
+    assert np.load(shard)["grasps"].shape == (2, 31)
+    assert json.loads((tmp_path / "ds" / "manifest.json").read_text())["version"] == 1
+    assert _leftovers(tmp_path / "ds", {"leap_3303", "manifest.json"}) == []
+
+
+def test_urdf_from_api_and_cli_honour_the_umask(tmp_path, umask):
+    api = ohra.write(ohra.get_hand("leap_3303"), tmp_path / "api.urdf")
+    assert main(["hand", "render", "leap_3303", "-o", str(tmp_path / "cli.urdf")]) == 0
+    assert _mode(api) == umask and _mode(tmp_path / "cli.urdf") == umask
+    assert (tmp_path / "cli.urdf").read_text() == ohra.render(ohra.get_hand("leap_3303"))
+    assert _leftovers(tmp_path, {"api.urdf", "cli.urdf"}) == []
+
+
+def test_params_json_honours_the_umask(tmp_path, umask):
+    ohra.get_hand("leap_3303").to_json(tmp_path / "p.json")
+    assert _mode(tmp_path / "p.json") == umask
+    assert ohra.load_params(tmp_path / "p.json").to_json() == ohra.get_hand("leap_3303").to_json()
+
+
+def test_static_html_honours_the_umask(tmp_path, umask, scene):
+    path = viz.save_html(scene, tmp_path / "scene.html")
+    assert _mode(path) == umask
+    assert "<html" in path.read_text().lower()
+    assert _leftovers(tmp_path, {"scene.html"}) == []
+
+
+def test_png_honours_the_umask(tmp_path, umask):
+    from ohra.sim.render import write_png
+
+    path = write_png(np.zeros((8, 8, 3), np.uint8), tmp_path / "sheet.png")
+    assert _mode(path) == umask and path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.parametrize("exc", [ZeroDivisionError, KeyboardInterrupt])
+def test_failing_write_leaves_no_partial_and_no_temp_file(tmp_path, exc):
+    def write(fh):
+        fh.write(b"half a shard")
+        raise exc("disk full")
+
+    with pytest.raises(exc):
+        atomic_write(tmp_path / "new.npz", write)
+    assert _leftovers(tmp_path, set()) == []
+
+    old = write_text(tmp_path / "old.json", '{"complete": true}\n')
+    with pytest.raises(exc):
+        atomic_write(old, write)
+    assert old.read_text() == '{"complete": true}\n'
+    assert _leftovers(tmp_path, {"old.json"}) == []
+
+
+def test_failing_named_writer_leaves_nothing(tmp_path):
+    with pytest.raises(RuntimeError), atomic_path(tmp_path / "fig.png", suffix=".png") as tmp:
+        tmp.write_bytes(b"\x89PNG partial")
+        raise RuntimeError("savefig failed")
+    assert _leftovers(tmp_path, set()) == []
+
+
+def test_write_npz_and_json_round_trip(tmp_path):
+    a = np.arange(12, dtype=np.float32).reshape(3, 4)
+    with np.load(write_npz(tmp_path / "a.npz", {"a": a})) as data:
+        np.testing.assert_array_equal(data["a"], a)
+    assert json.loads(write_json(tmp_path / "d.json", {"p": tmp_path}).read_text()) == {"p": str(tmp_path)}
+
+
+def test_parent_folders_are_created(tmp_path):
+    assert write_text(tmp_path / "a" / "b" / "c.txt", "x").read_text() == "x"
