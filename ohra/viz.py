@@ -7,6 +7,7 @@ into a self-contained HTML page (meshcat's own export) that opens without a runn
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -53,6 +54,9 @@ def add_hand(vis: Any, hand: HandModel, q: np.ndarray, T_world_palm: np.ndarray 
     vis[path]["palm"].set_object(g.Cylinder(palm["depth"], palm["radius"]), mat)
     vis[path]["palm"].set_transform(T0 @ Tp)
     caps = hand.capsules(q)
+    half = np.array([palm["depth"] / 2, palm["radius"], palm["radius"]])
+    _grow_bounds(vis, _box_corners(Tp[:3, 3] - half, Tp[:3, 3] + half) @ T0[:3, :3].T + T0[:3, 3])
+    _grow_bounds(vis, _capsule_corners(caps) @ T0[:3, :3].T + T0[:3, 3])
     for k, link in enumerate(caps.link):
         a, b, r = caps.p0[k], caps.p1[k], float(caps.radius[k])
         d = b - a
@@ -82,7 +86,9 @@ def add_mesh(vis: Any, vertices: np.ndarray, faces: np.ndarray, T: np.ndarray | 
 
     vis[path].set_object(g.TriangularMeshGeometry(np.asarray(vertices, dtype=float), np.asarray(faces, dtype=np.int64)),
                          _material(color, opacity))
-    vis[path].set_transform(np.eye(4) if T is None else np.asarray(T, dtype=float))
+    T = np.eye(4) if T is None else np.asarray(T, dtype=float)
+    vis[path].set_transform(T)
+    _grow_bounds(vis, np.asarray(vertices, dtype=float) @ T[:3, :3].T + T[:3, 3])
 
 
 def add_points(vis: Any, points: np.ndarray, path: str = "points", color: int = 0xFF3030, size: float = 0.004) -> None:
@@ -92,6 +98,7 @@ def add_points(vis: Any, points: np.ndarray, path: str = "points", color: int = 
     pts = np.asarray(points, dtype=np.float32).T
     colors = np.tile(np.array([[(color >> 16) & 255], [(color >> 8) & 255], [color & 255]], dtype=np.float32) / 255.0, (1, pts.shape[1]))
     vis[path].set_object(g.PointCloud(pts, colors, size=size))
+    _grow_bounds(vis, pts.T)
 
 
 def add_frame(vis: Any, T: np.ndarray, path: str = "frame", length: float = 0.05) -> None:
@@ -100,11 +107,124 @@ def add_frame(vis: Any, T: np.ndarray, path: str = "frame", length: float = 0.05
 
     vis[path].set_object(g.triad(length))
     vis[path].set_transform(np.asarray(T, dtype=float))
+    T = np.asarray(T, dtype=float)
+    _grow_bounds(vis, np.vstack([T[:3, 3], T[:3, 3] + length * T[:3, :3].T]))
 
 
 def static_html(vis: Any) -> str:
-    """A self-contained HTML snapshot of the scene (opens without a server)."""
-    return vis.static_html()
+    """A self-contained HTML snapshot of the scene (opens without a server), framed on its content."""
+    html = vis.static_html()
+    bounds = scene_bounds(vis)
+    if bounds is None:
+        return html
+    cut = html.rfind("</body>")
+    return html[:cut] + framing_script(frame_bounds(*bounds)) + html[cut:]
+
+
+# -- framing: a static export opens on its content ------------------------------------------------------
+FOV_DEG = 75.0  # meshcat's perspective camera: vertical field of view [deg]
+MESHCAT_GRID_CELL = 0.5  # m: meshcat's grid is 20 m wide in 40 cells
+MESHCAT_AXES_LENGTH = 0.5  # m
+VIEW_DIRECTION = (1.0, 0.35, 0.45)  # world direction from the content toward the camera (palm side, a bit above)
+
+
+@dataclass(frozen=True)
+class CameraView:
+    """Where a static export's camera sits and looks (world frame, z up, metres), and its grid cell."""
+
+    target: np.ndarray
+    position: np.ndarray
+    grid_cell: float
+
+
+def _box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+    return np.array([[(lo, hi)[i][0], (lo, hi)[j][1], (lo, hi)[k][2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+
+
+def _capsule_corners(capsules: Any) -> np.ndarray:
+    """Corners of the boxes around every capsule's two end spheres (palm frame)."""
+    r = np.asarray(capsules.radius, dtype=float)[:, None]
+    ends = np.vstack([capsules.p0, capsules.p1])
+    rr = np.vstack([r, r])
+    return np.vstack([ends - rr, ends + rr]).reshape(-1, 3)
+
+
+def _grow_bounds(vis: Any, points: np.ndarray) -> None:
+    """Widen the box of drawn content that the visualizer's window keeps for :func:`static_html`."""
+    p = np.asarray(points, dtype=float).reshape(-1, 3)
+    p = p[np.isfinite(p).all(axis=1)]
+    if len(p) == 0:
+        return
+    window = vis.window
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    old = getattr(window, "_ohra_bounds", None)
+    if old is not None:
+        lo, hi = np.minimum(lo, old[0]), np.maximum(hi, old[1])
+    window._ohra_bounds = (lo, hi)
+
+
+def scene_bounds(vis: Any) -> tuple[np.ndarray, np.ndarray] | None:
+    """(lo, hi) corners [m, world] of everything the ``add_*`` functions drew into ``vis``, or None."""
+    return getattr(vis.window, "_ohra_bounds", None)
+
+
+def clear_bounds(vis: Any) -> None:
+    """Forget the drawn content's box (after ``vis.delete()``)."""
+    vis.window._ohra_bounds = None
+
+
+def _nice(x: float) -> float:
+    """The 1-2-5 number nearest below ``x`` (> 0)."""
+    e = 10.0 ** np.floor(np.log10(x))
+    return float(max(m for m in (1.0, 2.0, 5.0) if m * e <= x * (1 + 1e-9)) * e)
+
+
+def frame_bounds(lo: np.ndarray, hi: np.ndarray, direction=VIEW_DIRECTION, fov_deg: float = FOV_DEG,
+                 margin: float = 1.1) -> CameraView:
+    """The camera that sees the whole box [lo, hi] (world, m) from ``direction``, looking at its centre.
+
+    The distance fits every corner into the vertical field of view and, assuming a window at least
+    as wide as it is tall, the horizontal one; ``margin`` leaves a border. The grid cell is the 1-2-5
+    length nearest below a tenth of the box's largest side.
+    """
+    lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+    centre = (lo + hi) / 2
+    size = max(float(np.max(hi - lo)), 1e-3)
+    back = np.asarray(direction, dtype=float)
+    back = back / np.linalg.norm(back)
+    up = np.array([0.0, 0.0, 1.0]) - back[2] * back
+    up /= np.linalg.norm(up)
+    right = np.cross(up, back)
+    c = _box_corners(lo, hi) - centre
+    t = np.tan(np.radians(fov_deg) / 2)
+    # a corner at depth c.back toward the camera needs distance >= c.back + (offset across) / tan
+    across = np.maximum(np.abs(c @ up), np.abs(c @ right))
+    distance = float(np.max(c @ back + margin * across / t))
+    distance = max(distance, size)  # flat or tiny content: not closer than its own size
+    return CameraView(centre, centre + distance * back, _nice(size / 10))
+
+
+def framing_script(view: CameraView) -> str:
+    """JavaScript for meshcat's static page: orbit target and camera position, grid and axes scaled.
+
+    meshcat's three.js world is y-up: a world point (x, y, z) is (x, z, -y) there. The orbit target
+    has no meshcat command, hence a script rather than scene commands.
+    """
+
+    def three(p: np.ndarray) -> str:
+        return ", ".join(f"{v:.6g}" for v in (p[0], p[2], -p[1]))
+
+    grid = view.grid_cell / MESHCAT_GRID_CELL
+    axes = 2 * view.grid_cell / MESHCAT_AXES_LENGTH
+    return (
+        "<script>\n(function () {  // ohra: open framed on the content\n"
+        f"  viewer.controls.target.set({three(view.target)});\n"
+        f"  viewer.camera.position.set({three(view.position)});\n"
+        f'  viewer.set_property(["Grid"], "scale", [{grid:.6g}, {grid:.6g}, {grid:.6g}]);\n'
+        f'  viewer.set_property(["Axes"], "scale", [{axes:.6g}, {axes:.6g}, {axes:.6g}]);\n'
+        "  viewer.controls.update();\n  viewer.set_dirty();\n})();\n</script>\n"
+    )
 
 
 def save_html(vis: Any, path: str | Path) -> Path:
@@ -122,6 +242,7 @@ def add_capsules(vis: Any, capsules: Any, T_world_palm: np.ndarray | None = None
 
     T0 = np.eye(4) if T_world_palm is None else np.asarray(T_world_palm, dtype=float)
     mat = _material(color, opacity)
+    _grow_bounds(vis, _capsule_corners(capsules) @ T0[:3, :3].T + T0[:3, 3])
     for k, link in enumerate(capsules.link):
         a, b, r = capsules.p0[k], capsules.p1[k], float(capsules.radius[k])
         d = b - a
@@ -196,6 +317,7 @@ def compare_html(name: str, form: str, out: str | Path, seed: int = 0, vis: Any 
     vis = new_visualizer() if own else vis
     try:
         vis.delete()
+        clear_bounds(vis)
         add_overlay(vis, name, form, None, np.eye(4), path="q0")
         T = np.eye(4)
         T[1, 3] = -0.3

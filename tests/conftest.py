@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from ohra.canonical.params import BaseParams, ExtendedParams, load_params
-from ohra.paths import hands_root, objects_root
+from ohra.paths import HANDS_ENV, OBJECTS_ENV, hands_root, objects_root
 
 DATA = Path(__file__).parent / "data"
 
@@ -28,9 +29,19 @@ def rng() -> np.random.Generator:
     return np.random.default_rng(12345)
 
 
+# Tests that need ../shared skip without it when run locally, and say so at the end of the run; CI
+# (.ci/run) sets OHRA_REQUIRE_ASSETS=1, which turns the skip into a failure.
+REQUIRE_ASSETS_ENV = "OHRA_REQUIRE_ASSETS"
+ASSETS_MISSING = "shared assets missing"
+BROWSER_MISSING = "no headless Chromium"
+
+
 def _require(root: Path) -> Path:
     if not root.is_dir():
-        pytest.skip(f"shared assets not found at {root}")
+        msg = f"{ASSETS_MISSING}: {root} is not a folder"
+        if os.environ.get(REQUIRE_ASSETS_ENV) == "1":
+            pytest.fail(f"{msg} ({REQUIRE_ASSETS_ENV}=1)")
+        pytest.skip(msg)
     return root
 
 
@@ -42,3 +53,19 @@ def hands_dir() -> Path:
 @pytest.fixture
 def objects_dir() -> Path:
     return _require(objects_root())
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus, config) -> None:
+    """A loud note when tests skipped for missing shared assets or a missing browser."""
+    reasons = [str(r.longrepr[2]) if isinstance(r.longrepr, tuple) else str(r.longrepr)
+               for r in terminalreporter.stats.get("skipped", [])]
+    assets = sum(ASSETS_MISSING in r for r in reasons)
+    browser = sum(BROWSER_MISSING in r for r in reasons)
+    if assets:
+        terminalreporter.write_sep("!", f"{assets} TESTS SKIPPED: SHARED ASSETS MISSING", red=True, bold=True)
+        terminalreporter.write_line(f"hands: {hands_root()}  objects: {objects_root()}")
+        terminalreporter.write_line(f"Put the assets at ../shared/hands and ../shared/objects beside the repository, or set "
+                                    f"{HANDS_ENV} and {OBJECTS_ENV}; CI sets {REQUIRE_ASSETS_ENV}=1 to fail instead of skipping.")
+    if browser:
+        terminalreporter.write_sep("!", f"{browser} BROWSER TESTS SKIPPED: NO HEADLESS CHROMIUM", red=True, bold=True)
+        terminalreporter.write_line("Install it (Debian: apt-get install -y chromium) or set OHRA_CHROMIUM to its path.")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
+from ohra import ActionMap
 from ohra.objects.model import ObjectModel
 from ohra.canonical.params import BaseParams
 from ohra.rotations import pose_to_grasp
@@ -39,4 +40,47 @@ def pinch_grasp(dx: float = 0.0, dy: float = 0.0) -> np.ndarray:
     """Palm pose putting the box centre between the fingers' middle segments, shifted by (dx, dy)."""
     T = np.eye(4)
     T[:3, 3] = (dx, dy, -(Z_K + 0.05))
+    return pose_to_grasp(T, np.zeros(22))
+
+
+# -- a rigid cage: a "hand" that holds a cube against every push but one ------------------------------
+CUBE = 0.03  # cube edge [m]
+CAGE_INNER = CUBE / 2 + 0.001  # half-width of the cage's inside: 1 mm clearance [m]
+CAGE_WALL = 0.01  # wall thickness [m]
+_INERTIAL = ('<inertial><mass value="0.1"/>'
+             '<inertia ixx="1e-4" iyy="1e-4" izz="1e-4" ixy="0" ixz="0" iyz="0"/></inertial>')
+
+
+def cube() -> ObjectModel:
+    return ObjectModel(trimesh.creation.box(extents=(CUBE,) * 3), "cube", repair=False)
+
+
+def cage_hand(open_side: np.ndarray | None) -> tuple[str, ActionMap]:
+    """URDF and action map of a fixed box with five walls around the origin, open toward the unit
+    vector ``open_side`` (None: closed on all six sides). Its palm frame is the URDF root, so the
+    grasp ``pose_to_grasp(np.eye(4), 0)`` puts the :func:`cube` in the middle. One hinge, 30 cm away,
+    gives the action map a joint to drive; it never comes near the cube."""
+    walls = []
+    for axis in range(3):
+        for sign in (1.0, -1.0):
+            normal = np.zeros(3)
+            normal[axis] = sign
+            if open_side is not None and np.allclose(normal, open_side):
+                continue
+            size = np.full(3, 2 * (CAGE_INNER + CAGE_WALL))
+            size[axis] = CAGE_WALL
+            xyz = normal * (CAGE_INNER + CAGE_WALL / 2)
+            walls.append(f'<collision><origin xyz="{xyz[0]} {xyz[1]} {xyz[2]}"/>'
+                         f'<geometry><box size="{size[0]} {size[1]} {size[2]}"/></geometry></collision>')
+    urdf = (f'<robot name="cage"><link name="palm">{_INERTIAL}{"".join(walls)}</link>'
+            f'<link name="flag">{_INERTIAL}<collision><geometry><sphere radius="0.005"/></geometry></collision></link>'
+            '<joint name="hinge" type="revolute"><parent link="palm"/><child link="flag"/><origin xyz="0 0 -0.3"/>'
+            '<axis xyz="1 0 0"/><limit lower="-0.1" upper="0.1" effort="1" velocity="1"/></joint></robot>')
+    return urdf, ActionMap.from_urdf(urdf, {"index_joint1": "hinge"})
+
+
+def palm_at(xyz=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """Grasp with the palm (unrotated) at ``xyz`` in the object frame and all canonical joints 0."""
+    T = np.eye(4)
+    T[:3, 3] = xyz
     return pose_to_grasp(T, np.zeros(22))

@@ -13,7 +13,8 @@ torch = pytest.importorskip("torch")
 
 import ohra  # noqa: E402
 from ohra.cli.main import main as cli_main  # noqa: E402
-from ohra.errors import CheckpointError, OhraError  # noqa: E402
+from ohra.errors import CheckpointError  # noqa: E402
+from ohra.hands import registry  # noqa: E402
 from ohra.canonical.kinematics import HandModel  # noqa: E402
 from ohra.learn import encode_vectors, sample_vectors  # noqa: E402
 from ohra.learn.encoding import FLAGS, LatentError  # noqa: E402
@@ -24,19 +25,6 @@ from ohra.learn.vae import MorphologyVAE, VAEConfig, make_optimizer, vae_loss  #
 from ohra.canonical.params import BaseParams  # noqa: E402
 
 SMALL = TrainConfig(samples=2048, batch_size=256, epochs=4, threads=1, heldout=256, checkpoint_every=1)
-
-
-def _has_hands(*names: str) -> bool:
-    try:
-        for n in names:
-            ohra.get_hand(n, "base")
-        return True
-    except OhraError:
-        return False
-
-
-needs_real_hands = pytest.mark.skipif(not _has_hands("dex3_right", "shadow_hand_right"),
-                                      reason="registered base hands dex3_right / shadow_hand_right not in this checkout")
 
 
 def _states_equal(a: dict, b: dict) -> bool:
@@ -146,9 +134,7 @@ def test_corrupt_or_missing_checkpoints_raise_checkpoint_errors(tmp_path):
 # -- the shipped model ------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def vae():
-    if not (default_model_dir() / "model.pt").is_file():
-        pytest.skip("shipped VAE model not present")
-    return load_vae()
+    return load_vae()  # package data: a missing or broken shipped model fails these tests
 
 
 def test_shipped_model_loads_with_config_and_metrics_and_meets_the_targets(vae):
@@ -179,12 +165,12 @@ def test_encode_is_deterministic_and_decode_of_any_latent_is_valid(vae):
         vae.decode(np.full(16, np.nan))
 
 
-@needs_real_hands
 def test_registered_hands_encode_and_reconstruct_their_presence_pattern(vae):
     """Every registered base hand encodes; those whose joint pattern the sampler can produce get
     their presence pattern back exactly. Barrett's "thumb" (finger 3) has no joint 1, a pattern the
     reference sampler never draws: it is outside the training distribution."""
-    names = [n for n in ohra.list_hands() if _has_hands(n)]
+    names = [n for n in ohra.list_hands() if "base" in registry.registered_forms(n)]
+    assert {"dex3_right", "shadow_hand_right", "barrett_hand"} <= set(names)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         mu, logvar = vae.encode(names)
@@ -197,7 +183,6 @@ def test_registered_hands_encode_and_reconstruct_their_presence_pattern(vae):
     assert not wrong, f"presence pattern not reconstructed for {wrong}"
 
 
-@needs_real_hands
 def test_interpolation_from_dex3_to_shadow(vae):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -212,7 +197,6 @@ def test_interpolation_from_dex3_to_shadow(vae):
 
 
 # -- CLI --------------------------------------------------------------------------------------------
-@needs_real_hands
 def test_cli_interpolate_writes_urdfs_png_and_html(vae, tmp_path, capsys):
     rc = cli_main(["vae", "interpolate", "dex3_right", "shadow_hand_right", "-n", "4", "-o", str(tmp_path)])
     assert rc == 0
@@ -223,7 +207,7 @@ def test_cli_interpolate_writes_urdfs_png_and_html(vae, tmp_path, capsys):
 
 
 def test_cli_bad_input_is_one_line_and_exit_2(vae, tmp_path, capsys):
-    ext = ohra.get_hand("shadow_hand_right", "base").to_extended() if _has_hands("shadow_hand_right") else None
+    ext = ohra.get_hand("shadow_hand_right", "base").to_extended()
     cases = [
         (["vae", "decode", "1,2,3"], "expected shape (16,)"),
         (["vae", "decode", "a,b"], "comma-separated"),
@@ -232,12 +216,11 @@ def test_cli_bad_input_is_one_line_and_exit_2(vae, tmp_path, capsys):
     bad = tmp_path / "bad.pt"
     bad.write_bytes(b"\x00garbage")
     cases.append((["vae", "encode", "dex3_right", "--model", str(bad)], "corrupt"))
-    if ext is not None:
-        d = ext.to_dict()
-        d["finger_radii"] = [r * (1.0 + 0.1 * i) for i, r in enumerate(d["finger_radii"])]
-        wrong_form = tmp_path / "ext.json"
-        wrong_form.write_text(json.dumps(d))
-        cases.append((["vae", "encode", str(wrong_form)], "base"))
+    d = ext.to_dict()
+    d["finger_radii"] = [r * (1.0 + 0.1 * i) for i, r in enumerate(d["finger_radii"])]
+    wrong_form = tmp_path / "ext.json"
+    wrong_form.write_text(json.dumps(d))
+    cases.append((["vae", "encode", str(wrong_form)], "base"))
     for argv, msg in cases:
         rc = cli_main(argv)
         err = capsys.readouterr().err

@@ -10,7 +10,6 @@ nbformat = pytest.importorskip("nbformat")
 nbclient = pytest.importorskip("nbclient")
 pytest.importorskip("torch")
 
-from ohra.learn.morph import default_model_dir  # noqa: E402
 
 NB = Path(__file__).resolve().parents[1] / "notebooks" / "03_morphology_vae.ipynb"
 
@@ -26,8 +25,6 @@ def _text(cell) -> str:
 
 
 def test_morphology_notebook_executes(tmp_path):
-    if not (default_model_dir() / "model.pt").is_file():
-        pytest.skip("shipped VAE model not present")
     nb = nbformat.read(NB, as_version=4)
     nbclient.NotebookClient(nb, timeout=300, kernel_name="python3", resources={"metadata": {"path": str(tmp_path)}}).execute()
     texts = [_text(c) for c in nb.cells if c.cell_type == "code"]

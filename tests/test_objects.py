@@ -59,11 +59,43 @@ def test_farthest_point_sampling_spreads_points():
     assert len(set(idx.tolist())) == 20
 
 
-def test_urdf_object_applies_its_scale(objects_dir):
-    a = ObjectModel.load(objects_dir / "ycb" / "TomatoSoupCan" / "model.urdf")
-    b = ObjectModel.load(objects_dir / "ycb" / "TomatoSoupCan" / "textured_simple_reoriented.obj")
-    scale = float(np.ptp(a.mesh.vertices, axis=0).max() / np.ptp(b.mesh.vertices, axis=0).max())
-    assert scale == pytest.approx(0.7, rel=1e-3) or scale == pytest.approx(1.0, rel=1e-3)
+def _write_obj(path, meshes) -> None:
+    """One OBJ file, one ``o`` object per mesh (the layout of V-HACD output)."""
+    lines, base = [], 0
+    for k, m in enumerate(meshes):
+        lines.append(f"o piece{k}")
+        lines += [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in m.vertices]
+        lines += [f"f {i + base + 1} {j + base + 1} {l + base + 1}" for i, j, l in m.faces]
+        base += len(m.vertices)
+    path.write_text("\n".join(lines) + "\n")
+
+
+def test_urdf_object_applies_its_mesh_scale_to_the_mesh_and_the_convex_pieces(tmp_path):
+    """A PyBullet-style object URDF with a non-uniform scale: the object (the built-in L block's mesh,
+    non-convex, so its two provided convex pieces are used) is the scaled mesh, and so are its pieces."""
+    ref = ObjectModel.builtin("l_block")
+    _write_obj(tmp_path / "visual.obj", [ref.mesh])
+    _write_obj(tmp_path / "collision.obj", ref.convex_pieces())
+    scale = np.array([2.0, 0.5, 3.0])
+    s = " ".join(f"{v:g}" for v in scale)
+    (tmp_path / "model.urdf").write_text(
+        f'<robot name="thing"><link name="base"><visual><geometry><mesh filename="visual.obj" scale="{s}"/></geometry></visual>'
+        f'<collision><geometry><mesh filename="collision.obj" scale="{s}"/></geometry></collision></link></robot>')
+    o = ObjectModel.load(tmp_path / "model.urdf")
+    assert o.mesh.extents == pytest.approx(scale * ref.mesh.extents, rel=1e-6)
+    pieces = o.convex_pieces()
+    assert len(pieces) == 2
+    assert sum(p.volume for p in pieces) == pytest.approx(np.prod(scale) * sum(p.volume for p in ref.convex_pieces()), rel=1e-9)
+    for got, want in zip(sorted(p.bounds.tolist() for p in pieces), sorted((p.bounds * scale).tolist() for p in ref.convex_pieces())):
+        assert np.allclose(got, want, atol=1e-6), (got, want)
+    assert ObjectModel.load(tmp_path / "visual.obj").mesh.extents == pytest.approx(ref.mesh.extents, rel=1e-6)
+
+
+def test_ycb_urdf_scale_is_applied(objects_dir):
+    """MasterChefCan's URDF scales its mesh by 0.7."""
+    a = ObjectModel.load(objects_dir / "ycb" / "MasterChefCan" / "model.urdf")
+    b = ObjectModel.load(objects_dir / "ycb" / "MasterChefCan" / "textured_simple_reoriented.obj")
+    assert a.mesh.extents == pytest.approx(0.7 * b.mesh.extents, rel=1e-6)
 
 
 def test_missing_or_empty_mesh_is_a_clear_error(tmp_path):

@@ -272,14 +272,18 @@ def test_perturbed_valid_params_only_raise_params_error(data):
 @settings(max_examples=60, deadline=None)
 @given(st.recursive(st.one_of(st.none(), st.booleans(), st.floats(), st.text(max_size=3)), lambda c: st.lists(c, max_size=4), max_leaves=20))
 def test_malformed_structures_only_raise_params_error(junk):
-    keys = [k for k, _ in BaseParams.KEYS]
-    for k in keys:
-        d = json.loads(open(__import__("pathlib").Path(__file__).parent / "data" / "shadow_hand_right_base.json").read())
+    """Junk under any key is either rejected with a ParamsError that names that key, or is a
+    well-formed value that the params then hold exactly."""
+    path = __import__("pathlib").Path(__file__).parent / "data" / "shadow_hand_right_base.json"
+    for k, shape in BaseParams.KEYS:
+        d = json.loads(path.read_text())
         d[k] = junk
         try:
-            BaseParams.from_dict(d)
-        except ParamsError:
-            pass
+            p = BaseParams.from_dict(d)
+        except ParamsError as exc:
+            assert repr(k) in str(exc), (k, junk, str(exc))
+            continue
+        assert np.asarray(getattr(p, k), dtype=float).reshape(shape).tolist() == np.asarray(junk, dtype=float).reshape(shape).tolist()
 
 
 def test_joint_names_are_canonical():

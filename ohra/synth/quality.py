@@ -20,20 +20,16 @@ def contact_normals(points: np.ndarray, obj: ObjectModel, h: float = 1e-3) -> np
     return grad / np.maximum(np.linalg.norm(grad, axis=1, keepdims=True), 1e-12)
 
 
-def ferrari_canny(points: np.ndarray, obj: ObjectModel, mu: float = 0.5, torque_length: float = 0.05, facets: int = 8,
-                  normals: np.ndarray | None = None) -> float:
-    """Q1: radius of the largest origin-centred ball in the convex hull of the contact wrenches.
+def contact_wrenches(points: np.ndarray, normals: np.ndarray, center: np.ndarray, mu: float = 0.5,
+                     torque_length: float = 0.05, facets: int = 8) -> np.ndarray:
+    """(N * facets, 6) wrenches [force, torque / ``torque_length``] of the linearised friction cones.
 
-    Each contact's friction cone (unit normal force, inward) is linearised with ``facets`` edges;
-    torques are about the object's centre of mass, divided by ``torque_length`` [m]. ``normals``
-    (outward, unit) default to the SDF gradient at the points. Returns 0 when the origin is not
-    strictly inside the hull (no force closure).
+    Contact ``i`` at ``points[i]`` with *outward* unit normal ``normals[i]`` pushes on the object:
+    each cone edge is ``-n + mu * t`` (unit normal force, into the object) for ``facets`` tangents
+    ``t`` evenly spaced around ``n``; torques are about ``center`` (the centre of mass) [m].
     """
     p = np.asarray(points, dtype=float).reshape(-1, 3)
-    if len(p) < 2:
-        return 0.0
-    n = contact_normals(p, obj) if normals is None else np.asarray(normals, dtype=float).reshape(-1, 3)
-    c = obj.center_mass
+    n = np.asarray(normals, dtype=float).reshape(-1, 3)
     wrenches = []
     for pi, ni in zip(p, n):
         a = np.cross(ni, [1.0, 0.0, 0.0])
@@ -44,8 +40,23 @@ def ferrari_canny(points: np.ndarray, obj: ObjectModel, mu: float = 0.5, torque_
         for k in range(facets):
             th = 2 * np.pi * k / facets
             f = -ni + mu * (np.cos(th) * a + np.sin(th) * b)
-            wrenches.append(np.concatenate([f, np.cross(pi - c, f) / torque_length]))
-    W = np.array(wrenches)
+            wrenches.append(np.concatenate([f, np.cross(pi - center, f) / torque_length]))
+    return np.array(wrenches).reshape(-1, 6)
+
+
+def ferrari_canny(points: np.ndarray, obj: ObjectModel, mu: float = 0.5, torque_length: float = 0.05, facets: int = 8,
+                  normals: np.ndarray | None = None) -> float:
+    """Q1: radius of the largest origin-centred ball in the convex hull of the contact wrenches.
+
+    Wrenches: :func:`contact_wrenches` about the object's centre of mass. ``normals`` (outward,
+    unit) default to the SDF gradient at the points. Returns 0 when the origin is not strictly
+    inside the hull (no force closure).
+    """
+    p = np.asarray(points, dtype=float).reshape(-1, 3)
+    if len(p) < 2:
+        return 0.0
+    n = contact_normals(p, obj) if normals is None else np.asarray(normals, dtype=float).reshape(-1, 3)
+    W = contact_wrenches(p, n, obj.center_mass, mu, torque_length, facets)
     try:
         hull = ConvexHull(W)
     except (QhullError, ValueError):
