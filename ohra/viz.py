@@ -350,10 +350,8 @@ def grasp_png(hand: HandModel, grasp: np.ndarray, vertices: np.ndarray, faces: n
               views: tuple[tuple[float, float], ...] = ((20, -60), (20, 30)), size: float = 4.0) -> Path:
     """Render a grasp to a PNG with matplotlib (no display needed): object mesh + capsule hand,
     one panel per (elevation, azimuth) view, metres on the axes."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    # The object-oriented Figure (no pyplot, no backend switch): a notebook's inline figures keep working.
+    from matplotlib.figure import Figure
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
     from ohra.rotations import grasp_to_pose
@@ -363,7 +361,7 @@ def grasp_png(hand: HandModel, grasp: np.ndarray, vertices: np.ndarray, faces: n
     p0 = caps.p0 @ T[:3, :3].T + T[:3, 3]
     p1 = caps.p1 @ T[:3, :3].T + T[:3, 3]
     V, F = np.asarray(vertices), np.asarray(faces)
-    fig = plt.figure(figsize=(size * len(views), size))
+    fig = Figure(figsize=(size * len(views), size))
     for k, (elev, azim) in enumerate(views):
         ax = fig.add_subplot(1, len(views), k + 1, projection="3d")
         ax.add_collection3d(Poly3DCollection(V[F], facecolor="#d9a066", edgecolor="none", alpha=0.6))
@@ -385,5 +383,4 @@ def grasp_png(hand: HandModel, grasp: np.ndarray, vertices: np.ndarray, faces: n
     path = Path(path)
     with atomic_path(path, suffix=path.suffix or ".png") as tmp:  # savefig picks the format from the name
         fig.savefig(tmp, dpi=80)
-    plt.close(fig)
     return path

@@ -76,14 +76,11 @@ def contact_sheet(images: np.ndarray, success: np.ndarray | None = None, columns
 
 def write_png(image: np.ndarray, path: str | Path) -> Path:
     """Write an RGB array as PNG via a temporary file and a rename (no partial file)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.image import imsave  # no pyplot: the caller's backend (e.g. notebook inline) is left alone
 
     from ohra.io import atomic_path
 
     path = Path(path)
     with atomic_path(path, suffix=".png") as tmp:
-        plt.imsave(tmp, image)
+        imsave(tmp, image)
     return path
