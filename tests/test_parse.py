@@ -14,7 +14,8 @@ from ohra.original.spec import load_spec
 from ohra.hands import registry
 from ohra.canonical.kinematics import HandModel
 from ohra.original.urdf import MissingMeshWarning, load_urdf
-from ohra.original.parse import ParseWarning, canonical_keypoints, ext_arrays, ext_arrays_from_base, parse
+from ohra.original.keypoints import canonical_keypoints, ext_arrays, ext_arrays_from_base
+from ohra.original.parse import ParseWarning, parse
 from ohra.canonical.params import BaseParams
 from ohra.canonical.urdfgen import render
 

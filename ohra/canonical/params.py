@@ -171,24 +171,35 @@ def present_mask(lowers: np.ndarray, uppers: np.ndarray) -> np.ndarray:
     return (np.asarray(lowers) != 0.0) | (np.asarray(uppers) != 0.0)
 
 
-def link_presence(present: np.ndarray, template: str = "standard") -> dict[str, tuple[bool, bool, bool]]:
-    """Which of (proximal, middle, distal) links carry geometry, per finger, from joint presence.
+def segment_mask(present: np.ndarray, template: str = "standard") -> np.ndarray:
+    """Which (proximal, middle, distal) links carry geometry: joint presence (..., 22) -> (..., 5, 3) bool.
 
     Rules of the canonical templates (reference §2.2-2.4): thumb proximal iff j1 or j2, middle iff
-    j3 or j4, distal iff j5. Other fingers: proximal iff j1 or j2, middle iff j3, distal iff j4.
-    In the LEAP flavour (abduction after flexion): proximal iff j1, middle iff j2 or j3, distal iff j4.
+    j3 or j4, distal iff j5. Other fingers: proximal iff j1 or j2, middle iff j3, distal iff j4
+    (the little finger's joints 1-4: little_joint0 is the extra metacarpal joint and carries no
+    segment). In the LEAP flavour (abduction after flexion): proximal iff j1, middle iff j2 or j3,
+    distal iff j4. The one definition of these rules; batched for the learning code.
     """
     p = np.asarray(present, dtype=bool)
-    out = {"thumb": (bool(p[0] or p[1]), bool(p[2] or p[3]), bool(p[4]))}
-    for f in FINGERS[1:]:
-        j = p[FINGER_SLICES[f]]
+    if p.shape[-1] != 22:
+        raise ParamsError(f"joint presence must have 22 entries in its last axis, got shape {p.shape}")
+    out = np.zeros(p.shape[:-1] + (5, 3), dtype=bool)
+    out[..., 0, :] = np.stack([p[..., 0] | p[..., 1], p[..., 2] | p[..., 3], p[..., 4]], axis=-1)
+    for fi, f in enumerate(FINGERS[1:], start=1):
+        j = p[..., FINGER_SLICES[f]]
         if f == "little":
-            j = j[1:]  # little_joint0 is the extra metacarpal joint, it carries no segment
+            j = j[..., 1:]
         if template == "leap":
-            out[f] = (bool(j[0]), bool(j[1] or j[2]), bool(j[3]))
+            out[..., fi, :] = np.stack([j[..., 0], j[..., 1] | j[..., 2], j[..., 3]], axis=-1)
         else:
-            out[f] = (bool(j[0] or j[1]), bool(j[2]), bool(j[3]))
+            out[..., fi, :] = np.stack([j[..., 0] | j[..., 1], j[..., 2], j[..., 3]], axis=-1)
     return out
+
+
+def link_presence(present: np.ndarray, template: str = "standard") -> dict[str, tuple[bool, bool, bool]]:
+    """:func:`segment_mask` of one hand as ``{finger: (proximal, middle, distal)}``."""
+    m = segment_mask(present, template)
+    return {f: (bool(m[fi, 0]), bool(m[fi, 1]), bool(m[fi, 2])) for fi, f in enumerate(FINGERS)}
 
 
 class _ParamsMixin:

@@ -31,7 +31,9 @@ import numpy as np
 
 from ohra.canonical.kinematics import HandModel
 from ohra.canonical.params import FINGER_SLICES, FINGERS, JOINT_NAMES
-from ohra.original.parse import Measurement, ParseResult, line_distance, measure, original_keypoints, sample_original
+from ohra.original.keypoints import line_distance, original_keypoints, sample_original
+from ohra.original.measure import Measurement, measure
+from ohra.original.parse import ParseResult
 
 
 @dataclass(frozen=True)
