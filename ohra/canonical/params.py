@@ -265,7 +265,7 @@ class _ParamsMixin:
         if not isinstance(d, dict):
             raise ParamsError(f"{where}: expected a JSON object, got {type(d).__name__}")
         try:
-            return cls.from_dict(d)
+            return cls.from_dict(_without_couplings(d, where))
         except ParamsError as exc:
             raise ParamsError(f"{where}: {exc}") from None
 
@@ -674,6 +674,17 @@ def _unflatten(keys: tuple[tuple[str, tuple[int, ...]], ...], v: Any, size: int)
     return out
 
 
+def _without_couplings(d: dict[str, Any], where: str) -> dict[str, Any]:
+    """``d`` without the optional ``"couplings"`` key (validated here; read with
+    :func:`ohra.canonical.couplings.read_couplings`). Reference files have no such key."""
+    if "couplings" not in d:
+        return d
+    from ohra.canonical.couplings import couplings_from_json_value
+
+    couplings_from_json_value(d["couplings"], where)
+    return {k: v for k, v in d.items() if k != "couplings"}
+
+
 def load_params(source: str | Path | Mapping[str, Any]) -> BaseParams | ExtendedParams:
     """Load params of either form from a JSON path, JSON text or dict; the form is detected by its keys."""
     if isinstance(source, Mapping):
@@ -686,6 +697,7 @@ def load_params(source: str | Path | Mapping[str, Any]) -> BaseParams | Extended
             raise ParamsError(f"{where}: malformed JSON ({exc})") from None
         if not isinstance(d, dict):
             raise ParamsError(f"{where}: expected a JSON object, got {type(d).__name__}")
+    d = _without_couplings(d, where)
     cls: type[BaseParams] | type[ExtendedParams]
     if "finger_radii" in d or "joint_origins" in d:
         cls = ExtendedParams

@@ -138,6 +138,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     parser = _Parser(prog="ohra", description="Canonical dexterous hands: render, inspect, parse, evaluate, synthesise, learn.")
     parser.add_argument("--version", action="version", version=f"ohra {__version__}")
+    parser.add_argument("--hands", action="append", default=[], metavar="DIR", dest="hands_dirs",
+                        help="user hand folder: its *.yaml specs join the registry (also $OHRA_HANDS_PATH)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
     hand = sub.add_parser("hand", help="canonical hands: list, render, info, ...")
@@ -179,6 +181,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
+        for folder in args.hands_dirs:
+            from ohra.hands.registry import add_hands_path
+
+            add_hands_path(folder)
         return int(args.func(args) or 0)
     except OhraError as exc:
         print(f"ohra: error: {exc}", file=sys.stderr)

@@ -14,6 +14,7 @@ import numpy as np
 
 
 def _cmd_parse(args: argparse.Namespace) -> int:
+    from ohra.canonical.couplings import params_json
     from ohra.original.fidelity import compare
     from ohra.original.spec import load_spec
     from ohra.original.parse import parse
@@ -25,7 +26,7 @@ def _cmd_parse(args: argparse.Namespace) -> int:
         res = parse(spec, form, fit_params=args.fit)
     for w in caught:
         print(f"warning: {w.message}", file=sys.stderr)
-    text = res.params.to_json()
+    text = params_json(res.params, res.couplings)  # + the optional "couplings" key of a coupled hand
     if args.output:
         from pathlib import Path
 
@@ -71,8 +72,11 @@ def _cmd_show(args: argparse.Namespace) -> int:  # pragma: no cover - starts a s
     q = None
     if args.q:
         q = np.array([float(x) for x in args.q.replace(",", " ").split()])
+    from ohra.hands.resolve import resolve_hand
+
+    ref = resolve_hand(args.hand, form)  # a bad name fails here, before a meshcat server starts
     vis = viz.new_visualizer()
-    viz.show_hand(vis, args.hand, form, q=q, original=args.original)
+    viz.show_hand(vis, ref, form, q=q, original=args.original)
     print(vis.url())
     if not args.no_wait:
         input("press Enter to stop the viewer ")

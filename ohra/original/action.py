@@ -7,7 +7,14 @@ twist joint the form cannot express) are set to 0 when mapping back, the referen
 ``unmapped_default`` to choose other values.
 
 The original joint order is the order of the movable (revolute, continuous, prismatic) joints as
-they appear in the original URDF file.
+they appear in the original URDF file, mimic joints excluded.
+
+Couplings (:mod:`ohra.canonical.couplings`, ``slot = multiplier * driver + offset``) are applied
+both ways: original -> canonical fills every coupled slot from its driver; canonical -> original
+reads only the driving slots (a coupled slot mapped to an actuated original joint gets the value
+the coupling gives). A slot may map a joint outside the original joint vector (a ``<mimic>``
+joint, moved by the URDF itself) only when it is coupled. :meth:`ActionMap.residual` reports how
+far a canonical vector violates the couplings and :meth:`ActionMap.project` enforces them.
 """
 
 from __future__ import annotations
@@ -19,8 +26,10 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ohra.errors import MappingError
+from ohra.canonical import couplings as cpl
+from ohra.canonical.couplings import Coupling
 from ohra.canonical.params import JOINT_INDEX, JOINT_NAMES
+from ohra.errors import MappingError, ParamsError
 from ohra.transforms import invert, xyzrpy_to_matrix
 
 MOVABLE_TYPES = ("revolute", "continuous", "prismatic")
@@ -76,6 +85,8 @@ class ActionMap:
         fixed: canonical joint name -> constant value for slots no original joint drives.
         unmapped_default: original joint name -> value used by :meth:`to_original` for joints that
             drive no slot (default 0).
+        couplings: canonical couplings (:class:`ohra.canonical.couplings.Coupling`); chains are
+            resolved to their root driver.
     """
 
     slots: Mapping[str, SlotMap]
@@ -83,12 +94,49 @@ class ActionMap:
     palm_origin: Sequence[float] = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     fixed: Mapping[str, float] = field(default_factory=dict)
     unmapped_default: Mapping[str, float] = field(default_factory=dict)
+    couplings: Sequence[Coupling] = ()
 
     def __post_init__(self) -> None:
         self.original_joints = tuple(self.original_joints)
         if len(set(self.original_joints)) != len(self.original_joints):
             dup = [n for n in self.original_joints if self.original_joints.count(n) > 1][0]
             raise MappingError(f"original joint {dup!r} appears twice in the original joint order")
+        try:
+            self.couplings = cpl.resolve(self.couplings)
+        except ParamsError as exc:
+            raise MappingError(str(exc)) from None
+        self.slots = slots = self._checked_slots()
+        self._check_couplings()
+        for slot in self.fixed:
+            if slot not in JOINT_INDEX:
+                raise MappingError(f"unknown canonical slot {slot!r} in fixed values")
+            if slot in slots:
+                raise MappingError(f"slot {slot!r} is both mapped and fixed")
+        for name in self.unmapped_default:
+            if name not in self.original_joints:
+                raise MappingError(f"unmapped default names unknown original joint {name!r}")
+        po = np.asarray(self.palm_origin, dtype=float)
+        if po.shape != (6,) or not np.all(np.isfinite(po)):
+            raise MappingError(f"palm_origin must be 6 finite numbers (xyz rpy), got {list(np.ravel(po))}")
+        self.palm_origin = po
+        n = len(self.original_joints)
+        active = {s: sm for s, sm in slots.items() if sm.name in self.original_joints}
+        self._passive = {s: sm for s, sm in slots.items() if s not in active}
+        self._c_idx = np.array([JOINT_INDEX[s] for s in active], dtype=int)
+        self._o_idx = np.array([self.original_joints.index(sm.name) for sm in active.values()], dtype=int)
+        self._sign = np.array([float(sm.sign) for sm in active.values()])
+        self._offset = np.array([sm.offset for sm in active.values()])
+        self._canon_const = np.zeros(22)
+        for slot, v in self.fixed.items():
+            self._canon_const[JOINT_INDEX[slot]] = float(v)
+        self._orig_const = np.zeros(n)
+        for name, v in self.unmapped_default.items():
+            self._orig_const[self.original_joints.index(name)] = float(v)
+        self._T_palm = xyzrpy_to_matrix(po)
+
+    def _checked_slots(self) -> dict[str, SlotMap]:
+        """Validated slot maps; a joint outside the original vector is allowed for coupled slots only."""
+        coupled = {c.slot for c in self.couplings}
         slots: dict[str, SlotMap] = {}
         used: dict[str, str] = {}
         for slot, sm in dict(self.slots).items():
@@ -98,40 +146,23 @@ class ActionMap:
                 sm = SlotMap(**sm)
             elif isinstance(sm, str):
                 sm = SlotMap(sm)
-            if sm.name not in self.original_joints:
+            if sm.name not in self.original_joints and slot not in coupled:
                 raise MappingError(
-                    f"slot {slot!r} names original joint {sm.name!r}, which is not a movable joint of the "
-                    f"original hand (known: {', '.join(self.original_joints)})"
+                    f"slot {slot!r} names original joint {sm.name!r}, which is not a movable joint of the original hand "
+                    f"(known: {', '.join(self.original_joints)}; a mimic joint is mapped only with its slot's coupling)"
                 )
             if sm.name in used:
                 raise MappingError(f"original joint {sm.name!r} is mapped twice (slots {used[sm.name]!r} and {slot!r})")
             used[sm.name] = slot
             slots[slot] = sm
-        for slot in self.fixed:
-            if slot not in JOINT_INDEX:
-                raise MappingError(f"unknown canonical slot {slot!r} in fixed values")
-            if slot in slots:
-                raise MappingError(f"slot {slot!r} is both mapped and fixed")
-        for name in self.unmapped_default:
-            if name not in self.original_joints:
-                raise MappingError(f"unmapped default names unknown original joint {name!r}")
-        self.slots = slots
-        po = np.asarray(self.palm_origin, dtype=float)
-        if po.shape != (6,) or not np.all(np.isfinite(po)):
-            raise MappingError(f"palm_origin must be 6 finite numbers (xyz rpy), got {list(np.ravel(po))}")
-        self.palm_origin = po
-        n = len(self.original_joints)
-        self._c_idx = np.array([JOINT_INDEX[s] for s in slots], dtype=int)
-        self._o_idx = np.array([self.original_joints.index(sm.name) for sm in slots.values()], dtype=int)
-        self._sign = np.array([float(sm.sign) for sm in slots.values()])
-        self._offset = np.array([sm.offset for sm in slots.values()])
-        self._canon_const = np.zeros(22)
-        for slot, v in self.fixed.items():
-            self._canon_const[JOINT_INDEX[slot]] = float(v)
-        self._orig_const = np.zeros(n)
-        for name, v in self.unmapped_default.items():
-            self._orig_const[self.original_joints.index(name)] = float(v)
-        self._T_palm = xyzrpy_to_matrix(po)
+        return slots
+
+    def _check_couplings(self) -> None:
+        for c in self.couplings:
+            for s in (c.slot, c.driver):
+                if s not in self.slots:
+                    raise MappingError(f"coupling {c.slot} <- {c.driver}: slot {s!r} is not mapped")
+        self._A, self._b = cpl.coupling_matrix(self.couplings)
 
     @classmethod
     def from_urdf(
@@ -151,10 +182,34 @@ class ActionMap:
 
     @property
     def mapped_slots(self) -> np.ndarray:
-        """(22,) bool: canonical slots driven by an original joint."""
+        """(22,) bool: canonical slots driven by an original joint (mimic joints included)."""
         m = np.zeros(22, dtype=bool)
-        m[self._c_idx] = True
+        m[[JOINT_INDEX[s] for s in self.slots]] = True
         return m
+
+    @property
+    def free_slots(self) -> np.ndarray:
+        """(22,) bool: slots not coupled to another (the independent canonical coordinates)."""
+        return cpl.free_mask(self.couplings)
+
+    @property
+    def passive_joints(self) -> dict[str, str]:
+        """Coupled slot -> the original joint outside the joint vector (``<mimic>``) that it maps."""
+        return {s: sm.name for s, sm in self._passive.items()}
+
+    def passive_values(self, q_canon: np.ndarray) -> dict[str, np.ndarray]:
+        """Original values of the passive (mimic) joints from their own slots of ``q_canon`` (22,) or
+        (N,22) — not from the coupling — for :meth:`OriginalHand.link_poses`' ``passive``."""
+        q = self._check(q_canon, 22, "canonical joint")
+        return {sm.name: sm.sign * (q[..., JOINT_INDEX[s]] - sm.offset) for s, sm in self._passive.items()}
+
+    def residual(self, q_canon: np.ndarray) -> np.ndarray:
+        """(..., K) coupling residuals ``q[slot] - (a q[driver] + b)`` [rad] of canonical vector(s)."""
+        return cpl.residual(self.couplings, self._check(q_canon, 22, "canonical joint"))
+
+    def project(self, q_canon: np.ndarray) -> np.ndarray:
+        """Canonical vector(s) with every coupled slot set from its driver (free slots unchanged)."""
+        return cpl.project(self.couplings, self._check(q_canon, 22, "canonical joint"))
 
     @property
     def mapped_original(self) -> np.ndarray:
@@ -174,11 +229,16 @@ class ActionMap:
         q = self._check(q_orig, self.n_original, "original joint")
         out = np.broadcast_to(self._canon_const, q.shape[:-1] + (22,)).copy()
         out[..., self._c_idx] = self._sign * q[..., self._o_idx] + self._offset
-        return out
+        return cpl.project(self.couplings, out) if self.couplings else out
 
     def to_original(self, q_canon: np.ndarray) -> np.ndarray:
-        """Canonical vector(s) (22,) or (N,22) -> original (n,) or (N,n); unmapped joints get their default."""
+        """Canonical vector(s) (22,) or (N,22) -> original (n,) or (N,n); unmapped joints get their default.
+
+        Only driving slots are read: coupled slots are taken from the coupling (see :meth:`residual`).
+        """
         q = self._check(q_canon, 22, "canonical joint")
+        if self.couplings:
+            q = cpl.project(self.couplings, q)
         out = np.broadcast_to(self._orig_const, q.shape[:-1] + (self.n_original,)).copy()
         out[..., self._o_idx] = self._sign * (q[..., self._c_idx] - self._offset)
         return out
@@ -192,7 +252,8 @@ class ActionMap:
         clo, cup = self._canon_const.copy(), self._canon_const.copy()
         clo[self._c_idx] = np.minimum(a, b)
         cup[self._c_idx] = np.maximum(a, b)
-        return clo, cup
+        # a coupled slot reaches what its driver's range gives it
+        return cpl.propagate_limits(self.couplings, clo, cup) if self.couplings else (clo, cup)
 
     def wrist_to_canonical(self, T_root: np.ndarray) -> np.ndarray:
         """Pose(s) of the original root frame (…,4,4) -> pose(s) of the canonical palm frame."""

@@ -19,7 +19,6 @@ from ohra.canonical.params import (
     EXT_ROW_START,
     FINGER_SLICES,
     FINGERS,
-    JOINT_INDEX,
     JOINT_NAMES,
     BaseParams,
     ExtendedParams,

@@ -1,17 +1,22 @@
 """How well a canonical hand reproduces its original: joint, fingertip and surface errors.
 
-For a hand and a form, N original configurations are sampled uniformly within the mapped joints'
-limits (seeded; unmapped joints at their canonical-zero value), mapped to canonical with the hand's
-:class:`ohra.ActionMap`, and both hands are compared in the canonical palm frame:
+For a hand and a form, N original configurations are sampled uniformly within the limits of the
+*actuated* joints inside the hand (seeded): the joints that drive a slot, and those that drive none
+but move links below the palm (which the canonical hand cannot follow: each is named in the notes as
+an approximation, and its motion counts in the errors). Coupled joints follow their drivers (URDF
+``<mimic>`` joints through the URDF itself, declared couplings through the action map). Each
+configuration is mapped to canonical with the hand's :class:`ohra.ActionMap`, and both hands are
+compared in the canonical palm frame:
 
 * **joints**: distance from each canonical joint origin to the mapped original joint's axis line
   (a revolute joint's position along its own axis has no kinematic meaning); ``joint_origins``
   reports the plain distance between the original child-frame origin and the canonical joint origin.
-* **tips**: canonical tip frame vs the original fingertip point. The original fingertip is defined
-  automatically from the distal link's geometry (the child link of the finger's last mapped joint,
-  with links fixed to it; collision geometry, else visual) at canonical zero: the centroid of its
-  points within 1 mm of the farthest extent along the finger direction, moved out to that extent,
-  and carried rigidly with that link.
+* **tips**: canonical tip frame vs the *true* fingertip of the original finger: the end of the
+  finger's geometry over every link it moves beyond its last mapped joint (links fixed to it and
+  links moved by mimic or unmapped joints; collision geometry, else visual) at canonical zero: the
+  centroid of its points within 1 mm of the farthest extent along the finger direction, moved out
+  to that extent, and carried rigidly by the link that reaches farthest — never simply the last
+  mapped link.
 * **surface**: symmetric mean point-to-surface distance between the canonical capsule hand (palm
   cylinder + capsules) and the original geometry of the hand's links (the palm link and everything
   below it), over a few configurations. Original -> canonical distances are analytic; canonical ->
@@ -29,10 +34,11 @@ from typing import Any
 
 import numpy as np
 
+from ohra.canonical.couplings import describe
 from ohra.canonical.kinematics import HandModel
 from ohra.canonical.params import FINGER_SLICES, FINGERS, JOINT_NAMES
-from ohra.original.keypoints import line_distance, original_keypoints, sample_original
-from ohra.original.measure import Measurement, measure
+from ohra.original.keypoints import line_distance, original_keypoints, sample_original, unmapped_hand_joints
+from ohra.original.measure import Measurement
 from ohra.original.parse import ParseResult
 
 
@@ -65,6 +71,8 @@ class FidelityReport:
     tips: dict[str, Stats]
     surface: dict[str, Stats] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    approximations: list[str] = field(default_factory=list)  # what the canonical form cannot express
+    couplings: list[str] = field(default_factory=list)  # "slot = a * driver + b" lines
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -74,6 +82,8 @@ class FidelityReport:
             "tips": {k: v.to_dict() for k, v in self.tips.items()},
             "surface": {k: v.to_dict() for k, v in self.surface.items()},
             "notes": self.notes,
+            "approximations": self.approximations,
+            "couplings": self.couplings,
         }
 
     def table(self) -> str:
@@ -88,6 +98,8 @@ class FidelityReport:
 
         for r in rows:
             lines.append(f"{r:8s} {cell(self.tips, r):>24s} {cell(self.joints, r):>24s} {cell(self.surface, r):>24s}")
+        lines += [f"coupling: {c}" for c in self.couplings]
+        lines += [f"approximation: {a}" for a in self.approximations]
         return "\n".join(lines)
 
 
@@ -101,7 +113,7 @@ def keypoint_errors(res: ParseResult, samples: int = 200, seed: int = 0) -> tupl
     """Per-finger joint (axis-line), joint-origin and fingertip errors [m] as arrays."""
     m = res.measurement
     hm = HandModel.from_params(res.params)
-    q_orig = sample_original(m, samples, seed)
+    q_orig = sample_original(m, samples, seed, unmapped=True)
     ok = original_keypoints(m, q_orig)
     qc = np.clip(ok.q_canon, hm.lower, hm.upper)
     links = _joint_links(hm.urdf)
@@ -196,7 +208,7 @@ def surface_errors(res: ParseResult, configs: int = 3, points: int = 1500, seed:
             g = hand.link_geometry(l)
             if g is not None:
                 meshes[l] = g
-    q_orig = sample_original(m, configs - 1, seed + 1) if configs > 1 else m.q0[None]
+    q_orig = sample_original(m, configs - 1, seed + 1, unmapped=True) if configs > 1 else m.q0[None]
     ok = original_keypoints(m, q_orig)
     qc = np.clip(ok.q_canon, hm.lower, hm.upper)
     palm = hm.palm
@@ -253,30 +265,36 @@ def surface_errors(res: ParseResult, configs: int = 3, points: int = 1500, seed:
     return {k: np.concatenate(v) if v else np.array([]) for k, v in out.items()}
 
 
+def approximations(res: ParseResult) -> list[str]:
+    """What the canonical hand of ``res`` cannot express, one named item each."""
+    m = res.measurement
+    out = [n[len("approximation: "):] for n in res.notes if n.startswith("approximation: ") and "looks bent" not in n]
+    for name in unmapped_hand_joints(m):
+        j = m.hand.joints[name]
+        out.append(f"joint {name!r} ([{j.lower:+.3f}, {j.upper:+.3f}] rad) moves links inside the hand but drives no "
+                   f"slot of the {res.form} form: sampled over its range, the canonical hand cannot follow it")
+    return out
+
+
 def compare(
-    hand: str | ParseResult,
-    form: str = "base",
+    hand: Any,
+    form: str | None = "base",
     samples: int = 200,
     seed: int = 0,
     surface: bool = True,
     surface_configs: int = 3,
     surface_points: int = 1500,
 ) -> FidelityReport:
-    """Fidelity of a registered hand (committed params) or of a :class:`ParseResult`."""
+    """Fidelity of a :class:`ParseResult`, or of any hand :func:`ohra.hands.resolve_hand` accepts
+    (registered name: committed params; spec YAML: parsed; params JSON with its spec)."""
     if isinstance(hand, ParseResult):
         res = hand
         name = res.spec.name
     else:
-        from ohra.hands import registry
+        from ohra.hands.resolve import resolve_hand
 
-        name = hand
-        sp = registry.spec(name)
-        params = registry.registered_params(name, form)
-        orig = registry.load_original(name)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            m = measure(orig, sp, form)
-        res = ParseResult(params, form, sp, m, params, None, list(m.notes))
+        ref = resolve_hand(hand, form)
+        res, name = ref.parse_result(), ref.name
     jerr, oerr, terr = keypoint_errors(res, samples, seed)
     rep = FidelityReport(
         name, res.form, samples,
@@ -284,6 +302,8 @@ def compare(
         {**{f: Stats.of(v) for f, v in oerr.items()}, "hand": Stats.of(np.concatenate([v.ravel() for v in oerr.values()]))},
         {**{f: Stats.of(v) for f, v in terr.items()}, "hand": Stats.of(np.concatenate([v.ravel() for v in terr.values()]) if terr else np.array([]))},
         notes=list(res.notes),
+        approximations=approximations(res),
+        couplings=describe(res.couplings),
     )
     if surface:
         se = surface_errors(res, surface_configs, surface_points, seed)

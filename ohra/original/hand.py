@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -123,10 +123,31 @@ class OriginalHand:
         return self.lower + rng.random((int(n), len(self.movable_joints))) * (self.upper - self.lower)
 
     # -- kinematics ------------------------------------------------------------------------------
-    def link_poses(self, q: np.ndarray, links: Sequence[str] | None = None) -> np.ndarray:
+    @cached_property
+    def mimic_joints(self) -> tuple[str, ...]:
+        """Names of the movable joints that follow another through ``<mimic>``, file order."""
+        return tuple(n for n, j in self.joints.items() if j.type in MOVABLE_TYPES and j.mimic is not None)
+
+    def mimic_root(self, name: str) -> tuple[str, float, float]:
+        """(actuated joint, multiplier, offset) with ``q[name] = multiplier * q[root] + offset``,
+        composing chains of mimics; an actuated joint returns ``(name, 1, 0)``."""
+        a, b = 1.0, 0.0
+        j = self.joints[name]
+        while j.mimic is not None:
+            master, mult, off = j.mimic
+            a, b = a * mult, a * off + b  # q = a * (mult * q_master + off) + b
+            j = self.joints[master]
+        return j.name, a, b
+
+    def link_poses(
+        self, q: np.ndarray, links: Sequence[str] | None = None, passive: Mapping[str, Any] | None = None
+    ) -> np.ndarray:
         """Poses of ``links`` (default: all, order :attr:`links`) in the root frame.
 
-        ``q``: (dof,) -> (L,4,4); (N,dof) -> (N,L,4,4).
+        ``q``: (dof,) -> (L,4,4); (N,dof) -> (N,L,4,4). ``passive``: mimic joint name -> value
+        (scalar or (N,)) that replaces what its ``<mimic>`` tag would give (joints mimicking it
+        follow the given value); used to pose the hand where the coupling does not hold, e.g. at
+        the canonical zero of every slot.
         """
         q = np.asarray(q, dtype=float)
         single = q.ndim == 1
@@ -136,6 +157,11 @@ class OriginalHand:
             raise ParseError(f"expected an original joint vector of length {n_dof}, got shape {q.shape}")
         index = {name: i for i, name in enumerate(self.movable_joints)}
         N = qb.shape[0]
+        over = {}
+        for name, v in (passive or {}).items():
+            if name not in self.mimic_joints:
+                raise ParseError(f"passive value for {name!r}, which is not a mimic joint (mimic joints: {', '.join(self.mimic_joints) or 'none'})")
+            over[name] = np.broadcast_to(np.asarray(v, dtype=float), (N,))
         want = list(self.links if links is None else links)
         for w in want:
             if w not in self.links:
@@ -153,11 +179,7 @@ class OriginalHand:
             j = self.parent_joint[link]
             T = poses[j.parent] @ j.origin
             if j.type in MOVABLE_TYPES:
-                if j.mimic is not None:
-                    master, mult, off = j.mimic
-                    val = mult * _joint_value(qb, index, self.joints, master) + off
-                else:
-                    val = qb[:, index[j.name]]
+                val = _joint_value(qb, index, self.joints, j.name, over)
                 M = np.broadcast_to(np.eye(4), (N, 4, 4)).copy()
                 if j.type == "prismatic":
                     M[:, :3, 3] = val[:, None] * j.axis
@@ -233,11 +255,14 @@ class OriginalHand:
             raise ParseError(f"Pinocchio cannot load {self.path}: {exc}") from None
 
 
-def _joint_value(qb: np.ndarray, index: dict[str, int], joints: dict[str, Joint], name: str) -> np.ndarray:
+def _joint_value(qb: np.ndarray, index: dict[str, int], joints: dict[str, Joint], name: str, over: dict) -> np.ndarray:
+    """(N,) value of joint ``name``: given (``over``), else its entry of q, else through its mimic tag."""
+    if name in over:
+        return over[name]
     j = joints[name]
     if j.mimic is not None:
         master, mult, off = j.mimic
-        return mult * _joint_value(qb, index, joints, master) + off
+        return mult * _joint_value(qb, index, joints, master, over) + off
     return qb[:, index[name]]
 
 

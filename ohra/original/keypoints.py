@@ -183,12 +183,12 @@ class OriginalKeypoints:
 
 
 def tip_points_local(m: Measurement) -> dict[str, tuple[str, np.ndarray]]:
-    """The fingertip point of each finger as (link, point in that link's frame)."""
-    poses = m.hand.link_poses(m.q0)
+    """The (true) fingertip point of each finger as (link that carries it, point in that link's frame)."""
+    poses = m.hand.link_poses(m.q0, passive=m.passive0)
     idx = {l: i for i, l in enumerate(m.hand.links)}
     out = {}
     for f, fm in m.fingers.items():
-        link = m.tip_links[f][0]
+        link = fm.tip_link or m.tip_links[f][0]
         T = m.T_palm_root @ poses[idx[link]]
         out[f] = (link, invert(T)[:3, :3] @ fm.tip + invert(T)[:3, 3])
     return out
@@ -218,16 +218,36 @@ def original_keypoints(m: Measurement, q_orig: np.ndarray) -> OriginalKeypoints:
     return OriginalKeypoints(q_orig, am.to_canonical(q_orig), joints, axes, tips)
 
 
-def sample_original(m: Measurement, n: int, seed: int) -> np.ndarray:
-    """(n, dof) original configurations uniform within the mapped joints' limits (unmapped joints
-    stay at their canonical-zero value), preceded by canonical zero itself when that lies within the
-    original limits (Barrett's bent distal links, e.g., cannot straighten)."""
+def unmapped_hand_joints(m: Measurement) -> list[str]:
+    """Actuated joints that drive no slot but move links below the palm (not a wrist above it)."""
+    below = set(m.hand.descendants(m.palm_link))
+    mapped = m.action_map.mapped_original
+    return [n for n, used in zip(m.hand.movable_joints, mapped)
+            if not used and m.hand.joints[n].parent in below and m.hand.joints[n].upper > m.hand.joints[n].lower]
+
+
+def sample_original(m: Measurement, n: int, seed: int, unmapped: bool = False) -> np.ndarray:
+    """(n, dof) original configurations uniform within the actuated joints' limits, preceded by
+    canonical zero itself when that lies within the original limits (Barrett's bent distal links,
+    e.g., cannot straighten).
+
+    Sampled: the joints that drive a slot (coupled slots' joints then follow their drivers, mimic
+    joints through the URDF itself); with ``unmapped`` also the actuated joints inside the hand
+    that drive no slot (what the canonical hand cannot follow). Other joints stay at their
+    canonical-zero value.
+    """
     hand, am = m.hand, m.action_map
     rng = np.random.default_rng(seed)
     q = np.tile(m.q0, (n, 1))
     mapped = am.mapped_original
+    if unmapped:
+        mapped = mapped | np.isin(np.array(hand.movable_joints), unmapped_hand_joints(m))
     lo, up = hand.lower[mapped], hand.upper[mapped]
     q[:, mapped] = lo + rng.random((n, int(mapped.sum()))) * (up - lo)
+    if am.couplings:  # declared couplings between actuated joints: the coupled ones follow their drivers
+        keep = q[:, ~am.mapped_original]
+        q = am.to_original(am.to_canonical(q))
+        q[:, ~am.mapped_original] = keep
     q0 = m.q0[mapped]
     if np.all((q0 >= lo - 1e-9) & (q0 <= up + 1e-9)):
         q = np.vstack([m.q0[None], q])
@@ -242,5 +262,5 @@ def line_distance(points: np.ndarray, line_pts: np.ndarray, line_dirs: np.ndarra
 
 __all__ = [
     "canonical_keypoints", "ext_arrays", "ext_arrays_from_base", "original_keypoints", "OriginalKeypoints",
-    "sample_original", "line_distance", "tip_points_local",
+    "sample_original", "line_distance", "tip_points_local", "unmapped_hand_joints",
 ]

@@ -10,9 +10,15 @@ parameters. Rules (see also :mod:`ohra.original.parse`):
   flexion axis (j3, else j4, else j2; thumb: j4, else j5, else j3) made orthogonal to ``z``.
 * stations along a finger: base (j1/j2), middle joint (j3 / thumb j3,j4), distal joint (j4 / thumb
   j5) and the fingertip.
-* fingertip point: the centroid of the distal link's geometry points (with links fixed to it) within
-  1 mm of its farthest extent along the finger direction, moved out to that extent. Without
-  geometry: the distal joint plus the previous segment's length (warned).
+* fingertip point (the *true* fingertip): the centroid of the geometry points of every link the
+  finger moves beyond its last mapped joint (links fixed to it, links moved by ``<mimic>`` joints or
+  unmapped joints, posed at canonical zero) within 1 mm of its farthest extent along the finger
+  direction, moved out to that extent, carried rigidly by the link that reaches farthest. Without
+  geometry: the distal joint plus the previous segment's length (warned). Links moved by joints
+  that drive no slot are noted (the canonical finger cannot follow them).
+* canonical zero: mimic joints mapped to a slot are posed from their own slot (0), not from their
+  coupling, so a straight canonical finger is measured on the straight original finger; a finger
+  that is still bent at canonical zero is noted with the slot offset that would straighten it.
 * palm radius: half the mean of the palm geometry's extents in y and z (the disc's plane); without
   palm geometry, from the knuckle spread (warned). Finger radius: half the mean cross-section width
   of each segment link, median over the finger's links.
@@ -71,6 +77,7 @@ class FingerMeasure:
     radius: float | None
     seg_links: list[str]
     distal_links: list[str]
+    tip_link: str = ""  # the link that carries the fingertip point
 
 
 @dataclass
@@ -89,6 +96,12 @@ class Measurement:
     finger_radius: dict[str, float]
     tip_links: dict[str, list[str]]
     notes: list[str] = field(default_factory=list)
+    passive0: dict[str, np.ndarray] = field(default_factory=dict)  # mimic joint values at canonical zero
+
+    @property
+    def couplings(self):
+        """The canonical couplings of this form (from the action map)."""
+        return self.action_map.couplings
 
 
 # -- small geometry helpers ------------------------------------------------------------------------
@@ -251,16 +264,78 @@ def _measure_finger(
     last_slot = _last_slot(slots)
     last_link = hand.joints[fs.slots[last_slot].name].child
     distal_links = fixed_descendants(hand, last_link)
+    moved = distal_links + [l for l in hand.descendants(last_link) if l not in distal_links]
+    _note_unfollowed(hand, f, fs, moved, last_link, notes)
     seg_links: list[str] = []
     for s in slots:
         if not s.endswith("joint0"):
             seg_links += fixed_descendants(hand, hand.joints[fs.slots[s].name].child)
-    dist_pts = geometry_points(hand, distal_links, T_links)
+    seg_links += [l for l in moved if l not in seg_links]  # mimic-driven links are part of the finger
+    dist_pts, owner = _points_with_owner(hand, moved, T_links)
     z, tip = _direction_and_tip(f, stations, p[last_slot], dist_pts, last_link, spec.source, notes)
+    tip_link = _rigid_root(hand, owner[int(np.argmax((dist_pts - tip) @ z))]) if dist_pts is not None else last_link
     y = _flexion_axis(f, slots, a, z)
     stations.append(tip)
+    _note_bends(f, fs, stations, p, a, y, notes)
     radius = _segment_radius(hand, seg_links, T_links, y, z)
-    return FingerMeasure(slots, p, a, stations, z, y, tip, radius, seg_links, distal_links)
+    return FingerMeasure(slots, p, a, stations, z, y, tip, radius, seg_links, distal_links, tip_link)
+
+
+def _points_with_owner(hand: OriginalHand, links: list[str], T_links: dict) -> tuple[np.ndarray | None, list[str]]:
+    """Geometry points of ``links`` (as :func:`geometry_points`) and the link of each point."""
+    pts, owner = [], []
+    for l in links:
+        p = geometry_points(hand, [l], T_links)
+        if p is not None:
+            pts.append(p)
+            owner += [l] * len(p)
+    return (np.vstack(pts) if pts else None), owner
+
+
+def _rigid_root(hand: OriginalHand, link: str) -> str:
+    """The first link at or above ``link`` whose parent joint is not fixed (they move together)."""
+    while link in hand.parent_joint and hand.parent_joint[link].type == "fixed":
+        link = hand.parent_joint[link].parent
+    return link
+
+
+def _note_unfollowed(hand: OriginalHand, f: str, fs: FormSpec, moved: list[str], last_link: str, notes: list[str]) -> None:
+    """Warn about joints beyond the finger's last mapped joint that move links but drive no slot."""
+    mapped = {sm.name for sm in fs.slots.values()}
+    loose = []
+    for l in moved:
+        j = hand.parent_joint.get(l)
+        if l != last_link and j is not None and j.type != "fixed" and j.name not in mapped:
+            loose.append(f"{j.name!r}" + (f" (mimic of {j.mimic[0]!r})" if j.mimic else " (unmapped)"))
+    if loose:
+        msg = (f"{f}: joint(s) {', '.join(loose)} move links beyond the finger's last mapped joint but drive no slot: the "
+               f"canonical finger holds them at canonical zero (map them to slots to follow them)")
+        notes.append("approximation: " + msg)
+        warnings.warn(msg, ParseWarning, stacklevel=3)
+
+
+BEND_NOTE = np.radians(15.0)  # noted above this (joint origins sit off the finger axis by a few degrees)
+
+
+def _note_bends(f: str, fs: FormSpec, stations: list, p: dict, a: dict, y: np.ndarray, notes: list[str]) -> None:
+    """Note joints where the finger is bent at canonical zero (the template's zero is straight),
+    with the slot offset that would make canonical zero straight."""
+    for k in (1, 2):
+        if stations[k] is None or stations[k - 1] is None:
+            continue
+        nxt = next((s for s in stations[k + 1:] if s is not None), None)
+        d_in, d_out = stations[k] - stations[k - 1], (nxt - stations[k]) if nxt is not None else None
+        group = [s for s in STATION_SLOTS[f][k] if s in a]
+        if d_out is None or not group or np.linalg.norm(d_in) < 1e-6 or np.linalg.norm(d_out) < 1e-6:
+            continue
+        slot = max(group, key=lambda s: np.linalg.norm(np.cross(a[s], unit(d_in))))
+        ax = a[slot]
+        u, v = d_in - (d_in @ ax) * ax, d_out - (d_out @ ax) * ax
+        bend = float(np.arctan2(np.cross(u, v) @ ax, u @ v))  # + = flexed toward the palm
+        if abs(bend) > BEND_NOTE:
+            sm = fs.slots[slot]
+            notes.append(f"approximation: at canonical zero the {f} finger looks bent {np.degrees(bend):+.1f} deg at {slot} "
+                         f"(joint {sm.name!r}); offset {sm.offset + bend:+.4f} on {slot} would make canonical zero straight")
 
 
 def _palm_radius(
@@ -287,12 +362,13 @@ def _palm_radius(
 
 def measure(hand: OriginalHand, spec: HandSpec, form: str) -> Measurement:
     """Measure joint frames, fingertips and radii of ``hand`` under ``spec``'s ``form`` mapping."""
-    am = spec.action_map(form, hand.movable_joints)
+    am = spec.action_map(form, hand)
     fs = spec.form(form)
     notes: list[str] = []
     q0 = am.to_original(np.zeros(22))
+    passive0 = am.passive_values(np.zeros(22))
     T_palm_root = invert(xyzrpy_to_matrix(spec.palm_origin))
-    poses = hand.link_poses(q0)
+    poses = hand.link_poses(q0, passive=passive0)
     T_links = {l: T_palm_root @ poses[i] for i, l in enumerate(hand.links)}
     lower, upper = am.limits_to_canonical(hand.lower, hand.upper)
     for slot, v in fs.fixed.items():
@@ -315,7 +391,7 @@ def measure(hand: OriginalHand, spec: HandSpec, form: str) -> Measurement:
         else:
             finger_radius[f] = fm.radius
     return Measurement(hand, am, T_palm_root, q0, lower, upper, fingers, palm_link, palm_radius,
-                       finger_radius, tip_links, notes)
+                       finger_radius, tip_links, notes, passive0)
 
 
 __all__ = ["measure", "Measurement", "FingerMeasure", "ParseWarning", "geometry_points", "fixed_descendants", "unit"]

@@ -22,7 +22,9 @@ from pathlib import Path
 
 from ohra.canonical.params import BaseParams, ExtendedParams
 from ohra.errors import ParamsError, ParseError, SpecError
+from ohra.canonical.couplings import Coupling, describe
 from ohra.original.action import ActionMap
+from ohra.original.checks import check_palm_frame
 from ohra.original.estimate import initial_base, initial_extended
 from ohra.original.fit import FitResult, fit, rounded
 from ohra.original.measure import Measurement, ParseWarning, measure
@@ -76,6 +78,11 @@ class ParseResult:
     def hand(self) -> OriginalHand:
         return self.measurement.hand
 
+    @property
+    def couplings(self) -> tuple[Coupling, ...]:
+        """Canonical couplings of this hand and form (``slot = multiplier * driver + offset``)."""
+        return tuple(self.measurement.action_map.couplings)
+
 
 def load_original_for(spec: HandSpec, hands_root: str | Path | None = None) -> OriginalHand:
     """The original hand of ``spec`` (its URDF loaded and its joint names checked)."""
@@ -83,9 +90,10 @@ def load_original_for(spec: HandSpec, hands_root: str | Path | None = None) -> O
     if not path.is_file():
         from ohra.errors import AssetsNotFoundError
 
-        raise AssetsNotFoundError(f"{spec.source}: original URDF not found at {path} (set OHRA_HANDS_ROOT)")
+        tried = ", ".join(str(c) for c in spec.urdf_candidates(hands_root))
+        raise AssetsNotFoundError(f"{spec.source}: original URDF {spec.urdf!r} not found (tried {tried}; set OHRA_HANDS_ROOT)")
     hand = load_urdf(path)
-    spec.check_joints(hand.movable_joints)
+    spec.check_joints(hand)
     return hand
 
 
@@ -105,8 +113,9 @@ def parse(
     if hand is None:
         hand = load_original_for(spec, hands_root)
     else:
-        spec.check_joints(hand.movable_joints)
+        spec.check_joints(hand)
     m = measure(hand, spec, form)
+    m.notes.extend(check_palm_frame(m, spec, form))
     try:
         init = initial_base(m, spec, form) if form == "base" else initial_extended(m, spec, form)
     except ParamsError as exc:
@@ -119,6 +128,7 @@ def parse(
         params = rounded(init)
     params = apply_overrides(params, spec, form)
     notes = list(m.notes) + [f"override {o.key} = {o.value}: {o.reason}" for o in spec.overrides_for(form)]
+    notes += [f"coupling: {line}" for line in describe(m.couplings)]
     return ParseResult(params, form, spec, m, init, fr, notes)
 
 
