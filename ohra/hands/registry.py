@@ -52,24 +52,25 @@ def hands_paths() -> tuple[Path, ...]:
 
 
 def _spec_files() -> dict[str, Path]:
-    return _spec_files_in((specs_dir(),) + hands_paths())
+    """Hand name -> spec file over the package specs and the user folders (re-read when files change)."""
+    listing = tuple((p, p.stat().st_mtime_ns) for folder in (specs_dir(),) + hands_paths() for p in sorted(folder.glob("*.yaml")))
+    return _spec_files_in(listing)
 
 
 @lru_cache(maxsize=8)
-def _spec_files_in(folders: tuple[Path, ...]) -> dict[str, Path]:
-    """Hand name -> spec file over ``folders`` (one that does not parse is an error, never skipped)."""
+def _spec_files_in(listing: tuple[tuple[Path, int], ...]) -> dict[str, Path]:
+    """Hand name -> spec file (a file that does not parse is an error, never skipped)."""
     from ohra.original.spec import read_yaml
 
     out: dict[str, Path] = {}
-    for folder in folders:
-        for p in sorted(folder.glob("*.yaml")):
-            d = read_yaml(p.read_text(), str(p))
-            if not isinstance(d, dict) or "joints" not in d or "urdf" not in d:
-                raise SpecError(f"{p}: not a hand spec (expected a mapping with 'urdf' and 'joints' keys)")
-            name = str(d.get("name", p.stem))
-            if name in out:
-                raise SpecError(f"hand {name!r} is defined twice: {out[name]} and {p}")
-            out[name] = p
+    for p, _ in listing:
+        d = read_yaml(p.read_text(), str(p))
+        if not isinstance(d, dict) or "joints" not in d or "urdf" not in d:
+            raise SpecError(f"{p}: not a hand spec (expected a mapping with 'urdf' and 'joints' keys)")
+        name = str(d.get("name", p.stem))
+        if name in out:
+            raise SpecError(f"hand {name!r} is defined twice: {out[name]} and {p}")
+        out[name] = p
     return out
 
 
@@ -107,14 +108,19 @@ def registered_forms(name: str) -> list[str]:
     return [f for f in FORMS if f in spec(name).forms]
 
 
+def spec_path(name: str) -> Path:
+    """The spec file of a registered hand."""
+    files = _spec_files()
+    if name not in files:
+        raise HandNotFoundError(f"unknown hand {name!r}; registered: {', '.join(registered_hands())}")
+    return files[name]
+
+
 def spec(name: str):
     """The :class:`ohra.original.spec.HandSpec` of a registered hand."""
     from ohra.original.spec import load_spec
 
-    files = _spec_files()
-    if name not in files:
-        raise HandNotFoundError(f"unknown hand {name!r}; registered: {', '.join(registered_hands())}")
-    return load_spec(files[name])
+    return load_spec(spec_path(name))
 
 
 def _resolve_form(name: str, form: str | None) -> str:
