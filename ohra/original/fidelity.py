@@ -72,6 +72,7 @@ class FidelityReport:
     surface: dict[str, Stats] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     approximations: list[str] = field(default_factory=list)  # what the canonical form cannot express
+    tips_held: Stats | None = None  # hand tip error with unmapped joints held (only when there are some)
     couplings: list[str] = field(default_factory=list)  # "slot = a * driver + b" lines
 
     def to_dict(self) -> dict[str, Any]:
@@ -83,6 +84,7 @@ class FidelityReport:
             "surface": {k: v.to_dict() for k, v in self.surface.items()},
             "notes": self.notes,
             "approximations": self.approximations,
+            "tips_unmapped_held": self.tips_held.to_dict() if self.tips_held is not None else None,
             "couplings": self.couplings,
         }
 
@@ -98,6 +100,9 @@ class FidelityReport:
 
         for r in rows:
             lines.append(f"{r:8s} {cell(self.tips, r):>24s} {cell(self.joints, r):>24s} {cell(self.surface, r):>24s}")
+        if self.tips_held is not None:
+            lines.append(f"fingertip with the unmapped joints held at their default (as the action map drives the "
+                         f"original): {self.tips_held.mean:.2f} / {self.tips_held.p95:.2f} / {self.tips_held.max:.2f}")
         lines += [f"coupling: {c}" for c in self.couplings]
         lines += [f"approximation: {a}" for a in self.approximations]
         return "\n".join(lines)
@@ -109,11 +114,15 @@ def _joint_links(urdf: str) -> dict[str, str]:
     return {j.get("name"): j.find("child").get("link") for j in root.findall("joint")}
 
 
-def keypoint_errors(res: ParseResult, samples: int = 200, seed: int = 0) -> tuple[dict, dict, dict]:
-    """Per-finger joint (axis-line), joint-origin and fingertip errors [m] as arrays."""
+def keypoint_errors(res: ParseResult, samples: int = 200, seed: int = 0, unmapped: bool = True) -> tuple[dict, dict, dict]:
+    """Per-finger joint (axis-line), joint-origin and fingertip errors [m] as arrays.
+
+    ``unmapped``: also sample the actuated joints inside the hand that drive no slot (default);
+    False holds them at their default, as the action map drives the original hand.
+    """
     m = res.measurement
     hm = HandModel.from_params(res.params)
-    q_orig = sample_original(m, samples, seed, unmapped=True)
+    q_orig = sample_original(m, samples, seed, unmapped=unmapped)
     ok = original_keypoints(m, q_orig)
     qc = np.clip(ok.q_canon, hm.lower, hm.upper)
     links = _joint_links(hm.urdf)
@@ -305,6 +314,9 @@ def compare(
         approximations=approximations(res),
         couplings=describe(res.couplings),
     )
+    if unmapped_hand_joints(res.measurement):
+        held = keypoint_errors(res, samples, seed, unmapped=False)[2]
+        rep.tips_held = Stats.of(np.concatenate([v.ravel() for v in held.values()]) if held else np.array([]))
     if surface:
         se = surface_errors(res, surface_configs, surface_points, seed)
         rep.surface = {k: Stats.of(v) for k, v in se.items()}
