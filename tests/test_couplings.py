@@ -116,3 +116,19 @@ def test_a_joint_outside_the_vector_needs_a_coupling():
         ActionMap({"index_joint2": "a", "index_joint3": "m"}, ["a"])
     with pytest.raises(MappingError, match="not mapped"):
         ActionMap({"index_joint2": "a"}, ["a"], couplings=[Coupling("index_joint3", "index_joint2", 1.0)])
+
+
+def test_action_map_from_a_urdf_reads_mimic_chains():
+    urdf = """<robot name="chain"><link name="p"/><link name="a"/><link name="b"/><link name="c"/>
+      <joint name="j1" type="revolute"><parent link="p"/><child link="a"/><axis xyz="0 1 0"/><limit lower="0" upper="1"/></joint>
+      <joint name="j2" type="revolute"><parent link="a"/><child link="b"/><axis xyz="0 1 0"/><limit lower="0" upper="1"/>
+        <mimic joint="j1" multiplier="2.0" offset="0.1"/></joint>
+      <joint name="j3" type="revolute"><parent link="b"/><child link="c"/><axis xyz="0 1 0"/><limit lower="0" upper="1"/>
+        <mimic joint="j2" multiplier="0.5"/></joint></robot>"""
+    am = ActionMap.from_urdf(urdf, {"index_joint2": "j1", "index_joint4": {"name": "j3", "sign": -1.0, "offset": 0.2}})
+    assert am.original_joints == ("j1",)
+    (c,) = am.couplings
+    # q_j3 = 0.5 * (2 q_j1 + 0.1) = q_j1 + 0.05;  slot = -q_j3 + 0.2 = -q_slot2 + 0.15
+    assert (c.slot, c.driver, c.multiplier, c.offset) == ("index_joint4", "index_joint2", -1.0, pytest.approx(0.15))
+    with pytest.raises(MappingError, match="follows 'j1'.*map 'j1' to a slot too"):
+        ActionMap.from_urdf(urdf, {"index_joint4": "j3"})

@@ -22,7 +22,7 @@ from __future__ import annotations
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -46,6 +46,33 @@ class SlotMap:
     def __post_init__(self) -> None:
         if self.sign not in (1.0, -1.0, 1, -1):
             raise MappingError(f"sign of original joint {self.name!r} must be +1 or -1, got {self.sign}")
+
+
+def mimic_couplings(slots: Mapping[str, SlotMap], hand: Any) -> tuple[Coupling, ...]:
+    """Canonical couplings of the slots that map ``<mimic>`` joints of ``hand`` (an
+    :class:`~ohra.original.hand.OriginalHand`), chains of mimics composed.
+
+    With ``q_slot = s q_J + o``, ``q_J = a q_R + b`` (the mimic chain down to actuated joint R) and R
+    mapped to slot d with ``q_d = s_d q_R + o_d``: ``q_slot = (s a s_d) q_d + s (b - a s_d o_d) + o``.
+
+    Raises:
+        MappingError: a mimic joint whose actuated root drives no slot (names both joints).
+    """
+    by_joint = {sm.name: slot for slot, sm in slots.items()}
+    mimic = set(hand.mimic_joints)
+    out = []
+    for slot, sm in slots.items():
+        if sm.name not in mimic:
+            continue
+        root, a, b = hand.mimic_root(sm.name)
+        if root not in by_joint:
+            raise MappingError(f"slot {slot!r} maps mimic joint {sm.name!r}, which follows {root!r} "
+                               f"(q = {a:g} * q[{root}] {b:+g}); map {root!r} to a slot too")
+        d = slots[by_joint[root]]
+        mult = sm.sign * a * d.sign
+        off = sm.sign * (b - a * d.sign * d.offset) + sm.offset
+        out.append(Coupling(slot, by_joint[root], mult, off, f"urdf mimic {sm.name} -> {root}"))
+    return tuple(out)
 
 
 def original_joint_names(urdf: str | Path) -> list[str]:
@@ -173,8 +200,16 @@ class ActionMap:
         fixed: Mapping[str, float] | None = None,
         unmapped_default: Mapping[str, float] | None = None,
     ) -> "ActionMap":
-        """ActionMap whose original joint order is the movable joints of ``urdf`` (path or XML text) by name."""
-        return cls(slots, original_joint_names(urdf), palm_origin, dict(fixed or {}), dict(unmapped_default or {}))
+        """ActionMap whose original joint order is the movable joints of ``urdf`` (path or XML text) by
+        name; slots that map ``<mimic>`` joints get their couplings from the URDF."""
+        names = original_joint_names(urdf)
+        couplings: tuple[Coupling, ...] = ()
+        if "<mimic" in _read(urdf):
+            from ohra.original.urdf import load_urdf
+
+            sm = {k: (SlotMap(**v) if isinstance(v, Mapping) else SlotMap(v) if isinstance(v, str) else v) for k, v in slots.items()}
+            couplings = mimic_couplings(sm, load_urdf(urdf))
+        return cls(slots, names, palm_origin, dict(fixed or {}), dict(unmapped_default or {}), couplings)
 
     @property
     def n_original(self) -> int:

@@ -47,8 +47,8 @@ from typing import Any
 
 import numpy as np
 from ohra.canonical.couplings import Coupling, resolve
-from ohra.errors import ParamsError, SpecError
-from ohra.original.action import ActionMap, SlotMap
+from ohra.errors import MappingError, ParamsError, SpecError
+from ohra.original.action import ActionMap, SlotMap, mimic_couplings
 from ohra.paths import hands_root
 
 FORMS = ("base", "extended")
@@ -144,23 +144,10 @@ class HandSpec:
         """Canonical couplings of ``form``: from the URDF's ``<mimic>`` tags of mapped joints (when
         ``hand`` is an :class:`~ohra.original.hand.OriginalHand`) and declared in the spec; resolved."""
         fs = self.form(form)
-        out: list[Coupling] = []
-        by_joint = {sm.name: slot for slot, sm in fs.slots.items()}
-        mimic = set(getattr(hand, "mimic_joints", ()))
-        for slot, sm in fs.slots.items():
-            if sm.name not in mimic:
-                continue
-            root, a, b = hand.mimic_root(sm.name)
-            if root not in by_joint:
-                raise SpecError(
-                    f"{self.source}: forms.{form} slot {slot!r} maps mimic joint {sm.name!r}, which follows {root!r} "
-                    f"(q = {a:g} * q[{root}] {b:+g}); map {root!r} to a slot too"
-                )
-            d = fs.slots[by_joint[root]]
-            # q_slot = s*q_J + o;  q_J = a*q_R + b;  q_R = s_d*(q_d - o_d)
-            mult = sm.sign * a * d.sign
-            off = sm.sign * (b - a * d.sign * d.offset) + sm.offset
-            out.append(Coupling(slot, by_joint[root], mult, off, f"urdf mimic {sm.name} -> {root}"))
+        try:
+            out = list(mimic_couplings(fs.slots, hand)) if hand is not None and hasattr(hand, "mimic_root") else []
+        except MappingError as exc:
+            raise SpecError(f"{self.source}: forms.{form}: {exc}") from None
         for c in self.couplings:
             if c.slot in fs.slots and c.driver in fs.slots:
                 out.append(c)
