@@ -197,77 +197,81 @@ def _sample_palm(rng, R, depth, n) -> np.ndarray:
     return np.vstack([side, disc])
 
 
+def _original_samples(parts: list, labels: list[str], points: int, rng) -> tuple[np.ndarray, np.ndarray]:
+    """Surface samples of the posed original meshes, proportional to area, with their finger labels."""
+    import trimesh
+
+    areas = np.array([p.area for p in parts])
+    counts = np.maximum(1, np.round(points * areas / areas.sum()).astype(int))
+    pts, lab = [], []
+    for p, n, label in zip(parts, counts, labels):
+        s, _ = trimesh.sample.sample_surface(p, int(n), seed=int(rng.integers(1 << 31)))
+        pts.append(np.asarray(s))
+        lab += [label] * len(s)
+    return np.vstack(pts), np.array(lab)
+
+
+def _canonical_samples(caps, palm: dict, points: int, rng) -> tuple[np.ndarray, np.ndarray]:
+    """Surface samples of the capsule hand, proportional to area, kept only where on the union's surface."""
+    c_pts, c_lab = [], []
+    areas_c = [2 * np.pi * r * np.linalg.norm(b - a) + 4 * np.pi * r * r for a, b, r in zip(caps.p0, caps.p1, caps.radius)]
+    area_palm = 2 * np.pi * palm["radius"] * palm["depth"] + 2 * np.pi * palm["radius"] ** 2
+    tot = sum(areas_c) + area_palm
+    for k in range(len(caps.link)):
+        s = _sample_capsule(rng, caps.p0[k], caps.p1[k], caps.radius[k], max(8, int(points * areas_c[k] / tot)))
+        c_pts.append(s)
+        c_lab += [FINGERS[caps.finger[k]]] * len(s)
+    s = _sample_palm(rng, palm["radius"], palm["depth"], max(8, int(points * area_palm / tot)))
+    c_pts.append(s)
+    c_lab += ["palm"] * len(s)
+    pts, lab = np.vstack(c_pts), np.array(c_lab)
+    inside = np.zeros(len(pts), dtype=bool)
+    if len(caps.link):
+        inside |= np.min(_capsule_signed(pts, caps.p0, caps.p1, caps.radius), axis=1) < -1e-6
+    inside |= _palm_signed(pts, palm["radius"], palm["depth"]) < -1e-6
+    return pts[~inside], lab[~inside]
+
+
+def _hand_meshes(m: Measurement) -> tuple[dict, dict[str, str]]:
+    """Geometry of the palm link and everything below it (link -> trimesh), and link -> finger."""
+    finger_of = {l: f for f, fm in m.fingers.items() for l in fm.seg_links}
+    meshes = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for l in m.hand.descendants(m.palm_link):
+            g = m.hand.link_geometry(l)
+            if g is not None:
+                meshes[l] = g
+    return meshes, finger_of
+
+
 def surface_errors(res: ParseResult, configs: int = 3, points: int = 1500, seed: int = 0) -> dict[str, np.ndarray]:
     """Per-finger and hand symmetric surface distances [m] (concatenated over configurations)."""
     import trimesh
 
     m: Measurement = res.measurement
-    hand = m.hand
     hm = HandModel.from_params(res.params)
     rng = np.random.default_rng(seed)
-    hand_links = [l for l in hand.descendants(m.palm_link)]
-    finger_of: dict[str, str] = {}
-    for f, fm in m.fingers.items():
-        for l in fm.seg_links:
-            finger_of[l] = f
-    meshes = {}
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        for l in hand_links:
-            g = hand.link_geometry(l)
-            if g is not None:
-                meshes[l] = g
+    meshes, finger_of = _hand_meshes(m)
     q_orig = sample_original(m, configs - 1, seed + 1, unmapped=True) if configs > 1 else m.q0[None]
-    ok = original_keypoints(m, q_orig)
-    qc = np.clip(ok.q_canon, hm.lower, hm.upper)
-    palm = hm.palm
+    qc = np.clip(original_keypoints(m, q_orig).q_canon, hm.lower, hm.upper)
     out: dict[str, list[np.ndarray]] = {k: [] for k in list(m.fingers) + ["hand"]}
     link_list = list(meshes)
-    poses = hand.link_poses(q_orig, link_list) if link_list else None
+    poses = m.hand.link_poses(q_orig, link_list) if link_list else None
     for c in range(q_orig.shape[0]):
-        parts, labels = [], []
+        parts = []
         for i, l in enumerate(link_list):
-            T = m.T_palm_root @ poses[c, i]
             mm = meshes[l].copy()
-            mm.apply_transform(T)
+            mm.apply_transform(m.T_palm_root @ poses[c, i])
             parts.append(mm)
-            labels.append(finger_of.get(l, "palm"))
         if not parts:
             continue
-        areas = np.array([p.area for p in parts])
-        counts = np.maximum(1, np.round(points * areas / areas.sum()).astype(int))
-        o_pts, o_lab = [], []
-        for p, n, lab in zip(parts, counts, labels):
-            s, _ = trimesh.sample.sample_surface(p, int(n), seed=int(rng.integers(1 << 31)))
-            o_pts.append(np.asarray(s))
-            o_lab += [lab] * len(s)
-        o_pts = np.vstack(o_pts)
-        o_lab = np.array(o_lab)
+        o_pts, o_lab = _original_samples(parts, [finger_of.get(l, "palm") for l in link_list], points, rng)
         caps = hm.capsules(qc[c])
         sd = np.min(_capsule_signed(o_pts, caps.p0, caps.p1, caps.radius), axis=1) if len(caps.link) else np.full(len(o_pts), np.inf)
-        sd = np.minimum(sd, _palm_signed(o_pts, palm["radius"], palm["depth"]))
-        d_o2c = np.abs(sd)
-        # canonical samples, proportional to area, kept only where on the union's surface
-        c_pts, c_lab = [], []
-        areas_c = [2 * np.pi * r * np.linalg.norm(b - a) + 4 * np.pi * r * r for a, b, r in zip(caps.p0, caps.p1, caps.radius)]
-        area_palm = 2 * np.pi * palm["radius"] * palm["depth"] + 2 * np.pi * palm["radius"] ** 2
-        tot = sum(areas_c) + area_palm
-        for k in range(len(caps.link)):
-            s = _sample_capsule(rng, caps.p0[k], caps.p1[k], caps.radius[k], max(8, int(points * areas_c[k] / tot)))
-            c_pts.append(s)
-            c_lab += [FINGERS[caps.finger[k]]] * len(s)
-        s = _sample_palm(rng, palm["radius"], palm["depth"], max(8, int(points * area_palm / tot)))
-        c_pts.append(s)
-        c_lab += ["palm"] * len(s)
-        c_pts = np.vstack(c_pts)
-        c_lab = np.array(c_lab)
-        inside = np.zeros(len(c_pts), dtype=bool)
-        if len(caps.link):
-            inside |= np.min(_capsule_signed(c_pts, caps.p0, caps.p1, caps.radius), axis=1) < -1e-6
-        inside |= _palm_signed(c_pts, palm["radius"], palm["depth"]) < -1e-6
-        c_pts, c_lab = c_pts[~inside], c_lab[~inside]
-        merged = trimesh.util.concatenate(parts)
-        _, d_c2o, _ = trimesh.proximity.closest_point(merged, c_pts)
+        d_o2c = np.abs(np.minimum(sd, _palm_signed(o_pts, hm.palm["radius"], hm.palm["depth"])))
+        c_pts, c_lab = _canonical_samples(caps, hm.palm, points, rng)
+        _, d_c2o, _ = trimesh.proximity.closest_point(trimesh.util.concatenate(parts), c_pts)
         for f in m.fingers:
             out[f].append(np.concatenate([d_o2c[o_lab == f], d_c2o[c_lab == f]]))
         out["hand"].append(np.concatenate([d_o2c, d_c2o]))
