@@ -130,5 +130,11 @@ def test_action_map_from_a_urdf_reads_mimic_chains():
     (c,) = am.couplings
     # q_j3 = 0.5 * (2 q_j1 + 0.1) = q_j1 + 0.05;  slot = -q_j3 + 0.2 = -q_slot2 + 0.15
     assert (c.slot, c.driver, c.multiplier, c.offset) == ("index_joint4", "index_joint2", -1.0, pytest.approx(0.15))
-    with pytest.raises(MappingError, match="follows 'j1'.*map 'j1' to a slot too"):
-        ActionMap.from_urdf(urdf, {"index_joint4": "j3"})
+    # two mimics of an actuated joint that drives no slot: the first drives it (a proxy), the other follows
+    am = ActionMap.from_urdf(urdf, {"index_joint3": "j2", "index_joint4": "j3"})
+    assert am.mapped_original.tolist() == [True]
+    (c,) = am.couplings
+    # q_j2 = 2 q_j1 + 0.1, q_j3 = q_j1 + 0.05 = 0.5 q_j2
+    assert (c.slot, c.driver, c.multiplier, c.offset) == ("index_joint4", "index_joint3", 0.5, pytest.approx(0.0))
+    q = am.project(np.eye(22)[JOINT_INDEX["index_joint3"]] * 0.9)
+    assert am.to_original(q)[0] == pytest.approx(0.4)

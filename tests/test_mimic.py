@@ -80,10 +80,16 @@ def test_an_unmapped_mimic_joint_is_named_and_its_error_is_honest(tmp_path, no_h
     assert "approximation:" in rep.table()
 
 
-def test_a_mimic_joint_needs_its_driver_mapped(tmp_path, no_hands_root):
+def test_a_mimic_joint_whose_driver_has_no_slot_drives_it_as_a_proxy(tmp_path, no_hands_root):
+    """E.g. a spread joint moving a palm piece, mimicked by two fingers' abduction joints: map the mimics only."""
     spec = _toy(tmp_path, MIMIC_SPEC.replace("index_joint2: a, ", ""))
-    with pytest.raises(SpecError, match="maps mimic joint 'm', which follows 'a'.*map 'a' to a slot too"):
-        parse(spec, "extended", fit_params=False)
+    res = parse(spec, "extended", fit_params=False)
+    am = res.action_map
+    assert am.mapped_original.tolist() == [True] and not res.couplings
+    q = np.zeros(22)
+    q[JOINT_INDEX["index_joint3"]] = 0.55
+    assert am.to_original(q)[0] == pytest.approx((0.55 + 0.05) / 1.2)  # a = (m + 0.05) / 1.2
+    np.testing.assert_allclose(am.to_canonical(am.to_original(q)), q, atol=1e-12)
 
 
 def test_a_declared_coupling_travels_like_a_urdf_one(tmp_path, no_hands_root):

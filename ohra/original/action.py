@@ -48,30 +48,56 @@ class SlotMap:
             raise MappingError(f"sign of original joint {self.name!r} must be +1 or -1, got {self.sign}")
 
 
-def mimic_couplings(slots: Mapping[str, SlotMap], hand: Any) -> tuple[Coupling, ...]:
-    """Canonical couplings of the slots that map ``<mimic>`` joints of ``hand`` (an
-    :class:`~ohra.original.hand.OriginalHand`), chains of mimics composed.
+Mimic = Mapping[str, tuple[str, float, float]]  # mimic joint -> (actuated root joint, multiplier, offset)
 
-    With ``q_slot = s q_J + o``, ``q_J = a q_R + b`` (the mimic chain down to actuated joint R) and R
-    mapped to slot d with ``q_d = s_d q_R + o_d``: ``q_slot = (s a s_d) q_d + s (b - a s_d o_d) + o``.
 
-    Raises:
-        MappingError: a mimic joint whose actuated root drives no slot (names both joints).
-    """
-    by_joint = {sm.name: slot for slot, sm in slots.items()}
-    mimic = set(hand.mimic_joints)
-    out = []
+def mimic_relations(slots: Mapping[str, Any], hand: Any) -> dict[str, tuple[str, float, float]]:
+    """``{mimic joint: (actuated root, a, b)}`` (``q_J = a q_root + b``, chains composed) for the
+    mapped joints of ``slots`` that are ``<mimic>`` joints of ``hand`` (an OriginalHand)."""
+    names = {(sm.name if isinstance(sm, SlotMap) else SlotMap(**sm).name if isinstance(sm, Mapping) else str(sm)) for sm in slots.values()}
+    return {j: hand.mimic_root(j) for j in hand.mimic_joints if j in names}
+
+
+def _linear(slots: Mapping[str, SlotMap], original_joints: Sequence[str], mimic: Mimic) -> dict[str, tuple[str, float, float]]:
+    """Slot -> (actuated joint, alpha, beta) with ``q_slot = alpha * q_joint + beta`` (direct or via a mimic)."""
+    out = {}
     for slot, sm in slots.items():
-        if sm.name not in mimic:
-            continue
-        root, a, b = hand.mimic_root(sm.name)
-        if root not in by_joint:
-            raise MappingError(f"slot {slot!r} maps mimic joint {sm.name!r}, which follows {root!r} "
-                               f"(q = {a:g} * q[{root}] {b:+g}); map {root!r} to a slot too")
-        d = slots[by_joint[root]]
-        mult = sm.sign * a * d.sign
-        off = sm.sign * (b - a * d.sign * d.offset) + sm.offset
-        out.append(Coupling(slot, by_joint[root], mult, off, f"urdf mimic {sm.name} -> {root}"))
+        if sm.name in original_joints:
+            out[slot] = (sm.name, float(sm.sign), float(sm.offset))
+        elif sm.name in mimic:
+            root, a, b = mimic[sm.name]
+            if root not in original_joints:
+                raise MappingError(f"slot {slot!r} maps mimic joint {sm.name!r}, whose driver {root!r} is not an actuated joint")
+            if a == 0.0:
+                raise MappingError(f"slot {slot!r} maps mimic joint {sm.name!r} with multiplier 0 (a fixed joint): fix it instead")
+            out[slot] = (root, sm.sign * a, sm.sign * b + sm.offset)
+    return out
+
+
+def mimic_couplings(slots: Mapping[str, SlotMap], mimic: Mimic | Any) -> tuple[Coupling, ...]:
+    """Canonical couplings of the slots that map ``<mimic>`` joints (``mimic``: :func:`mimic_relations`
+    or an OriginalHand), chains of mimics composed.
+
+    Slots whose joints move with the same actuated joint R are coupled to one driver: the slot
+    mapping R itself, else (R drives no slot: a proxy) the first of them in canonical order. With
+    ``q_slot = alpha q_R + beta`` per slot: ``q_j = (alpha_j / alpha_d) q_d + beta_j - alpha_j beta_d / alpha_d``.
+    """
+    if hasattr(mimic, "mimic_root"):
+        mimic = mimic_relations(slots, mimic)
+    roots = {r for r, _, _ in mimic.values()}
+    lin = _linear(slots, [*roots, *(sm.name for sm in slots.values() if sm.name not in mimic)], mimic)
+    out = []
+    for root in sorted(roots):
+        group = [s for s in JOINT_NAMES if s in lin and lin[s][0] == root]
+        direct = [s for s in group if slots[s].name == root]
+        d = direct[0] if direct else group[0]
+        _, ad, bd = lin[d]
+        for s in group:
+            if s == d or slots[s].name not in mimic:
+                continue
+            _, aj, bj = lin[s]
+            src = f"urdf mimic {slots[s].name} -> {root}" + ("" if direct else f" (slot {d} drives {root})")
+            out.append(Coupling(s, d, aj / ad, bj - aj * bd / ad, src))
     return tuple(out)
 
 
@@ -112,8 +138,10 @@ class ActionMap:
         fixed: canonical joint name -> constant value for slots no original joint drives.
         unmapped_default: original joint name -> value used by :meth:`to_original` for joints that
             drive no slot (default 0).
-        couplings: canonical couplings (:class:`ohra.canonical.couplings.Coupling`); chains are
-            resolved to their root driver.
+        couplings: declared canonical couplings (:class:`ohra.canonical.couplings.Coupling`);
+            chains are resolved to their root driver.
+        mimic: mimic joint -> (actuated root, multiplier, offset) for slots that map ``<mimic>``
+            joints (:func:`mimic_relations`); their couplings are added (:func:`mimic_couplings`).
     """
 
     slots: Mapping[str, SlotMap]
@@ -122,14 +150,18 @@ class ActionMap:
     fixed: Mapping[str, float] = field(default_factory=dict)
     unmapped_default: Mapping[str, float] = field(default_factory=dict)
     couplings: Sequence[Coupling] = ()
+    mimic: Mimic = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         self.original_joints = tuple(self.original_joints)
         if len(set(self.original_joints)) != len(self.original_joints):
             dup = [n for n in self.original_joints if self.original_joints.count(n) > 1][0]
             raise MappingError(f"original joint {dup!r} appears twice in the original joint order")
+        self.mimic = dict(self.mimic)
+        raw = {k: (SlotMap(**v) if isinstance(v, Mapping) else SlotMap(v) if isinstance(v, str) else v) for k, v in dict(self.slots).items()}
         try:
-            self.couplings = cpl.resolve(self.couplings)
+            self.couplings = cpl.resolve(list(self.couplings) + list(mimic_couplings(
+                {k: v for k, v in raw.items() if k in JOINT_INDEX}, self.mimic)))
         except ParamsError as exc:
             raise MappingError(str(exc)) from None
         self.slots = slots = self._checked_slots()
@@ -147,12 +179,17 @@ class ActionMap:
             raise MappingError(f"palm_origin must be 6 finite numbers (xyz rpy), got {list(np.ravel(po))}")
         self.palm_origin = po
         n = len(self.original_joints)
-        active = {s: sm for s, sm in slots.items() if sm.name in self.original_joints}
-        self._passive = {s: sm for s, sm in slots.items() if s not in active}
-        self._c_idx = np.array([JOINT_INDEX[s] for s in active], dtype=int)
-        self._o_idx = np.array([self.original_joints.index(sm.name) for sm in active.values()], dtype=int)
-        self._sign = np.array([float(sm.sign) for sm in active.values()])
-        self._offset = np.array([sm.offset for sm in active.values()])
+        self._passive = {s: sm for s, sm in slots.items() if sm.name not in self.original_joints}
+        lin = _linear(slots, self.original_joints, self.mimic)
+        self._c_idx = np.array([JOINT_INDEX[s] for s in lin], dtype=int)
+        self._o_idx = np.array([self.original_joints.index(j) for j, _, _ in lin.values()], dtype=int)
+        self._alpha = np.array([a for _, a, _ in lin.values()])
+        self._beta = np.array([b for _, _, b in lin.values()])
+        # writers of the original vector: slots mapping a joint of it, else a free slot moving it through a mimic
+        coupled = {c.slot for c in self.couplings}
+        direct = [s for s in lin if slots[s].name in self.original_joints]
+        proxy = [s for s in lin if s not in direct and s not in coupled and lin[s][0] not in {lin[d][0] for d in direct}]
+        self._w = np.array([list(lin).index(s) for s in direct + proxy], dtype=int)
         self._canon_const = np.zeros(22)
         for slot, v in self.fixed.items():
             self._canon_const[JOINT_INDEX[slot]] = float(v)
@@ -173,7 +210,7 @@ class ActionMap:
                 sm = SlotMap(**sm)
             elif isinstance(sm, str):
                 sm = SlotMap(sm)
-            if sm.name not in self.original_joints and slot not in coupled:
+            if sm.name not in self.original_joints and sm.name not in self.mimic and slot not in coupled:
                 raise MappingError(
                     f"slot {slot!r} names original joint {sm.name!r}, which is not a movable joint of the original hand "
                     f"(known: {', '.join(self.original_joints)}; a mimic joint is mapped only with its slot's coupling)"
@@ -203,13 +240,12 @@ class ActionMap:
         """ActionMap whose original joint order is the movable joints of ``urdf`` (path or XML text) by
         name; slots that map ``<mimic>`` joints get their couplings from the URDF."""
         names = original_joint_names(urdf)
-        couplings: tuple[Coupling, ...] = ()
+        mimic: dict[str, tuple[str, float, float]] = {}
         if "<mimic" in _read(urdf):
             from ohra.original.urdf import load_urdf
 
-            sm = {k: (SlotMap(**v) if isinstance(v, Mapping) else SlotMap(v) if isinstance(v, str) else v) for k, v in slots.items()}
-            couplings = mimic_couplings(sm, load_urdf(urdf))
-        return cls(slots, names, palm_origin, dict(fixed or {}), dict(unmapped_default or {}), couplings)
+            mimic = mimic_relations(slots, load_urdf(urdf))
+        return cls(slots, names, palm_origin, dict(fixed or {}), dict(unmapped_default or {}), mimic=mimic)
 
     @property
     def n_original(self) -> int:
@@ -229,7 +265,7 @@ class ActionMap:
 
     @property
     def passive_joints(self) -> dict[str, str]:
-        """Coupled slot -> the original joint outside the joint vector (``<mimic>``) that it maps."""
+        """Slot -> the original joint outside the joint vector (``<mimic>``) that it maps."""
         return {s: sm.name for s, sm in self._passive.items()}
 
     def passive_values(self, q_canon: np.ndarray) -> dict[str, np.ndarray]:
@@ -248,9 +284,9 @@ class ActionMap:
 
     @property
     def mapped_original(self) -> np.ndarray:
-        """(n_original,) bool: original joints that drive a canonical slot."""
+        """(n_original,) bool: original joints set from a canonical slot (directly or through a mimic)."""
         m = np.zeros(self.n_original, dtype=bool)
-        m[self._o_idx] = True
+        m[self._o_idx[self._w]] = True
         return m
 
     def _check(self, q: np.ndarray, n: int, what: str) -> np.ndarray:
@@ -263,7 +299,7 @@ class ActionMap:
         """Original joint vector(s) (n,) or (N,n) -> canonical (22,) or (N,22)."""
         q = self._check(q_orig, self.n_original, "original joint")
         out = np.broadcast_to(self._canon_const, q.shape[:-1] + (22,)).copy()
-        out[..., self._c_idx] = self._sign * q[..., self._o_idx] + self._offset
+        out[..., self._c_idx] = self._alpha * q[..., self._o_idx] + self._beta
         return cpl.project(self.couplings, out) if self.couplings else out
 
     def to_original(self, q_canon: np.ndarray) -> np.ndarray:
@@ -275,15 +311,16 @@ class ActionMap:
         if self.couplings:
             q = cpl.project(self.couplings, q)
         out = np.broadcast_to(self._orig_const, q.shape[:-1] + (self.n_original,)).copy()
-        out[..., self._o_idx] = self._sign * (q[..., self._c_idx] - self._offset)
+        w = self._w
+        out[..., self._o_idx[w]] = (q[..., self._c_idx[w]] - self._beta[w]) / self._alpha[w]
         return out
 
     def limits_to_canonical(self, lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Canonical (22,) limits from original limits (a negated joint swaps and negates its limits)."""
         lo = self._check(lower, self.n_original, "original lower-limit")
         up = self._check(upper, self.n_original, "original upper-limit")
-        a = self._sign * lo[self._o_idx] + self._offset
-        b = self._sign * up[self._o_idx] + self._offset
+        a = self._alpha * lo[self._o_idx] + self._beta
+        b = self._alpha * up[self._o_idx] + self._beta
         clo, cup = self._canon_const.copy(), self._canon_const.copy()
         clo[self._c_idx] = np.minimum(a, b)
         cup[self._c_idx] = np.maximum(a, b)

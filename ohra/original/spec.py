@@ -46,9 +46,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from ohra.canonical.couplings import Coupling, resolve
-from ohra.errors import MappingError, ParamsError, SpecError
-from ohra.original.action import ActionMap, SlotMap, mimic_couplings
+from ohra.canonical.couplings import Coupling
+from ohra.errors import MappingError, SpecError
+from ohra.original.action import ActionMap, SlotMap, mimic_relations
 from ohra.paths import hands_root
 
 FORMS = ("base", "extended")
@@ -143,18 +143,12 @@ class HandSpec:
     def couplings_for(self, form: str, hand: Any = None) -> tuple[Coupling, ...]:
         """Canonical couplings of ``form``: from the URDF's ``<mimic>`` tags of mapped joints (when
         ``hand`` is an :class:`~ohra.original.hand.OriginalHand`) and declared in the spec; resolved."""
+        return tuple(self.action_map(form, hand).couplings) if hasattr(hand, "mimic_root") else self.declared_couplings(form)
+
+    def declared_couplings(self, form: str) -> tuple[Coupling, ...]:
+        """The spec's own couplings that apply to ``form`` (both slots mapped there)."""
         fs = self.form(form)
-        try:
-            out = list(mimic_couplings(fs.slots, hand)) if hand is not None and hasattr(hand, "mimic_root") else []
-        except MappingError as exc:
-            raise SpecError(f"{self.source}: forms.{form}: {exc}") from None
-        for c in self.couplings:
-            if c.slot in fs.slots and c.driver in fs.slots:
-                out.append(c)
-        try:
-            return resolve(out)
-        except ParamsError as exc:
-            raise SpecError(f"{self.source}: forms.{form}: {exc}") from None
+        return tuple(c for c in self.couplings if c.slot in fs.slots and c.driver in fs.slots)
 
     def action_map(self, form: str, hand: Any) -> ActionMap:
         """The :class:`ohra.ActionMap` of ``form`` for an original hand (an
@@ -162,7 +156,12 @@ class HandSpec:
         self.check_joints(hand)
         fs = self.form(form)
         actuated, _ = _joint_info(hand)
-        return ActionMap(fs.slots, list(actuated), self.palm_origin, fs.fixed, couplings=self.couplings_for(form, hand))
+        mimic = mimic_relations(fs.slots, hand) if hasattr(hand, "mimic_root") else {}
+        try:
+            return ActionMap(fs.slots, list(actuated), self.palm_origin, fs.fixed,
+                             couplings=self.declared_couplings(form), mimic=mimic)
+        except MappingError as exc:
+            raise SpecError(f"{self.source}: forms.{form}: {exc}") from None
 
     def overrides_for(self, form: str) -> list[Override]:
         return [o for o in self.overrides if o.form in (None, form)]
