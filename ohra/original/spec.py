@@ -27,7 +27,8 @@ A spec is a small YAML file (the registered hands' specs live in ``ohra/hands/sp
 A slot may name a ``<mimic>`` joint of the URDF like any other joint: its coupling to the slot of
 the joint it follows (through chains of mimics) is read from the URDF and carried as
 ``slot = multiplier * driver + offset`` in canonical terms (:mod:`ohra.canonical.couplings`);
-the joint it follows must be mapped too. ``couplings`` declares more such relations (both slots
+when the followed joint has no slot, the first such mimic slot drives it
+(:func:`ohra.original.action.mimic_couplings`). ``couplings`` declares more such relations (both slots
 mapped in each form where it applies). A relative ``urdf`` path is looked up next to the spec file
 first, then under the hand-assets root.
 
