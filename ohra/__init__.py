@@ -21,7 +21,8 @@ from ohra.errors import (
     ParseError,
     SpecError,
 )
-from ohra.hands import get_hand, list_hands
+from ohra.hands import get_couplings, get_hand, list_hands, resolve_hand
+from ohra.canonical.couplings import Coupling
 from ohra.canonical.kinematics import Capsules, HandModel
 from ohra.canonical.params import FINGERS, JOINT_NAMES, BaseParams, ExtendedParams, load_params
 from ohra.canonical.urdfgen import render, write
@@ -37,6 +38,7 @@ def load_original(name: str):
 __all__ = [
     "__version__", "ActionMap", "SlotMap", "BaseParams", "ExtendedParams", "load_params", "FINGERS",
     "JOINT_NAMES", "HandModel", "Capsules", "render", "write", "get_hand", "list_hands", "load_original",
+    "get_couplings", "resolve_hand", "Coupling",
     "OhraError", "ParamsError", "MappingError", "SpecError", "ParseError", "HandNotFoundError",
     "AssetsNotFoundError", "ObjectError", "GraspError", "CheckpointError", "DatasetError",
 ]

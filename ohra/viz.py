@@ -282,37 +282,42 @@ def add_original(vis: Any, hand: Any, q_orig: np.ndarray, T_world_root: np.ndarr
             add_mesh(vis, m.vertices, m.faces, T0 @ T, path=f"{path}/{name}", color=color, opacity=opacity)
 
 
-def add_overlay(vis: Any, name: str, form: str = "base", q: np.ndarray | None = None,
+def add_overlay(vis: Any, name: Any, form: str = "base", q: np.ndarray | None = None,
                 T_world_palm: np.ndarray | None = None, path: str = "overlay", original: bool = True) -> None:
-    """The paper's Fig. 2 view: a registered hand's original meshes and canonical capsules at the same
-    canonical configuration ``q`` (default 0 clamped into the limits), both in the palm frame."""
-    from ohra.hands import registry
+    """The paper's Fig. 2 view: a hand's original meshes and canonical capsules at the same canonical
+    configuration ``q`` (default 0 clamped into the limits, couplings applied), both in the palm frame.
+    ``name``: anything :func:`ohra.hands.resolve_hand` accepts (registered name, spec YAML, params JSON)."""
+    from ohra.canonical.couplings import project
     from ohra.canonical.kinematics import HandModel
+    from ohra.hands.resolve import resolve_hand
     from ohra.transforms import invert, xyzrpy_to_matrix
 
-    params = registry.registered_params(name, form)
+    ref = resolve_hand(name, form)
+    params = ref.params
     hm = HandModel.from_params(params)
     qc = hm.neutral() if q is None else hm.clamp(q)
+    qc = hm.clamp(project(ref.couplings, qc)) if ref.couplings else qc
     T0 = np.eye(4) if T_world_palm is None else np.asarray(T_world_palm, dtype=float)
     add_hand(vis, hm, qc, T0, path=f"{path}/canonical")
     if original:
         import warnings
 
-        sp = registry.spec(name)
+        sp = ref.require_spec("the original overlay")
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            orig = registry.load_original(name)
-        am = sp.action_map(form, orig.movable_joints)
+            orig = ref.original()
+            am = ref.action_map()
         T_root = T0 @ invert(xyzrpy_to_matrix(sp.palm_origin))
         add_original(vis, orig, am.to_original(qc), T_root, path=f"{path}/original")
 
 
-def compare_html(name: str, form: str, out: str | Path, seed: int = 0, vis: Any = None) -> Path:
+def compare_html(name: Any, form: str, out: str | Path, seed: int = 0, vis: Any = None) -> Path:
     """Static HTML with the overlay at q = 0 and at a random configuration (side by side, 0.3 m apart)."""
-    from ohra.hands import registry
     from ohra.canonical.kinematics import HandModel
+    from ohra.hands.resolve import resolve_hand
 
-    hm = HandModel.from_params(registry.registered_params(name, form))
+    name = resolve_hand(name, form)  # resolved once (a spec file is parsed once)
+    hm = HandModel.from_params(name.params)
     own = vis is None
     vis = new_visualizer() if own else vis
     try:
@@ -330,8 +335,8 @@ def compare_html(name: str, form: str, out: str | Path, seed: int = 0, vis: Any 
             proc.wait()
 
 
-def show_hand(vis: Any, name: str, form: str = "base", q: np.ndarray | None = None, original: bool = False) -> None:
-    """Draw a registered hand (optionally over its original) for ``ohra hand show``."""
+def show_hand(vis: Any, name: Any, form: str = "base", q: np.ndarray | None = None, original: bool = False) -> None:
+    """Draw a hand (any :func:`ohra.hands.resolve_hand` reference; optionally over its original) for ``ohra hand show``."""
     add_overlay(vis, name, form, q, path="hand", original=original)
 
 

@@ -50,3 +50,13 @@ def test_cli_compare_prints_the_table(hands_dir, capsys, tmp_path):
     assert "barrett_hand (base)" in out and "index" in out
     text = html.read_text()
     assert text.strip().startswith("<!DOCTYPE html>") and len(text) > 10_000
+
+
+def test_joints_the_form_cannot_follow_count_and_are_named(hands_dir):
+    """Allegro's finger twist joints have no slot in the base form: sampled, they make a large error
+    (the honest number) and are named; held at 0 (as the action map drives the original) they do not."""
+    rep = compare("allegro_hand_right", "base", samples=40, surface=False)
+    assert {"joint_0.0", "joint_4.0", "joint_8.0"} == {a.split("'")[1] for a in rep.approximations}
+    assert rep.tips["hand"].mean > 8.0 and rep.tips_held is not None and rep.tips_held.mean < 2.0
+    ext = compare("allegro_hand_right", "extended", samples=20, surface=False)
+    assert not ext.approximations and ext.tips_held is None

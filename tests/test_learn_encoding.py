@@ -37,7 +37,8 @@ SHADOW_REF = {
 # broken registry would silently parametrize nothing); test_registered_hands_exist keeps it in step.
 BASE_HANDS = [
     "allegro_hand_left", "allegro_hand_right", "barrett_hand", "dex3_left", "dex3_right", "gaia_hand_left",
-    "gaia_hand_right", "leap_hand_left", "leap_hand_right", "shadow_hand_left", "shadow_hand_right",
+    "gaia_hand_right", "inspire_hand_left", "inspire_hand_right",
+    "leap_hand_left", "leap_hand_right", "shadow_hand_left", "shadow_hand_right",
     "sharpa_wave_left", "sharpa_wave_right",
 ]
 

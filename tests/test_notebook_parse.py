@@ -26,3 +26,9 @@ def test_parse_notebook_executes(hands_dir, tmp_path):
     assert "missing-mesh warnings" in texts[3] and "palm radius" in texts[3]
     assert "static HTML" in texts[4]
     assert (tmp_path / "shadow_overlay.html").is_file()
+    # the coupled Inspire hand: mimic joints mapped, couplings read, targets met at the true fingertip
+    assert "index_joint3 <- index_intermediate_joint" in texts[5] and "index_joint3 = 1.06399 * index_joint2" in texts[5]
+    assert "inspire extended" in texts[6] and "inspire base" in texts[6] and "target met: False" not in texts[6]
+    assert texts[6].count("target met: True") == 2
+    assert "projected back: True" in texts[7]
+    assert "static HTML" in texts[8] and (tmp_path / "inspire_overlay.html").is_file()

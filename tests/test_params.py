@@ -288,3 +288,31 @@ def test_malformed_structures_only_raise_params_error(junk):
 
 def test_joint_names_are_canonical():
     assert JOINT_NAMES[0] == "thumb_joint1" and JOINT_NAMES[17] == "little_joint0" and len(JOINT_NAMES) == 22
+
+
+def test_segment_mask_is_the_one_rule_for_single_hands_and_batches():
+    from ohra.canonical.params import link_presence, segment_mask
+    from ohra.learn.encoding import segment_presence
+
+    rng = np.random.default_rng(5)
+    present = rng.random((64, 22)) < 0.5
+    seg_t, seg_f, fingers = segment_presence(present)
+    for template in ("standard", "leap"):
+        batch = segment_mask(present, template)
+        for row, mask in zip(present, batch):
+            d = link_presence(row, template)
+            assert [d[f] for f in ("thumb", "index", "middle", "ring", "little")] == [tuple(r) for r in mask.tolist()]
+    # spot checks of the rules: little_joint0 alone carries no segment; index j3 alone is the middle link
+    p = np.zeros(22, dtype=bool)
+    p[17] = True
+    assert not segment_mask(p).any()
+    p[:] = False
+    p[7] = True
+    assert segment_mask(p)[1].tolist() == [False, True, False]
+    assert segment_mask(p, "leap")[1].tolist() == [False, True, False]
+    p[:] = False
+    p[6] = True  # index j2: proximal in the standard template, middle in the LEAP flavour
+    assert segment_mask(p)[1].tolist() == [True, False, False]
+    assert segment_mask(p, "leap")[1].tolist() == [False, True, False]
+    np.testing.assert_array_equal(seg_t, segment_mask(present)[:, 0])
+    np.testing.assert_array_equal(fingers, segment_mask(present).any(axis=2))

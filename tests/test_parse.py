@@ -14,7 +14,8 @@ from ohra.original.spec import load_spec
 from ohra.hands import registry
 from ohra.canonical.kinematics import HandModel
 from ohra.original.urdf import MissingMeshWarning, load_urdf
-from ohra.original.parse import ParseWarning, canonical_keypoints, ext_arrays, ext_arrays_from_base, parse
+from ohra.original.keypoints import canonical_keypoints, ext_arrays, ext_arrays_from_base
+from ohra.original.parse import ParseWarning, parse
 from ohra.canonical.params import BaseParams
 from ohra.canonical.urdfgen import render
 
@@ -69,10 +70,12 @@ def test_canonical_original_canonical_round_trip_is_exact(hands_dir, name, form)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         orig = load_urdf(sp.urdf_path())
-    am = sp.action_map(form, orig.movable_joints)
+    am = sp.action_map(form, orig)
     params = registry.registered_params(name, form)
+    assert am.couplings == registry.couplings(name, form)  # the committed couplings are the URDF's
     rng = np.random.default_rng(7)
     q = params.joint_lowers + rng.random((50, 22)) * (params.joint_uppers - params.joint_lowers)
+    q = am.project(q)  # a coupled hand's canonical vectors live on the coupled subspace
     np.testing.assert_array_equal(am.mapped_slots | ~params.movable_joints, np.ones(22, dtype=bool))
     np.testing.assert_allclose(am.to_canonical(am.to_original(q)), q, atol=1e-12)
 

@@ -18,9 +18,9 @@ def spec_folder(tmp_path, monkeypatch):
     """The registry reading its specs from ``tmp_path`` (one good spec copied in); cache cleared around."""
     shutil.copy(specs_dir() / "shadow_hand_right.yaml", tmp_path)
     monkeypatch.setattr(registry, "specs_dir", lambda: tmp_path)
-    registry._spec_files.cache_clear()
+    registry._spec_files_in.cache_clear()
     yield tmp_path
-    registry._spec_files.cache_clear()  # runs before monkeypatch restores specs_dir: nothing stale is cached
+    registry._spec_files_in.cache_clear()  # runs before monkeypatch restores specs_dir: nothing stale is cached
 
 
 def test_good_spec_alone_is_registered(spec_folder):

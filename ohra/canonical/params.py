@@ -172,24 +172,35 @@ def present_mask(lowers: np.ndarray, uppers: np.ndarray) -> np.ndarray:
     return (np.asarray(lowers) != 0.0) | (np.asarray(uppers) != 0.0)
 
 
-def link_presence(present: np.ndarray, template: str = "standard") -> dict[str, tuple[bool, bool, bool]]:
-    """Which of (proximal, middle, distal) links carry geometry, per finger, from joint presence.
+def segment_mask(present: np.ndarray, template: str = "standard") -> np.ndarray:
+    """Which (proximal, middle, distal) links carry geometry: joint presence (..., 22) -> (..., 5, 3) bool.
 
     Rules of the canonical templates (reference §2.2-2.4): thumb proximal iff j1 or j2, middle iff
-    j3 or j4, distal iff j5. Other fingers: proximal iff j1 or j2, middle iff j3, distal iff j4.
-    In the LEAP flavour (abduction after flexion): proximal iff j1, middle iff j2 or j3, distal iff j4.
+    j3 or j4, distal iff j5. Other fingers: proximal iff j1 or j2, middle iff j3, distal iff j4
+    (the little finger's joints 1-4: little_joint0 is the extra metacarpal joint and carries no
+    segment). In the LEAP flavour (abduction after flexion): proximal iff j1, middle iff j2 or j3,
+    distal iff j4. The one definition of these rules; batched for the learning code.
     """
     p = np.asarray(present, dtype=bool)
-    out = {"thumb": (bool(p[0] or p[1]), bool(p[2] or p[3]), bool(p[4]))}
-    for f in FINGERS[1:]:
-        j = p[FINGER_SLICES[f]]
+    if p.shape[-1] != 22:
+        raise ParamsError(f"joint presence must have 22 entries in its last axis, got shape {p.shape}")
+    out = np.zeros(p.shape[:-1] + (5, 3), dtype=bool)
+    out[..., 0, :] = np.stack([p[..., 0] | p[..., 1], p[..., 2] | p[..., 3], p[..., 4]], axis=-1)
+    for fi, f in enumerate(FINGERS[1:], start=1):
+        j = p[..., FINGER_SLICES[f]]
         if f == "little":
-            j = j[1:]  # little_joint0 is the extra metacarpal joint, it carries no segment
+            j = j[..., 1:]
         if template == "leap":
-            out[f] = (bool(j[0]), bool(j[1] or j[2]), bool(j[3]))
+            out[..., fi, :] = np.stack([j[..., 0], j[..., 1] | j[..., 2], j[..., 3]], axis=-1)
         else:
-            out[f] = (bool(j[0] or j[1]), bool(j[2]), bool(j[3]))
+            out[..., fi, :] = np.stack([j[..., 0] | j[..., 1], j[..., 2], j[..., 3]], axis=-1)
     return out
+
+
+def link_presence(present: np.ndarray, template: str = "standard") -> dict[str, tuple[bool, bool, bool]]:
+    """:func:`segment_mask` of one hand as ``{finger: (proximal, middle, distal)}``."""
+    m = segment_mask(present, template)
+    return {f: (bool(m[fi, 0]), bool(m[fi, 1]), bool(m[fi, 2])) for fi, f in enumerate(FINGERS)}
 
 
 class _ParamsMixin:
@@ -255,7 +266,7 @@ class _ParamsMixin:
         if not isinstance(d, dict):
             raise ParamsError(f"{where}: expected a JSON object, got {type(d).__name__}")
         try:
-            return cls.from_dict(d)
+            return cls.from_dict(_without_couplings(d, where))
         except ParamsError as exc:
             raise ParamsError(f"{where}: {exc}") from None
 
@@ -664,6 +675,17 @@ def _unflatten(keys: tuple[tuple[str, tuple[int, ...]], ...], v: Any, size: int)
     return out
 
 
+def _without_couplings(d: dict[str, Any], where: str) -> dict[str, Any]:
+    """``d`` without the optional ``"couplings"`` key (validated here; read with
+    :func:`ohra.canonical.couplings.read_couplings`). Reference files have no such key."""
+    if "couplings" not in d:
+        return d
+    from ohra.canonical.couplings import couplings_from_json_value
+
+    couplings_from_json_value(d["couplings"], where)
+    return {k: v for k, v in d.items() if k != "couplings"}
+
+
 def load_params(source: str | Path | Mapping[str, Any]) -> BaseParams | ExtendedParams:
     """Load params of either form from a JSON path, JSON text or dict; the form is detected by its keys."""
     if isinstance(source, Mapping):
@@ -676,6 +698,7 @@ def load_params(source: str | Path | Mapping[str, Any]) -> BaseParams | Extended
             raise ParamsError(f"{where}: malformed JSON ({exc})") from None
         if not isinstance(d, dict):
             raise ParamsError(f"{where}: expected a JSON object, got {type(d).__name__}")
+    d = _without_couplings(d, where)
     cls: type[BaseParams] | type[ExtendedParams]
     if "finger_radii" in d or "joint_origins" in d:
         cls = ExtendedParams

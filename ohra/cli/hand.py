@@ -200,11 +200,15 @@ def _cmd_parse(args: argparse.Namespace) -> int:
         res = parse(spec, _form(args), fit_params=args.fit)
     for w in caught:
         print(f"warning: {w.message}", file=sys.stderr)
+    from ohra.canonical.couplings import params_json
+    from ohra.io import write_text
+
+    text = params_json(res.params, res.couplings)  # + the optional "couplings" key of a coupled hand
     if args.output:
-        res.params.to_json(args.output)  # atomic, see ohra.io
+        write_text(args.output, text)
         print(f"wrote {args.output}", file=sys.stderr)
     else:
-        sys.stdout.write(res.params.to_json())
+        sys.stdout.write(text)
     if res.fit is not None:
         print(f"fit: keypoint rms {res.fit.initial_rms_mm:.2f} -> {res.fit.final_rms_mm:.2f} mm "
               f"({res.fit.samples} configurations, {res.fit.iterations} evaluations)", file=sys.stderr)
@@ -241,8 +245,11 @@ def _cmd_show(args: argparse.Namespace) -> int:  # pragma: no cover - starts a s
             q = np.array([float(x) for x in args.q.replace(",", " ").split()])
         except ValueError:
             raise OhraError(f"--q: expected 22 numbers separated by commas or spaces, got {args.q!r}") from None
+    from ohra.hands.resolve import resolve_hand
+
+    ref = resolve_hand(args.hand, _form(args))  # a bad name fails here, before a meshcat server starts
     vis = viz.new_visualizer()
-    viz.show_hand(vis, args.hand, _form(args), q=q, original=args.original)
+    viz.show_hand(vis, ref, _form(args), q=q, original=args.original)
     print(vis.url())
     if not args.no_wait:
         input("press Enter to stop the viewer ")

@@ -67,6 +67,8 @@ def build_parser(prog: str = "ohra") -> argparse.ArgumentParser:
     parser = Parser(prog=prog, description="Canonical dexterous hands: render, inspect, parse, evaluate, synthesise, learn.",
                     epilog="Run 'ohra COMMAND --help' for a command's options. Exit codes: 0 ok, 2 bad input or usage.")
     parser.add_argument("--version", action="version", version=f"ohra {__version__}")
+    parser.add_argument("--hands", action="append", default=[], metavar="DIR", dest="hands_dirs",
+                        help="user hand folder: its *.yaml specs join the registry (also $OHRA_HANDS_PATH)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
     sub.required = True
     for name in COMMANDS:
@@ -81,6 +83,10 @@ def build_parser(prog: str = "ohra") -> argparse.ArgumentParser:
 def execute(args: argparse.Namespace) -> int:
     """Run the command parsed into ``args`` (its ``func``); user errors become one stderr line and exit 2."""
     try:
+        for folder in getattr(args, "hands_dirs", ()):
+            from ohra.hands.registry import add_hands_path
+
+            add_hands_path(folder)
         return int(args.func(args) or 0)
     except OhraError as exc:
         print(f"ohra: error: {exc}", file=sys.stderr)

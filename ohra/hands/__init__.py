@@ -1,7 +1,8 @@
 """The hand registry: registered real hands, the 256 LEAP variants, and params files.
 
-``get_hand(name)`` accepts a registered hand name (``shadow_hand_right``, ...), a LEAP variant
-(``leap_3303``), or a path to a params JSON file.
+``get_hand(name)`` accepts a registered hand name (``shadow_hand_right``, ...; user folders from
+``$OHRA_HANDS_PATH`` included), a LEAP variant (``leap_3303``), a hand spec YAML file or a params
+JSON file; ``get_couplings(name)`` gives its coupled joints.
 """
 
 from __future__ import annotations
@@ -9,56 +10,44 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Union
 
-from ohra.errors import HandNotFoundError, ParamsError
-from ohra.canonical.params import BaseParams, ExtendedParams, load_params
-from ohra.hands.leap.variants import is_variant, leap_variant, variant_names
+from ohra.canonical.couplings import Coupling
+from ohra.canonical.params import BaseParams, ExtendedParams
+from ohra.hands.leap.variants import leap_variant, variant_names
+from ohra.hands.resolve import HandRef, resolve_hand
 
 Params = Union[BaseParams, ExtendedParams]
 FORMS = ("base", "extended")
 
 
+def _registry():
+    """The registered-hands module (specs and committed params of real hands); imported on use."""
+    from ohra.hands import registry
+
+    return registry
+
+
 def list_hands(include_variants: bool = False) -> list[str]:
     """Registered hand names (plus the 256 ``leap_XXXX`` variants if asked)."""
-    from ohra.hands import registry  # imported on use; an error in it surfaces here, never hidden
-
-    names = sorted(registry.registered_hands())
+    reg = _registry()
+    names = sorted(reg.registered_hands()) if reg is not None else []
     if include_variants:
         names += variant_names()
     return names
 
 
 def get_hand(name: str | Path, form: str | None = None) -> Params:
-    """Params of a registered hand, a LEAP variant or a params JSON file.
+    """Params of a registered hand, a LEAP variant, a hand spec YAML (parsed, cached) or a params JSON file.
 
     ``form`` is ``"base"`` or ``"extended"``; None picks the hand's natural form (base for registered
     hands that have one, extended for LEAP variants and extended-only hands, the file's own form).
+    Couplings travel beside the params: :func:`get_couplings`, or :func:`resolve_hand` for both.
     """
-    if form is not None and form not in FORMS:
-        raise HandNotFoundError(f"unknown form {form!r}; expected one of {FORMS}")
-    key = str(name)
-    if is_variant(key):
-        if form == "base":
-            raise HandNotFoundError(f"{key} exists only in the extended form (LEAP flavour)")
-        return leap_variant(key)
-    from ohra.hands import registry
-
-    if key in registry.registered_hands():
-        return registry.registered_params(key, form)
-    p = Path(key)
-    if p.suffix == ".json" or p.is_file():
-        if not p.is_file():
-            raise HandNotFoundError(f"params file not found: {p}")
-        params = load_params(p)
-        if form == "extended" and isinstance(params, BaseParams):
-            return params.to_extended()
-        if form == "base" and isinstance(params, ExtendedParams):
-            try:
-                return params.to_base()
-            except ParamsError as exc:
-                raise HandNotFoundError(f"{p}: {exc}") from None
-        return params
-    known = ", ".join(list_hands()) or "(no registered hands)"
-    raise HandNotFoundError(f"unknown hand {key!r}: not a registered hand ({known}), not leap_XXXX, not a params JSON file")
+    return resolve_hand(name, form).params
 
 
-__all__ = ["get_hand", "list_hands", "variant_names", "leap_variant", "FORMS"]
+def get_couplings(name: str | Path, form: str | None = None) -> tuple[Coupling, ...]:
+    """Canonical couplings (``slot = multiplier * driver + offset``) of any hand :func:`get_hand` accepts."""
+    return resolve_hand(name, form).couplings
+
+
+__all__ = ["get_hand", "get_couplings", "resolve_hand", "HandRef", "list_hands", "variant_names", "leap_variant", "FORMS"]

@@ -1,87 +1,166 @@
-"""Registered real hands: specs (``ohra/hands/specs/<name>.yaml``), committed params and canonical URDFs.
+"""Registered real hands: specs, committed params (+ couplings) and canonical URDFs.
 
-Each registered hand has a spec and, per form it is registered in, the parser's output committed as
-``ohra/hands/params/{base,extended}/<name>.json`` and the rendered canonical URDF as
-``ohra/urdf/{base,extended}/<name>.urdf``. Regenerate everything after changing a spec, the parser or
-the templates with::
+Package hands: a spec ``ohra/hands/specs/<name>.yaml`` and, per form it is registered in, the
+parser's output committed as ``ohra/hands/params/{base,extended}/<name>.json`` (with the optional
+``"couplings"`` key for hands with coupled joints) and the rendered canonical URDF as
+``ohra/urdf/{base,extended}/<name>.urdf``. Regenerate them after changing a spec, the parser or the
+templates with::
 
-    python -m ohra.hands.registry            # all hands (needs the hand assets)
+    python -m ohra.hands.registry            # all package hands (needs the hand assets)
     python -m ohra.hands.registry shadow_hand_right
+
+User hands, no package edits: every folder in ``$OHRA_HANDS_PATH`` (``os.pathsep``-separated) or
+added with :func:`add_hands_path` (``ohra --hands DIR``) contributes its ``*.yaml`` specs; their
+params are read from ``DIR/params/<form>/<name>.json`` when present, else parsed (with the fit) on
+first use and kept for the process. A name defined twice is an error naming both files.
 """
 
 from __future__ import annotations
 
+import os
 import sys
+import warnings
 from functools import lru_cache
 from pathlib import Path
 
-import yaml
-
-from ohra.errors import AssetsNotFoundError, HandNotFoundError, SpecError
+from ohra.canonical.couplings import Coupling, params_json, read_couplings
 from ohra.canonical.params import BaseParams, ExtendedParams, load_params
+from ohra.errors import AssetsNotFoundError, HandNotFoundError, SpecError
 from ohra.resources import hands_data_dir, specs_dir, urdf_dir
 
 FORMS = ("base", "extended")
+PATH_ENV = "OHRA_HANDS_PATH"
+_added: list[Path] = []
 
 
-@lru_cache(maxsize=1)
+def add_hands_path(folder: str | Path) -> None:
+    """Add a user hand folder (its ``*.yaml`` specs join the registry) for this process."""
+    p = Path(folder).expanduser().resolve()
+    if not p.is_dir():
+        raise HandNotFoundError(f"hand folder not found: {p}")
+    if p not in _added:
+        _added.append(p)
+
+
+def hands_paths() -> tuple[Path, ...]:
+    """User hand folders: ``$OHRA_HANDS_PATH`` entries, then those added with :func:`add_hands_path`."""
+    env = [Path(x).expanduser().resolve() for x in os.environ.get(PATH_ENV, "").split(os.pathsep) if x.strip()]
+    for p in env:
+        if not p.is_dir():
+            raise HandNotFoundError(f"{PATH_ENV} names {p}, which is not a folder")
+    return tuple(dict.fromkeys(env + _added))
+
+
 def _spec_files() -> dict[str, Path]:
-    """Registered hand name -> spec file (every ``specs/*.yaml``; one that does not parse is an error)."""
-    out = {}
-    for p in sorted(specs_dir().glob("*.yaml")):
-        try:
-            d = yaml.safe_load(p.read_text())
-        except yaml.YAMLError as exc:
-            mark = getattr(exc, "problem_mark", None)
-            where = f" line {mark.line + 1}" if mark is not None else ""
-            raise SpecError(f"{p}:{where} invalid YAML: {getattr(exc, 'problem', None) or exc}") from None
+    """Hand name -> spec file over the package specs and the user folders (re-read when files change)."""
+    listing = tuple((p, p.stat().st_mtime_ns) for folder in (specs_dir(),) + hands_paths() for p in sorted(folder.glob("*.yaml")))
+    return _spec_files_in(listing)
+
+
+@lru_cache(maxsize=8)
+def _spec_files_in(listing: tuple[tuple[Path, int], ...]) -> dict[str, Path]:
+    """Hand name -> spec file (a file that does not parse is an error, never skipped)."""
+    from ohra.original.spec import read_yaml
+
+    out: dict[str, Path] = {}
+    for p, _ in listing:
+        d = read_yaml(p.read_text(), str(p))
         if not isinstance(d, dict) or "joints" not in d or "urdf" not in d:
             raise SpecError(f"{p}: not a hand spec (expected a mapping with 'urdf' and 'joints' keys)")
-        out[str(d.get("name", p.stem))] = p
+        name = str(d.get("name", p.stem))
+        if name in out:
+            raise SpecError(f"hand {name!r} is defined twice: {out[name]} and {p}")
+        out[name] = p
     return out
 
 
+def _is_user(name: str) -> bool:
+    files = _spec_files()
+    return name in files and files[name].parent != specs_dir()
+
+
 def params_path(name: str, form: str) -> Path:
+    """Where the params JSON of a hand and form lives (package, or ``DIR/params/<form>/`` of a user folder)."""
+    files = _spec_files()
+    if name in files and _is_user(name):
+        return files[name].parent / "params" / form / f"{name}.json"
     return hands_data_dir() / "params" / form / f"{name}.json"
 
 
 def urdf_path(name: str, form: str) -> Path:
+    """Where the canonical URDF of a hand and form is written (``DIR/urdf/<form>/`` for user hands)."""
+    files = _spec_files()
+    if name in files and _is_user(name):
+        return files[name].parent / "urdf" / form / f"{name}.urdf"
     return urdf_dir() / form / f"{name}.urdf"
 
 
 def registered_hands() -> list[str]:
-    """Names of hands with a spec and at least one committed params file."""
-    return [n for n in _spec_files() if any(params_path(n, f).is_file() for f in FORMS)]
+    """Package hands with a spec and a committed params file, and every user-folder spec."""
+    return [n for n in _spec_files() if _is_user(n) or any(params_path(n, f).is_file() for f in FORMS)]
 
 
 def registered_forms(name: str) -> list[str]:
-    return [f for f in FORMS if params_path(name, f).is_file()]
+    """Forms a hand is registered in (user hands without params files: the forms of their spec)."""
+    forms = [f for f in FORMS if params_path(name, f).is_file()]
+    if forms or not _is_user(name):
+        return forms
+    return [f for f in FORMS if f in spec(name).forms]
+
+
+def spec_path(name: str) -> Path:
+    """The spec file of a registered hand."""
+    files = _spec_files()
+    if name not in files:
+        raise HandNotFoundError(f"unknown hand {name!r}; registered: {', '.join(registered_hands())}")
+    return files[name]
 
 
 def spec(name: str):
     """The :class:`ohra.original.spec.HandSpec` of a registered hand."""
     from ohra.original.spec import load_spec
 
-    files = _spec_files()
-    if name not in files:
-        raise HandNotFoundError(f"unknown hand {name!r}; registered: {', '.join(registered_hands())}")
-    return load_spec(files[name])
+    return load_spec(spec_path(name))
 
 
-def registered_params(name: str, form: str | None = None) -> BaseParams | ExtendedParams:
-    """Committed params of a registered hand (``form`` None: base when registered, else extended)."""
+def _resolve_form(name: str, form: str | None) -> str:
     forms = registered_forms(name)
     if not forms:
         raise HandNotFoundError(f"unknown hand {name!r}; registered: {', '.join(registered_hands())}")
     if form is None:
-        form = forms[0]
+        return forms[0]
     if form not in forms:
         raise HandNotFoundError(f"hand {name!r} is registered only in the {'/'.join(forms)} form, not {form!r}")
-    return load_params(params_path(name, form))
+    return form
+
+
+def registered_params(name: str, form: str | None = None) -> BaseParams | ExtendedParams:
+    """Params of a registered hand (``form`` None: base when registered, else extended)."""
+    form = _resolve_form(name, form)
+    p = params_path(name, form)
+    if p.is_file():
+        return load_params(p)
+    return _parsed(name, form).params
+
+
+def couplings(name: str, form: str | None = None) -> tuple[Coupling, ...]:
+    """Canonical couplings of a registered hand (empty for hands without coupled joints)."""
+    form = _resolve_form(name, form)
+    p = params_path(name, form)
+    if p.is_file():
+        return read_couplings(p)
+    return _parsed(name, form).couplings
+
+
+def _parsed(name: str, form: str):
+    """A user hand parsed on use (fit included), kept for the process while its spec is unchanged."""
+    from ohra.hands.resolve import parse_spec_file
+
+    return parse_spec_file(_spec_files()[name], form)
 
 
 def load_original(name: str, hands_root: str | Path | None = None):
-    """The original hand model (:class:`ohra.original.urdf.OriginalHand`) of a registered hand.
+    """The original hand model (:class:`ohra.original.hand.OriginalHand`) of a registered hand.
 
     Needs the hand assets; raises :class:`ohra.AssetsNotFoundError` naming the expected path.
     """
@@ -90,14 +169,16 @@ def load_original(name: str, hands_root: str | Path | None = None):
     sp = spec(name)
     path = sp.urdf_path(hands_root)
     if not path.is_file():
+        tried = ", ".join(str(c) for c in sp.urdf_candidates(hands_root))
         raise AssetsNotFoundError(
-            f"original URDF of {name!r} not found at {path}; set OHRA_HANDS_ROOT to the folder holding the hand assets"
+            f"original URDF of {name!r} not found (tried {tried}); set OHRA_HANDS_ROOT to the folder holding the hand assets"
         )
     return load_urdf(path)
 
 
 def generate(name: str, form: str, write: bool = True):
-    """Parse (with fit and overrides) and optionally write params JSON + canonical URDF; returns the ParseResult."""
+    """Parse (with fit and overrides) and optionally write params JSON (+ couplings) and the canonical
+    URDF; returns the ParseResult."""
     from ohra.canonical import urdfgen
     from ohra.original.parse import parse
 
@@ -106,15 +187,13 @@ def generate(name: str, form: str, write: bool = True):
     if write:
         p = params_path(name, form)
         p.parent.mkdir(parents=True, exist_ok=True)
-        res.params.to_json(p)
+        p.write_text(params_json(res.params, res.couplings))
         urdfgen.write(res.params, urdf_path(name, form), robot_name=name)
     return res
 
 
 def main(argv: list[str] | None = None) -> int:
-    import warnings
-
-    names = (argv if argv is not None else sys.argv[1:]) or list(_spec_files())
+    names = (argv if argv is not None else sys.argv[1:]) or [n for n in _spec_files() if not _is_user(n)]
     for n in names:
         sp = spec(n)
         for form in sp.forms:

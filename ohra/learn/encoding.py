@@ -36,7 +36,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ohra.errors import OhraError, ParamsError
-from ohra.canonical.params import MAX_ANGLE, BaseParams, ExtendedParams
+from ohra.canonical.params import MAX_ANGLE, BaseParams, ExtendedParams, segment_mask
 from ohra.learn.sampler import BASIS_AXES, EXTRA, FINGER_RADIUS, LENGTHS, LOWERS, PALM, THUMB_AXES, THUMB_RPY, UPPERS, XYZ
 
 ENCODING_DIM = 66
@@ -227,15 +227,11 @@ def decode_params(x66: Any, limits: Any = None) -> BaseParams | list[BaseParams]
 def segment_presence(present: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """From joint presence (N, 22): thumb segments (N, 3), non-thumb segments (N, 4, 3), fingers (N, 5).
 
-    Link rules of the base template: thumb proximal iff j1|j2, middle iff j3|j4, distal iff j5;
-    other fingers proximal iff j1|j2, middle iff j3, distal iff j4 (little: joints 1-4).
+    The base template's link rules, from :func:`ohra.canonical.params.segment_mask` (their one
+    definition), split the way the encoding uses them.
     """
-    p = np.asarray(present, dtype=bool)
-    seg_t = np.stack([p[:, 0] | p[:, 1], p[:, 2] | p[:, 3], p[:, 4]], axis=1)
-    j = np.stack([p[:, 5:9], p[:, 9:13], p[:, 13:17], p[:, 18:22]], axis=1)  # (N, 4, 4)
-    seg_f = np.stack([j[..., 0] | j[..., 1], j[..., 2], j[..., 3]], axis=2)
-    fingers = np.concatenate([seg_t.any(axis=1, keepdims=True), seg_f.any(axis=2)], axis=1)
-    return seg_t, seg_f, fingers
+    seg = segment_mask(present)
+    return seg[:, 0], seg[:, 1:], seg.any(axis=2)
 
 
 def project_vectors(v82: np.ndarray, min_gap_tol: float = 1e-9) -> np.ndarray:

@@ -7,7 +7,14 @@ twist joint the form cannot express) are set to 0 when mapping back, the referen
 ``unmapped_default`` to choose other values.
 
 The original joint order is the order of the movable (revolute, continuous, prismatic) joints as
-they appear in the original URDF file.
+they appear in the original URDF file, mimic joints excluded.
+
+Couplings (:mod:`ohra.canonical.couplings`, ``slot = multiplier * driver + offset``) are applied
+both ways: original -> canonical fills every coupled slot from its driver; canonical -> original
+reads only the driving slots (a coupled slot mapped to an actuated original joint gets the value
+the coupling gives). A slot may map a joint outside the original joint vector (a ``<mimic>``
+joint, moved by the URDF itself) only when it is coupled. :meth:`ActionMap.residual` reports how
+far a canonical vector violates the couplings and :meth:`ActionMap.project` enforces them.
 """
 
 from __future__ import annotations
@@ -15,12 +22,14 @@ from __future__ import annotations
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from ohra.errors import MappingError
+from ohra.canonical import couplings as cpl
+from ohra.canonical.couplings import Coupling
 from ohra.canonical.params import JOINT_INDEX, JOINT_NAMES
+from ohra.errors import MappingError, ParamsError
 from ohra.transforms import invert, xyzrpy_to_matrix
 
 MOVABLE_TYPES = ("revolute", "continuous", "prismatic")
@@ -37,6 +46,59 @@ class SlotMap:
     def __post_init__(self) -> None:
         if self.sign not in (1.0, -1.0, 1, -1):
             raise MappingError(f"sign of original joint {self.name!r} must be +1 or -1, got {self.sign}")
+
+
+Mimic = Mapping[str, tuple[str, float, float]]  # mimic joint -> (actuated root joint, multiplier, offset)
+
+
+def mimic_relations(slots: Mapping[str, Any], hand: Any) -> dict[str, tuple[str, float, float]]:
+    """``{mimic joint: (actuated root, a, b)}`` (``q_J = a q_root + b``, chains composed) for the
+    mapped joints of ``slots`` that are ``<mimic>`` joints of ``hand`` (an OriginalHand)."""
+    names = {(sm.name if isinstance(sm, SlotMap) else SlotMap(**sm).name if isinstance(sm, Mapping) else str(sm)) for sm in slots.values()}
+    return {j: hand.mimic_root(j) for j in hand.mimic_joints if j in names}
+
+
+def _linear(slots: Mapping[str, SlotMap], original_joints: Sequence[str], mimic: Mimic) -> dict[str, tuple[str, float, float]]:
+    """Slot -> (actuated joint, alpha, beta) with ``q_slot = alpha * q_joint + beta`` (direct or via a mimic)."""
+    out = {}
+    for slot, sm in slots.items():
+        if sm.name in original_joints:
+            out[slot] = (sm.name, float(sm.sign), float(sm.offset))
+        elif sm.name in mimic:
+            root, a, b = mimic[sm.name]
+            if root not in original_joints:
+                raise MappingError(f"slot {slot!r} maps mimic joint {sm.name!r}, whose driver {root!r} is not an actuated joint")
+            if a == 0.0:
+                raise MappingError(f"slot {slot!r} maps mimic joint {sm.name!r} with multiplier 0 (a fixed joint): fix it instead")
+            out[slot] = (root, sm.sign * a, sm.sign * b + sm.offset)
+    return out
+
+
+def mimic_couplings(slots: Mapping[str, SlotMap], mimic: Mimic | Any) -> tuple[Coupling, ...]:
+    """Canonical couplings of the slots that map ``<mimic>`` joints (``mimic``: :func:`mimic_relations`
+    or an OriginalHand), chains of mimics composed.
+
+    Slots whose joints move with the same actuated joint R are coupled to one driver: the slot
+    mapping R itself, else (R drives no slot: a proxy) the first of them in canonical order. With
+    ``q_slot = alpha q_R + beta`` per slot: ``q_j = (alpha_j / alpha_d) q_d + beta_j - alpha_j beta_d / alpha_d``.
+    """
+    if hasattr(mimic, "mimic_root"):
+        mimic = mimic_relations(slots, mimic)
+    roots = {r for r, _, _ in mimic.values()}
+    lin = _linear(slots, [*roots, *(sm.name for sm in slots.values() if sm.name not in mimic)], mimic)
+    out = []
+    for root in sorted(roots):
+        group = [s for s in JOINT_NAMES if s in lin and lin[s][0] == root]
+        direct = [s for s in group if slots[s].name == root]
+        d = direct[0] if direct else group[0]
+        _, ad, bd = lin[d]
+        for s in group:
+            if s == d or slots[s].name not in mimic:
+                continue
+            _, aj, bj = lin[s]
+            src = f"urdf mimic {slots[s].name} -> {root}" + ("" if direct else f" (slot {d} drives {root})")
+            out.append(Coupling(s, d, aj / ad, bj - aj * bd / ad, src))
+    return tuple(out)
 
 
 def original_joint_names(urdf: str | Path) -> list[str]:
@@ -76,6 +138,10 @@ class ActionMap:
         fixed: canonical joint name -> constant value for slots no original joint drives.
         unmapped_default: original joint name -> value used by :meth:`to_original` for joints that
             drive no slot (default 0).
+        couplings: declared canonical couplings (:class:`ohra.canonical.couplings.Coupling`);
+            chains are resolved to their root driver.
+        mimic: mimic joint -> (actuated root, multiplier, offset) for slots that map ``<mimic>``
+            joints (:func:`mimic_relations`); their couplings are added (:func:`mimic_couplings`).
     """
 
     slots: Mapping[str, SlotMap]
@@ -83,12 +149,58 @@ class ActionMap:
     palm_origin: Sequence[float] = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     fixed: Mapping[str, float] = field(default_factory=dict)
     unmapped_default: Mapping[str, float] = field(default_factory=dict)
+    couplings: Sequence[Coupling] = ()
+    mimic: Mimic = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         self.original_joints = tuple(self.original_joints)
         if len(set(self.original_joints)) != len(self.original_joints):
             dup = [n for n in self.original_joints if self.original_joints.count(n) > 1][0]
             raise MappingError(f"original joint {dup!r} appears twice in the original joint order")
+        self.mimic = dict(self.mimic)
+        raw = {k: (SlotMap(**v) if isinstance(v, Mapping) else SlotMap(v) if isinstance(v, str) else v) for k, v in dict(self.slots).items()}
+        try:
+            self.couplings = cpl.resolve(list(self.couplings) + list(mimic_couplings(
+                {k: v for k, v in raw.items() if k in JOINT_INDEX}, self.mimic)))
+        except ParamsError as exc:
+            raise MappingError(str(exc)) from None
+        self.slots = slots = self._checked_slots()
+        self._check_couplings()
+        for slot in self.fixed:
+            if slot not in JOINT_INDEX:
+                raise MappingError(f"unknown canonical slot {slot!r} in fixed values")
+            if slot in slots:
+                raise MappingError(f"slot {slot!r} is both mapped and fixed")
+        for name in self.unmapped_default:
+            if name not in self.original_joints:
+                raise MappingError(f"unmapped default names unknown original joint {name!r}")
+        po = np.asarray(self.palm_origin, dtype=float)
+        if po.shape != (6,) or not np.all(np.isfinite(po)):
+            raise MappingError(f"palm_origin must be 6 finite numbers (xyz rpy), got {list(np.ravel(po))}")
+        self.palm_origin = po
+        n = len(self.original_joints)
+        self._passive = {s: sm for s, sm in slots.items() if sm.name not in self.original_joints}
+        lin = _linear(slots, self.original_joints, self.mimic)
+        self._c_idx = np.array([JOINT_INDEX[s] for s in lin], dtype=int)
+        self._o_idx = np.array([self.original_joints.index(j) for j, _, _ in lin.values()], dtype=int)
+        self._alpha = np.array([a for _, a, _ in lin.values()])
+        self._beta = np.array([b for _, _, b in lin.values()])
+        # writers of the original vector: slots mapping a joint of it, else a free slot moving it through a mimic
+        coupled = {c.slot for c in self.couplings}
+        direct = [s for s in lin if slots[s].name in self.original_joints]
+        proxy = [s for s in lin if s not in direct and s not in coupled and lin[s][0] not in {lin[d][0] for d in direct}]
+        self._w = np.array([list(lin).index(s) for s in direct + proxy], dtype=int)
+        self._canon_const = np.zeros(22)
+        for slot, v in self.fixed.items():
+            self._canon_const[JOINT_INDEX[slot]] = float(v)
+        self._orig_const = np.zeros(n)
+        for name, v in self.unmapped_default.items():
+            self._orig_const[self.original_joints.index(name)] = float(v)
+        self._T_palm = xyzrpy_to_matrix(po)
+
+    def _checked_slots(self) -> dict[str, SlotMap]:
+        """Validated slot maps; a joint outside the original vector is allowed for coupled slots only."""
+        coupled = {c.slot for c in self.couplings}
         slots: dict[str, SlotMap] = {}
         used: dict[str, str] = {}
         for slot, sm in dict(self.slots).items():
@@ -98,40 +210,23 @@ class ActionMap:
                 sm = SlotMap(**sm)
             elif isinstance(sm, str):
                 sm = SlotMap(sm)
-            if sm.name not in self.original_joints:
+            if sm.name not in self.original_joints and sm.name not in self.mimic and slot not in coupled:
                 raise MappingError(
-                    f"slot {slot!r} names original joint {sm.name!r}, which is not a movable joint of the "
-                    f"original hand (known: {', '.join(self.original_joints)})"
+                    f"slot {slot!r} names original joint {sm.name!r}, which is not a movable joint of the original hand "
+                    f"(known: {', '.join(self.original_joints)}; a mimic joint is mapped only with its slot's coupling)"
                 )
             if sm.name in used:
                 raise MappingError(f"original joint {sm.name!r} is mapped twice (slots {used[sm.name]!r} and {slot!r})")
             used[sm.name] = slot
             slots[slot] = sm
-        for slot in self.fixed:
-            if slot not in JOINT_INDEX:
-                raise MappingError(f"unknown canonical slot {slot!r} in fixed values")
-            if slot in slots:
-                raise MappingError(f"slot {slot!r} is both mapped and fixed")
-        for name in self.unmapped_default:
-            if name not in self.original_joints:
-                raise MappingError(f"unmapped default names unknown original joint {name!r}")
-        self.slots = slots
-        po = np.asarray(self.palm_origin, dtype=float)
-        if po.shape != (6,) or not np.all(np.isfinite(po)):
-            raise MappingError(f"palm_origin must be 6 finite numbers (xyz rpy), got {list(np.ravel(po))}")
-        self.palm_origin = po
-        n = len(self.original_joints)
-        self._c_idx = np.array([JOINT_INDEX[s] for s in slots], dtype=int)
-        self._o_idx = np.array([self.original_joints.index(sm.name) for sm in slots.values()], dtype=int)
-        self._sign = np.array([float(sm.sign) for sm in slots.values()])
-        self._offset = np.array([sm.offset for sm in slots.values()])
-        self._canon_const = np.zeros(22)
-        for slot, v in self.fixed.items():
-            self._canon_const[JOINT_INDEX[slot]] = float(v)
-        self._orig_const = np.zeros(n)
-        for name, v in self.unmapped_default.items():
-            self._orig_const[self.original_joints.index(name)] = float(v)
-        self._T_palm = xyzrpy_to_matrix(po)
+        return slots
+
+    def _check_couplings(self) -> None:
+        for c in self.couplings:
+            for s in (c.slot, c.driver):
+                if s not in self.slots:
+                    raise MappingError(f"coupling {c.slot} <- {c.driver}: slot {s!r} is not mapped")
+        self._A, self._b = cpl.coupling_matrix(self.couplings)
 
     @classmethod
     def from_urdf(
@@ -142,8 +237,15 @@ class ActionMap:
         fixed: Mapping[str, float] | None = None,
         unmapped_default: Mapping[str, float] | None = None,
     ) -> "ActionMap":
-        """ActionMap whose original joint order is the movable joints of ``urdf`` (path or XML text) by name."""
-        return cls(slots, original_joint_names(urdf), palm_origin, dict(fixed or {}), dict(unmapped_default or {}))
+        """ActionMap whose original joint order is the movable joints of ``urdf`` (path or XML text) by
+        name; slots that map ``<mimic>`` joints get their couplings from the URDF."""
+        names = original_joint_names(urdf)
+        mimic: dict[str, tuple[str, float, float]] = {}
+        if "<mimic" in _read(urdf):
+            from ohra.original.urdf import load_urdf
+
+            mimic = mimic_relations(slots, load_urdf(urdf))
+        return cls(slots, names, palm_origin, dict(fixed or {}), dict(unmapped_default or {}), mimic=mimic)
 
     @property
     def n_original(self) -> int:
@@ -151,16 +253,40 @@ class ActionMap:
 
     @property
     def mapped_slots(self) -> np.ndarray:
-        """(22,) bool: canonical slots driven by an original joint."""
+        """(22,) bool: canonical slots driven by an original joint (mimic joints included)."""
         m = np.zeros(22, dtype=bool)
-        m[self._c_idx] = True
+        m[[JOINT_INDEX[s] for s in self.slots]] = True
         return m
 
     @property
+    def free_slots(self) -> np.ndarray:
+        """(22,) bool: slots not coupled to another (the independent canonical coordinates)."""
+        return cpl.free_mask(self.couplings)
+
+    @property
+    def passive_joints(self) -> dict[str, str]:
+        """Slot -> the original joint outside the joint vector (``<mimic>``) that it maps."""
+        return {s: sm.name for s, sm in self._passive.items()}
+
+    def passive_values(self, q_canon: np.ndarray) -> dict[str, np.ndarray]:
+        """Original values of the passive (mimic) joints from their own slots of ``q_canon`` (22,) or
+        (N,22) — not from the coupling — for :meth:`OriginalHand.link_poses`' ``passive``."""
+        q = self._check(q_canon, 22, "canonical joint")
+        return {sm.name: sm.sign * (q[..., JOINT_INDEX[s]] - sm.offset) for s, sm in self._passive.items()}
+
+    def residual(self, q_canon: np.ndarray) -> np.ndarray:
+        """(..., K) coupling residuals ``q[slot] - (a q[driver] + b)`` [rad] of canonical vector(s)."""
+        return cpl.residual(self.couplings, self._check(q_canon, 22, "canonical joint"))
+
+    def project(self, q_canon: np.ndarray) -> np.ndarray:
+        """Canonical vector(s) with every coupled slot set from its driver (free slots unchanged)."""
+        return cpl.project(self.couplings, self._check(q_canon, 22, "canonical joint"))
+
+    @property
     def mapped_original(self) -> np.ndarray:
-        """(n_original,) bool: original joints that drive a canonical slot."""
+        """(n_original,) bool: original joints set from a canonical slot (directly or through a mimic)."""
         m = np.zeros(self.n_original, dtype=bool)
-        m[self._o_idx] = True
+        m[self._o_idx[self._w]] = True
         return m
 
     def _check(self, q: np.ndarray, n: int, what: str) -> np.ndarray:
@@ -173,26 +299,33 @@ class ActionMap:
         """Original joint vector(s) (n,) or (N,n) -> canonical (22,) or (N,22)."""
         q = self._check(q_orig, self.n_original, "original joint")
         out = np.broadcast_to(self._canon_const, q.shape[:-1] + (22,)).copy()
-        out[..., self._c_idx] = self._sign * q[..., self._o_idx] + self._offset
-        return out
+        out[..., self._c_idx] = self._alpha * q[..., self._o_idx] + self._beta
+        return cpl.project(self.couplings, out) if self.couplings else out
 
     def to_original(self, q_canon: np.ndarray) -> np.ndarray:
-        """Canonical vector(s) (22,) or (N,22) -> original (n,) or (N,n); unmapped joints get their default."""
+        """Canonical vector(s) (22,) or (N,22) -> original (n,) or (N,n); unmapped joints get their default.
+
+        Only driving slots are read: coupled slots are taken from the coupling (see :meth:`residual`).
+        """
         q = self._check(q_canon, 22, "canonical joint")
+        if self.couplings:
+            q = cpl.project(self.couplings, q)
         out = np.broadcast_to(self._orig_const, q.shape[:-1] + (self.n_original,)).copy()
-        out[..., self._o_idx] = self._sign * (q[..., self._c_idx] - self._offset)
+        w = self._w
+        out[..., self._o_idx[w]] = (q[..., self._c_idx[w]] - self._beta[w]) / self._alpha[w]
         return out
 
     def limits_to_canonical(self, lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Canonical (22,) limits from original limits (a negated joint swaps and negates its limits)."""
         lo = self._check(lower, self.n_original, "original lower-limit")
         up = self._check(upper, self.n_original, "original upper-limit")
-        a = self._sign * lo[self._o_idx] + self._offset
-        b = self._sign * up[self._o_idx] + self._offset
+        a = self._alpha * lo[self._o_idx] + self._beta
+        b = self._alpha * up[self._o_idx] + self._beta
         clo, cup = self._canon_const.copy(), self._canon_const.copy()
         clo[self._c_idx] = np.minimum(a, b)
         cup[self._c_idx] = np.maximum(a, b)
-        return clo, cup
+        # a coupled slot reaches what its driver's range gives it
+        return cpl.propagate_limits(self.couplings, clo, cup) if self.couplings else (clo, cup)
 
     def wrist_to_canonical(self, T_root: np.ndarray) -> np.ndarray:
         """Pose(s) of the original root frame (…,4,4) -> pose(s) of the canonical palm frame."""

@@ -1,17 +1,22 @@
 """How well a canonical hand reproduces its original: joint, fingertip and surface errors.
 
-For a hand and a form, N original configurations are sampled uniformly within the mapped joints'
-limits (seeded; unmapped joints at their canonical-zero value), mapped to canonical with the hand's
-:class:`ohra.ActionMap`, and both hands are compared in the canonical palm frame:
+For a hand and a form, N original configurations are sampled uniformly within the limits of the
+*actuated* joints inside the hand (seeded): the joints that drive a slot, and those that drive none
+but move links below the palm (which the canonical hand cannot follow: each is named in the notes as
+an approximation, and its motion counts in the errors). Coupled joints follow their drivers (URDF
+``<mimic>`` joints through the URDF itself, declared couplings through the action map). Each
+configuration is mapped to canonical with the hand's :class:`ohra.ActionMap`, and both hands are
+compared in the canonical palm frame:
 
 * **joints**: distance from each canonical joint origin to the mapped original joint's axis line
   (a revolute joint's position along its own axis has no kinematic meaning); ``joint_origins``
   reports the plain distance between the original child-frame origin and the canonical joint origin.
-* **tips**: canonical tip frame vs the original fingertip point. The original fingertip is defined
-  automatically from the distal link's geometry (the child link of the finger's last mapped joint,
-  with links fixed to it; collision geometry, else visual) at canonical zero: the centroid of its
-  points within 1 mm of the farthest extent along the finger direction, moved out to that extent,
-  and carried rigidly with that link.
+* **tips**: canonical tip frame vs the *true* fingertip of the original finger: the end of the
+  finger's geometry over every link it moves beyond its last mapped joint (links fixed to it and
+  links moved by mimic or unmapped joints; collision geometry, else visual) at canonical zero: the
+  centroid of its points within 1 mm of the farthest extent along the finger direction, moved out
+  to that extent, and carried rigidly by the link that reaches farthest — never simply the last
+  mapped link.
 * **surface**: symmetric mean point-to-surface distance between the canonical capsule hand (palm
   cylinder + capsules) and the original geometry of the hand's links (the palm link and everything
   below it), over a few configurations. Original -> canonical distances are analytic; canonical ->
@@ -29,9 +34,12 @@ from typing import Any
 
 import numpy as np
 
+from ohra.canonical.couplings import describe
 from ohra.canonical.kinematics import HandModel
 from ohra.canonical.params import FINGER_SLICES, FINGERS, JOINT_NAMES
-from ohra.original.parse import Measurement, ParseResult, line_distance, measure, original_keypoints, sample_original
+from ohra.original.keypoints import line_distance, original_keypoints, sample_original, unmapped_hand_joints
+from ohra.original.measure import Measurement
+from ohra.original.parse import ParseResult
 
 
 @dataclass(frozen=True)
@@ -63,6 +71,9 @@ class FidelityReport:
     tips: dict[str, Stats]
     surface: dict[str, Stats] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    approximations: list[str] = field(default_factory=list)  # what the canonical form cannot express
+    tips_held: Stats | None = None  # hand tip error with unmapped joints held (only when there are some)
+    couplings: list[str] = field(default_factory=list)  # "slot = a * driver + b" lines
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -72,6 +83,9 @@ class FidelityReport:
             "tips": {k: v.to_dict() for k, v in self.tips.items()},
             "surface": {k: v.to_dict() for k, v in self.surface.items()},
             "notes": self.notes,
+            "approximations": self.approximations,
+            "tips_unmapped_held": self.tips_held.to_dict() if self.tips_held is not None else None,
+            "couplings": self.couplings,
         }
 
     def table(self) -> str:
@@ -86,6 +100,11 @@ class FidelityReport:
 
         for r in rows:
             lines.append(f"{r:8s} {cell(self.tips, r):>24s} {cell(self.joints, r):>24s} {cell(self.surface, r):>24s}")
+        if self.tips_held is not None:
+            lines.append(f"fingertip with the unmapped joints held at their default (as the action map drives the "
+                         f"original): {self.tips_held.mean:.2f} / {self.tips_held.p95:.2f} / {self.tips_held.max:.2f}")
+        lines += [f"coupling: {c}" for c in self.couplings]
+        lines += [f"approximation: {a}" for a in self.approximations]
         return "\n".join(lines)
 
 
@@ -95,11 +114,15 @@ def _joint_links(urdf: str) -> dict[str, str]:
     return {j.get("name"): j.find("child").get("link") for j in root.findall("joint")}
 
 
-def keypoint_errors(res: ParseResult, samples: int = 200, seed: int = 0) -> tuple[dict, dict, dict]:
-    """Per-finger joint (axis-line), joint-origin and fingertip errors [m] as arrays."""
+def keypoint_errors(res: ParseResult, samples: int = 200, seed: int = 0, unmapped: bool = True) -> tuple[dict, dict, dict]:
+    """Per-finger joint (axis-line), joint-origin and fingertip errors [m] as arrays.
+
+    ``unmapped``: also sample the actuated joints inside the hand that drive no slot (default);
+    False holds them at their default, as the action map drives the original hand.
+    """
     m = res.measurement
     hm = HandModel.from_params(res.params)
-    q_orig = sample_original(m, samples, seed)
+    q_orig = sample_original(m, samples, seed, unmapped=unmapped)
     ok = original_keypoints(m, q_orig)
     qc = np.clip(ok.q_canon, hm.lower, hm.upper)
     links = _joint_links(hm.urdf)
@@ -174,107 +197,117 @@ def _sample_palm(rng, R, depth, n) -> np.ndarray:
     return np.vstack([side, disc])
 
 
+def _original_samples(parts: list, labels: list[str], points: int, rng) -> tuple[np.ndarray, np.ndarray]:
+    """Surface samples of the posed original meshes, proportional to area, with their finger labels."""
+    import trimesh
+
+    areas = np.array([p.area for p in parts])
+    counts = np.maximum(1, np.round(points * areas / areas.sum()).astype(int))
+    pts, lab = [], []
+    for p, n, label in zip(parts, counts, labels):
+        s, _ = trimesh.sample.sample_surface(p, int(n), seed=int(rng.integers(1 << 31)))
+        pts.append(np.asarray(s))
+        lab += [label] * len(s)
+    return np.vstack(pts), np.array(lab)
+
+
+def _canonical_samples(caps, palm: dict, points: int, rng) -> tuple[np.ndarray, np.ndarray]:
+    """Surface samples of the capsule hand, proportional to area, kept only where on the union's surface."""
+    c_pts, c_lab = [], []
+    areas_c = [2 * np.pi * r * np.linalg.norm(b - a) + 4 * np.pi * r * r for a, b, r in zip(caps.p0, caps.p1, caps.radius)]
+    area_palm = 2 * np.pi * palm["radius"] * palm["depth"] + 2 * np.pi * palm["radius"] ** 2
+    tot = sum(areas_c) + area_palm
+    for k in range(len(caps.link)):
+        s = _sample_capsule(rng, caps.p0[k], caps.p1[k], caps.radius[k], max(8, int(points * areas_c[k] / tot)))
+        c_pts.append(s)
+        c_lab += [FINGERS[caps.finger[k]]] * len(s)
+    s = _sample_palm(rng, palm["radius"], palm["depth"], max(8, int(points * area_palm / tot)))
+    c_pts.append(s)
+    c_lab += ["palm"] * len(s)
+    pts, lab = np.vstack(c_pts), np.array(c_lab)
+    inside = np.zeros(len(pts), dtype=bool)
+    if len(caps.link):
+        inside |= np.min(_capsule_signed(pts, caps.p0, caps.p1, caps.radius), axis=1) < -1e-6
+    inside |= _palm_signed(pts, palm["radius"], palm["depth"]) < -1e-6
+    return pts[~inside], lab[~inside]
+
+
+def _hand_meshes(m: Measurement) -> tuple[dict, dict[str, str]]:
+    """Geometry of the palm link and everything below it (link -> trimesh), and link -> finger."""
+    finger_of = {l: f for f, fm in m.fingers.items() for l in fm.seg_links}
+    meshes = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for l in m.hand.descendants(m.palm_link):
+            g = m.hand.link_geometry(l)
+            if g is not None:
+                meshes[l] = g
+    return meshes, finger_of
+
+
 def surface_errors(res: ParseResult, configs: int = 3, points: int = 1500, seed: int = 0) -> dict[str, np.ndarray]:
     """Per-finger and hand symmetric surface distances [m] (concatenated over configurations)."""
     import trimesh
 
     m: Measurement = res.measurement
-    hand = m.hand
     hm = HandModel.from_params(res.params)
     rng = np.random.default_rng(seed)
-    hand_links = [l for l in hand.descendants(m.palm_link)]
-    finger_of: dict[str, str] = {}
-    for f, fm in m.fingers.items():
-        for l in fm.seg_links:
-            finger_of[l] = f
-    meshes = {}
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        for l in hand_links:
-            g = hand.link_geometry(l)
-            if g is not None:
-                meshes[l] = g
-    q_orig = sample_original(m, configs - 1, seed + 1) if configs > 1 else m.q0[None]
-    ok = original_keypoints(m, q_orig)
-    qc = np.clip(ok.q_canon, hm.lower, hm.upper)
-    palm = hm.palm
+    meshes, finger_of = _hand_meshes(m)
+    q_orig = sample_original(m, configs - 1, seed + 1, unmapped=True) if configs > 1 else m.q0[None]
+    qc = np.clip(original_keypoints(m, q_orig).q_canon, hm.lower, hm.upper)
     out: dict[str, list[np.ndarray]] = {k: [] for k in list(m.fingers) + ["hand"]}
     link_list = list(meshes)
-    poses = hand.link_poses(q_orig, link_list) if link_list else None
+    poses = m.hand.link_poses(q_orig, link_list) if link_list else None
     for c in range(q_orig.shape[0]):
-        parts, labels = [], []
+        parts = []
         for i, l in enumerate(link_list):
-            T = m.T_palm_root @ poses[c, i]
             mm = meshes[l].copy()
-            mm.apply_transform(T)
+            mm.apply_transform(m.T_palm_root @ poses[c, i])
             parts.append(mm)
-            labels.append(finger_of.get(l, "palm"))
         if not parts:
             continue
-        areas = np.array([p.area for p in parts])
-        counts = np.maximum(1, np.round(points * areas / areas.sum()).astype(int))
-        o_pts, o_lab = [], []
-        for p, n, lab in zip(parts, counts, labels):
-            s, _ = trimesh.sample.sample_surface(p, int(n), seed=int(rng.integers(1 << 31)))
-            o_pts.append(np.asarray(s))
-            o_lab += [lab] * len(s)
-        o_pts = np.vstack(o_pts)
-        o_lab = np.array(o_lab)
+        o_pts, o_lab = _original_samples(parts, [finger_of.get(l, "palm") for l in link_list], points, rng)
         caps = hm.capsules(qc[c])
         sd = np.min(_capsule_signed(o_pts, caps.p0, caps.p1, caps.radius), axis=1) if len(caps.link) else np.full(len(o_pts), np.inf)
-        sd = np.minimum(sd, _palm_signed(o_pts, palm["radius"], palm["depth"]))
-        d_o2c = np.abs(sd)
-        # canonical samples, proportional to area, kept only where on the union's surface
-        c_pts, c_lab = [], []
-        areas_c = [2 * np.pi * r * np.linalg.norm(b - a) + 4 * np.pi * r * r for a, b, r in zip(caps.p0, caps.p1, caps.radius)]
-        area_palm = 2 * np.pi * palm["radius"] * palm["depth"] + 2 * np.pi * palm["radius"] ** 2
-        tot = sum(areas_c) + area_palm
-        for k in range(len(caps.link)):
-            s = _sample_capsule(rng, caps.p0[k], caps.p1[k], caps.radius[k], max(8, int(points * areas_c[k] / tot)))
-            c_pts.append(s)
-            c_lab += [FINGERS[caps.finger[k]]] * len(s)
-        s = _sample_palm(rng, palm["radius"], palm["depth"], max(8, int(points * area_palm / tot)))
-        c_pts.append(s)
-        c_lab += ["palm"] * len(s)
-        c_pts = np.vstack(c_pts)
-        c_lab = np.array(c_lab)
-        inside = np.zeros(len(c_pts), dtype=bool)
-        if len(caps.link):
-            inside |= np.min(_capsule_signed(c_pts, caps.p0, caps.p1, caps.radius), axis=1) < -1e-6
-        inside |= _palm_signed(c_pts, palm["radius"], palm["depth"]) < -1e-6
-        c_pts, c_lab = c_pts[~inside], c_lab[~inside]
-        merged = trimesh.util.concatenate(parts)
-        _, d_c2o, _ = trimesh.proximity.closest_point(merged, c_pts)
+        d_o2c = np.abs(np.minimum(sd, _palm_signed(o_pts, hm.palm["radius"], hm.palm["depth"])))
+        c_pts, c_lab = _canonical_samples(caps, hm.palm, points, rng)
+        _, d_c2o, _ = trimesh.proximity.closest_point(trimesh.util.concatenate(parts), c_pts)
         for f in m.fingers:
             out[f].append(np.concatenate([d_o2c[o_lab == f], d_c2o[c_lab == f]]))
         out["hand"].append(np.concatenate([d_o2c, d_c2o]))
     return {k: np.concatenate(v) if v else np.array([]) for k, v in out.items()}
 
 
+def approximations(res: ParseResult) -> list[str]:
+    """What the canonical hand of ``res`` cannot express, one named item each."""
+    m = res.measurement
+    out = [n[len("approximation: "):] for n in res.notes if n.startswith("approximation: ") and "looks bent" not in n]
+    for name in unmapped_hand_joints(m):
+        j = m.hand.joints[name]
+        out.append(f"joint {name!r} ([{j.lower:+.3f}, {j.upper:+.3f}] rad) moves links inside the hand but drives no "
+                   f"slot of the {res.form} form: sampled over its range, the canonical hand cannot follow it")
+    return out
+
+
 def compare(
-    hand: str | ParseResult,
-    form: str = "base",
+    hand: Any,
+    form: str | None = "base",
     samples: int = 200,
     seed: int = 0,
     surface: bool = True,
     surface_configs: int = 3,
     surface_points: int = 1500,
 ) -> FidelityReport:
-    """Fidelity of a registered hand (committed params) or of a :class:`ParseResult`."""
+    """Fidelity of a :class:`ParseResult`, or of any hand :func:`ohra.hands.resolve_hand` accepts
+    (registered name: committed params; spec YAML: parsed; params JSON with its spec)."""
     if isinstance(hand, ParseResult):
         res = hand
         name = res.spec.name
     else:
-        from ohra.hands import registry
+        from ohra.hands.resolve import resolve_hand
 
-        name = hand
-        sp = registry.spec(name)
-        params = registry.registered_params(name, form)
-        orig = registry.load_original(name)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            m = measure(orig, sp, form)
-        res = ParseResult(params, form, sp, m, params, None, list(m.notes))
+        ref = resolve_hand(hand, form)
+        res, name = ref.parse_result(), ref.name
     jerr, oerr, terr = keypoint_errors(res, samples, seed)
     rep = FidelityReport(
         name, res.form, samples,
@@ -282,7 +315,12 @@ def compare(
         {**{f: Stats.of(v) for f, v in oerr.items()}, "hand": Stats.of(np.concatenate([v.ravel() for v in oerr.values()]))},
         {**{f: Stats.of(v) for f, v in terr.items()}, "hand": Stats.of(np.concatenate([v.ravel() for v in terr.values()]) if terr else np.array([]))},
         notes=list(res.notes),
+        approximations=approximations(res),
+        couplings=describe(res.couplings),
     )
+    if unmapped_hand_joints(res.measurement):
+        held = keypoint_errors(res, samples, seed, unmapped=False)[2]
+        rep.tips_held = Stats.of(np.concatenate([v.ravel() for v in held.values()]) if held else np.array([]))
     if surface:
         se = surface_errors(res, surface_configs, surface_points, seed)
         rep.surface = {k: Stats.of(v) for k, v in se.items()}

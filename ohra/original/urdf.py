@@ -11,255 +11,21 @@ Problems that make the hand unusable raise :class:`ohra.ParseError` naming the p
 is not XML, a joint naming an unknown link, a link with two parent joints (a kinematic loop), more
 than one root link, a mesh with zero faces (when its geometry is loaded).
 
-Frames: poses are 4x4 transforms of link frames in the URDF root link frame, metres. A *joint
-frame* is the child link frame of that joint (URDF semantics: the joint axis is expressed in it).
-The joint vector of the hand is its movable joints (revolute, continuous, prismatic) in file
-order, mimic joints excluded (they follow their master), as in :class:`ohra.ActionMap`.
+The model itself (:class:`OriginalHand`: frames, kinematics, geometry) lives in
+:mod:`ohra.original.hand` and is re-exported here.
 """
 
 from __future__ import annotations
 
 import warnings
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass, field
-from functools import cached_property
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
 from ohra.errors import ParseError
 from ohra.transforms import xyzrpy_to_matrix
-
-MOVABLE_TYPES = ("revolute", "continuous", "prismatic")
-KNOWN_TYPES = MOVABLE_TYPES + ("fixed", "floating", "planar")
-
-
-class MissingMeshWarning(UserWarning):
-    """A mesh file named by the URDF does not exist; its geometry element is skipped."""
-
-
-@dataclass(frozen=True)
-class Geometry:
-    """One ``<visual>``/``<collision>`` element: ``kind`` box|cylinder|sphere|mesh, pose in the link frame."""
-
-    link: str
-    tag: str  # "visual" or "collision"
-    kind: str
-    origin: np.ndarray  # (4,4) element pose in the link frame
-    size: tuple[float, ...] = ()  # box (x,y,z); cylinder (radius, length); sphere (radius,)
-    filename: str | None = None  # resolved absolute mesh path
-    scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
-
-
-@dataclass(frozen=True)
-class Joint:
-    name: str
-    type: str
-    parent: str
-    child: str
-    origin: np.ndarray  # (4,4) child frame in the parent frame at q=0
-    axis: np.ndarray  # (3,) unit axis in the child (joint) frame
-    lower: float
-    upper: float
-    mimic: tuple[str, float, float] | None = None  # (master joint, multiplier, offset)
-
-
-@dataclass
-class OriginalHand:
-    """A validated original hand URDF with resolved geometry and batched forward kinematics."""
-
-    path: Path | None
-    urdf_text: str  # cleaned XML (missing meshes removed); loads in Pinocchio / PyBullet
-    root: str
-    links: tuple[str, ...]
-    joints: dict[str, Joint]
-    geometries: tuple[Geometry, ...]
-    missing_meshes: tuple[str, ...] = ()
-    _mesh_cache: dict = field(default_factory=dict, repr=False)
-
-    # -- structure -------------------------------------------------------------------------------
-    @cached_property
-    def movable_joints(self) -> tuple[str, ...]:
-        """Names of the joint-vector entries (movable, not mimic), file order."""
-        return tuple(n for n, j in self.joints.items() if j.type in MOVABLE_TYPES and j.mimic is None)
-
-    @cached_property
-    def parent_joint(self) -> dict[str, Joint]:
-        """child link -> the joint whose child it is."""
-        return {j.child: j for j in self.joints.values()}
-
-    @cached_property
-    def _order(self) -> tuple[str, ...]:
-        """Links in topological order (root first, depth-first)."""
-        children: dict[str, list[str]] = {}
-        for j in self.joints.values():
-            children.setdefault(j.parent, []).append(j.child)
-        out, stack = [], [self.root]
-        while stack:
-            link = stack.pop()
-            out.append(link)
-            stack.extend(reversed(children.get(link, [])))
-        return tuple(out)
-
-    def ancestors(self, link: str) -> list[str]:
-        """Links from ``link`` up to the root (inclusive)."""
-        out = [link]
-        while out[-1] in self.parent_joint:
-            out.append(self.parent_joint[out[-1]].parent)
-        return out
-
-    def descendants(self, link: str) -> list[str]:
-        """``link`` and every link below it."""
-        children: dict[str, list[str]] = {}
-        for j in self.joints.values():
-            children.setdefault(j.parent, []).append(j.child)
-        out, stack = [], [link]
-        while stack:
-            x = stack.pop()
-            out.append(x)
-            stack.extend(children.get(x, []))
-        return out
-
-    @property
-    def lower(self) -> np.ndarray:
-        """(n,) lower limits of the joint vector (continuous joints: -pi)."""
-        return np.array([self.joints[n].lower for n in self.movable_joints])
-
-    @property
-    def upper(self) -> np.ndarray:
-        return np.array([self.joints[n].upper for n in self.movable_joints])
-
-    def random_configurations(self, n: int, seed: int = 0) -> np.ndarray:
-        """(n, dof) joint vectors uniform within the limits, seeded."""
-        rng = np.random.default_rng(seed)
-        return self.lower + rng.random((int(n), len(self.movable_joints))) * (self.upper - self.lower)
-
-    # -- kinematics ------------------------------------------------------------------------------
-    def link_poses(self, q: np.ndarray, links: Sequence[str] | None = None) -> np.ndarray:
-        """Poses of ``links`` (default: all, order :attr:`links`) in the root frame.
-
-        ``q``: (dof,) -> (L,4,4); (N,dof) -> (N,L,4,4).
-        """
-        q = np.asarray(q, dtype=float)
-        single = q.ndim == 1
-        qb = np.atleast_2d(q)
-        n_dof = len(self.movable_joints)
-        if qb.shape[-1] != n_dof:
-            raise ParseError(f"expected an original joint vector of length {n_dof}, got shape {q.shape}")
-        index = {name: i for i, name in enumerate(self.movable_joints)}
-        N = qb.shape[0]
-        want = list(self.links if links is None else links)
-        for w in want:
-            if w not in self.links:
-                raise ParseError(f"unknown link {w!r}")
-        needed: set[str] = set()
-        for w in want:
-            needed.update(self.ancestors(w))
-        poses: dict[str, np.ndarray] = {}
-        for link in self._order:
-            if link not in needed:
-                continue
-            if link == self.root:
-                poses[link] = np.broadcast_to(np.eye(4), (N, 4, 4))
-                continue
-            j = self.parent_joint[link]
-            T = poses[j.parent] @ j.origin
-            if j.type in MOVABLE_TYPES:
-                if j.mimic is not None:
-                    master, mult, off = j.mimic
-                    val = mult * _joint_value(qb, index, self.joints, master) + off
-                else:
-                    val = qb[:, index[j.name]]
-                M = np.broadcast_to(np.eye(4), (N, 4, 4)).copy()
-                if j.type == "prismatic":
-                    M[:, :3, 3] = val[:, None] * j.axis
-                else:
-                    M[:, :3, :3] = _rodrigues(j.axis, val)
-                T = T @ M
-            poses[link] = T
-        out = np.stack([poses[w] for w in want], axis=1)
-        return out[0] if single else out
-
-    # -- geometry --------------------------------------------------------------------------------
-    def link_geometry(self, link: str, prefer: str = "collision"):
-        """The link's geometry as one trimesh in the link frame, or None.
-
-        Collision elements when the link has any, else visual ones (``prefer="visual"`` swaps).
-        Raises :class:`ParseError` for a mesh with zero faces.
-        """
-        import trimesh
-
-        other = "visual" if prefer == "collision" else "collision"
-        for tag in (prefer, other):
-            elems = [g for g in self.geometries if g.link == link and g.tag == tag]
-            if elems:
-                parts = [self._element_mesh(g) for g in elems]
-                parts = [p for p in parts if p is not None]
-                if parts:
-                    return trimesh.util.concatenate(parts) if len(parts) > 1 else parts[0]
-        return None
-
-    def geometry_source(self, link: str, prefer: str = "collision") -> str | None:
-        """Which element kind :meth:`link_geometry` uses for ``link`` ("collision"/"visual"), or None."""
-        other = "visual" if prefer == "collision" else "collision"
-        for tag in (prefer, other):
-            if any(g.link == link and g.tag == tag for g in self.geometries):
-                return tag
-        return None
-
-    def _element_mesh(self, g: Geometry):
-        import trimesh
-
-        if g.kind == "box":
-            m = trimesh.creation.box(extents=g.size)
-        elif g.kind == "cylinder":
-            m = trimesh.creation.cylinder(radius=g.size[0], height=g.size[1], sections=24)
-        elif g.kind == "sphere":
-            m = trimesh.creation.icosphere(subdivisions=2, radius=g.size[0])
-        else:
-            m = self._load_mesh(g.filename).copy()
-            m.apply_scale(np.asarray(g.scale)) if len(set(g.scale)) == 1 else m.apply_transform(np.diag([*g.scale, 1.0]))
-        m.apply_transform(g.origin)
-        return m
-
-    def _load_mesh(self, filename: str):
-        import trimesh
-
-        if filename not in self._mesh_cache:
-            try:
-                m = trimesh.load(filename, force="mesh", process=False)
-            except Exception as exc:  # trimesh raises many kinds
-                raise ParseError(f"mesh {filename} cannot be read: {exc}") from None
-            if not isinstance(m, trimesh.Trimesh) or len(m.faces) == 0:
-                raise ParseError(f"mesh {filename} has zero faces")
-            self._mesh_cache[filename] = m
-        return self._mesh_cache[filename]
-
-    def pinocchio_model(self):
-        """Pinocchio model of the (cleaned) URDF, kinematics only."""
-        import pinocchio as pin
-
-        try:
-            return pin.buildModelFromXML(self.urdf_text)
-        except Exception as exc:
-            raise ParseError(f"Pinocchio cannot load {self.path}: {exc}") from None
-
-
-def _joint_value(qb: np.ndarray, index: dict[str, int], joints: dict[str, Joint], name: str) -> np.ndarray:
-    j = joints[name]
-    if j.mimic is not None:
-        master, mult, off = j.mimic
-        return mult * _joint_value(qb, index, joints, master) + off
-    return qb[:, index[name]]
-
-
-def _rodrigues(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
-    """(N,3,3) rotations about a fixed unit axis."""
-    x, y, z = axis
-    K = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-    s, c = np.sin(angle)[:, None, None], np.cos(angle)[:, None, None]
-    return np.eye(3) + s * K + (1.0 - c) * (K @ K)
+from ohra.original.hand import KNOWN_TYPES, MOVABLE_TYPES, Geometry, Joint, MissingMeshWarning, OriginalHand
 
 
 # -- loading -------------------------------------------------------------------------------------
@@ -323,94 +89,127 @@ def resolve_mesh_path(filename: str, urdf_dir: Path) -> Path:
     return p if p.is_absolute() else (urdf_dir / p).resolve()
 
 
-def load_urdf(source: str | Path, base_dir: str | Path | None = None) -> OriginalHand:
-    """Load and validate an original hand URDF (path, or XML text with ``base_dir`` for meshes)."""
-    path: Path | None = None
+def _read_source(source: str | Path, base_dir: str | Path | None) -> tuple[Path | None, str, str, Path]:
+    """(path or None, XML text, where-label for messages, folder that relative meshes resolve against)."""
     if isinstance(source, Path) or (isinstance(source, str) and not source.lstrip().startswith("<")):
         path = Path(source).expanduser().resolve()
-        text = read_urdf_text(path)
-        where = str(path)
-        urdf_dir = path.parent
-    else:
-        text = str(source)
-        where = "<urdf text>"
-        urdf_dir = Path(base_dir) if base_dir is not None else Path.cwd()
-    try:
-        root_elem = ET.fromstring(text)
-    except ET.ParseError as exc:
-        raise ParseError(f"{where}: not valid XML ({exc})") from None
-    if root_elem.tag != "robot":
-        raise ParseError(f"{where}: root element is <{root_elem.tag}>, expected <robot>")
+        return path, read_urdf_text(path), str(path), path.parent
+    return None, str(source), "<urdf text>", Path(base_dir) if base_dir is not None else Path.cwd()
 
+
+def _link_names(root_elem: ET.Element, where: str) -> list[str]:
     links = [l.get("name") for l in root_elem.findall("link")]
     if not links:
         raise ParseError(f"{where}: no <link> elements")
     dup = sorted({n for n in links if links.count(n) > 1})
     if dup:
         raise ParseError(f"{where}: link {dup[0]!r} is defined twice")
-    link_set = set(links)
+    return links  # type: ignore[return-value]
 
+
+def _joint_limits(je: ET.Element, jtype: str, jw: str) -> tuple[float, float]:
+    """(lower, upper) of a joint element: continuous -pi..pi; fixed 0..0; others need <limit>."""
+    if jtype == "continuous":
+        return -np.pi, np.pi
+    if jtype not in MOVABLE_TYPES:
+        return 0.0, 0.0
+    lim = je.find("limit")
+    if lim is None:
+        raise ParseError(f"{jw} ({jtype}) has no <limit>")
+    lo = float(_floats(lim.get("lower"), 1, 0.0, jw + " lower")[0])
+    up = float(_floats(lim.get("upper"), 1, 0.0, jw + " upper")[0])
+    if lo > up:
+        raise ParseError(f"{jw}: lower limit {lo} > upper limit {up}")
+    return lo, up
+
+
+def _joint_axis(je: ET.Element, jtype: str, jw: str) -> np.ndarray:
+    """Unit axis of a joint element (URDF default +x when absent)."""
+    ae = je.find("axis")
+    if ae is None:
+        return np.array([1.0, 0.0, 0.0])
+    axis = _floats(ae.get("xyz"), 3, 0.0, jw + " axis")
+    if jtype in MOVABLE_TYPES:
+        nrm = float(np.linalg.norm(axis))
+        if nrm < 1e-12:
+            raise ParseError(f"{jw} has a zero axis")
+        axis = axis / nrm
+    return axis
+
+
+def _mimic(je: ET.Element, jtype: str, jw: str) -> tuple[str, float, float] | None:
+    """(master joint, multiplier, offset) of a ``<mimic>`` tag on a movable joint, else None."""
+    me = je.find("mimic")
+    if me is None or jtype not in MOVABLE_TYPES:
+        return None
+    if not me.get("joint"):
+        raise ParseError(f"{jw}: <mimic> names no joint")
+    mult = float(_floats(me.get("multiplier"), 1, 1.0, jw + " mimic multiplier")[0])
+    off = float(_floats(me.get("offset"), 1, 0.0, jw + " mimic offset")[0])
+    return me.get("joint"), mult, off  # type: ignore[return-value]
+
+
+def _joint(je: ET.Element, where: str, link_set: set[str]) -> Joint:
+    """One validated ``<joint>`` element."""
+    name = je.get("name")
+    jtype = je.get("type")
+    jw = f"{where}: joint {name!r}"
+    if not name:
+        raise ParseError(f"{where}: a <joint> has no name")
+    if jtype not in KNOWN_TYPES:
+        raise ParseError(f"{jw} has unknown type {jtype!r}")
+    if jtype in ("floating", "planar"):
+        raise ParseError(f"{jw}: {jtype} joints are not supported in a hand")
+    pe, ce = je.find("parent"), je.find("child")
+    if pe is None or ce is None:
+        raise ParseError(f"{jw} lacks <parent> or <child>")
+    parent, child = pe.get("link"), ce.get("link")
+    for ln in (parent, child):
+        if ln not in link_set:
+            raise ParseError(f"{jw} names link {ln!r}, which is not defined")
+    lo, up = _joint_limits(je, jtype, jw)
+    return Joint(name, jtype, parent, child, _origin(je.find("origin"), jw), _joint_axis(je, jtype, jw), lo, up,
+                 _mimic(je, jtype, jw))
+
+
+def _joints(root_elem: ET.Element, where: str, link_set: set[str]) -> dict[str, Joint]:
+    """Every joint, checked: unique names, one parent joint per link, known mimic masters, no mimic cycle."""
     joints: dict[str, Joint] = {}
     child_of: dict[str, str] = {}
     for je in root_elem.findall("joint"):
-        name = je.get("name")
-        jtype = je.get("type")
-        jw = f"{where}: joint {name!r}"
-        if not name:
-            raise ParseError(f"{where}: a <joint> has no name")
-        if name in joints:
-            raise ParseError(f"{jw} is defined twice")
-        if jtype not in KNOWN_TYPES:
-            raise ParseError(f"{jw} has unknown type {jtype!r}")
-        if jtype in ("floating", "planar"):
-            raise ParseError(f"{jw}: {jtype} joints are not supported in a hand")
-        pe, ce = je.find("parent"), je.find("child")
-        if pe is None or ce is None:
-            raise ParseError(f"{jw} lacks <parent> or <child>")
-        parent, child = pe.get("link"), ce.get("link")
-        for ln in (parent, child):
-            if ln not in link_set:
-                raise ParseError(f"{jw} names link {ln!r}, which is not defined")
-        if child in child_of:
+        j = _joint(je, where, link_set)
+        if j.name in joints:
+            raise ParseError(f"{where}: joint {j.name!r} is defined twice")
+        if j.child in child_of:
             raise ParseError(
-                f"{where}: kinematic loop: link {child!r} is the child of two joints ({child_of[child]!r} and {name!r})"
+                f"{where}: kinematic loop: link {j.child!r} is the child of two joints ({child_of[j.child]!r} and {j.name!r})"
             )
-        child_of[child] = name
-        axis = _floats(je.find("axis").get("xyz") if je.find("axis") is not None else None, 3, 0.0, jw + " axis")
-        if je.find("axis") is None:
-            axis = np.array([1.0, 0.0, 0.0])
-        nrm = float(np.linalg.norm(axis))
-        if jtype in MOVABLE_TYPES:
-            if nrm < 1e-12:
-                raise ParseError(f"{jw} has a zero axis")
-            axis = axis / nrm
-        lim = je.find("limit")
-        if jtype == "continuous":
-            lo, up = -np.pi, np.pi
-        elif jtype in MOVABLE_TYPES:
-            if lim is None:
-                raise ParseError(f"{jw} ({jtype}) has no <limit>")
-            lo = float(_floats(lim.get("lower"), 1, 0.0, jw + " lower")[0])
-            up = float(_floats(lim.get("upper"), 1, 0.0, jw + " upper")[0])
-            if lo > up:
-                raise ParseError(f"{jw}: lower limit {lo} > upper limit {up}")
-        else:
-            lo = up = 0.0
-        mimic = None
-        me = je.find("mimic")
-        if me is not None and jtype in MOVABLE_TYPES:
-            mimic = (me.get("joint"), float(me.get("multiplier", 1.0)), float(me.get("offset", 0.0)))
-        joints[name] = Joint(name, jtype, parent, child, _origin(je.find("origin"), jw), axis, lo, up, mimic)
+        child_of[j.child] = j.name
+        joints[j.name] = j
     for j in joints.values():
-        if j.mimic is not None and j.mimic[0] not in joints:
-            raise ParseError(f"{where}: joint {j.name!r} mimics unknown joint {j.mimic[0]!r}")
+        seen = [j.name]
+        while j.mimic is not None:
+            master = joints.get(j.mimic[0])
+            if master is None:
+                raise ParseError(f"{where}: joint {j.name!r} mimics unknown joint {j.mimic[0]!r}")
+            if master.type not in MOVABLE_TYPES:
+                raise ParseError(f"{where}: joint {j.name!r} mimics {master.name!r}, which is a {master.type} joint")
+            if master.name in seen:
+                raise ParseError(f"{where}: mimic cycle {' -> '.join(seen + [master.name])}")
+            seen.append(master.name)
+            j = master
+    return joints
 
-    roots = [l for l in links if l not in child_of]
+
+def _root_link(links: list[str], joints: dict[str, Joint], where: str) -> str:
+    """The single root link; every link must be reachable from it (else a kinematic loop)."""
+    link_set = set(links)
+    children_set = {j.child for j in joints.values()}
+    roots = [l for l in links if l not in children_set]
     if len(roots) == 0:
         raise ParseError(f"{where}: kinematic loop: every link has a parent joint (no root link)")
     if len(roots) > 1:
         raise ParseError(f"{where}: the URDF has {len(roots)} root links ({', '.join(roots)}); expected one tree")
-    # every link must be reachable from the root (a cycle detached from the root is a loop)
     seen, stack = set(), [roots[0]]
     children: dict[str, list[str]] = {}
     for j in joints.values():
@@ -424,13 +223,30 @@ def load_urdf(source: str | Path, base_dir: str | Path | None = None) -> Origina
     if len(seen) != len(links):
         loop = sorted(link_set - seen)
         raise ParseError(f"{where}: kinematic loop: links {loop} are not reachable from the root {roots[0]!r}")
+    return roots[0]
 
+
+def load_urdf(source: str | Path, base_dir: str | Path | None = None) -> OriginalHand:
+    """Load and validate an original hand URDF (path, or XML text with ``base_dir`` for meshes).
+
+    Raises:
+        ParseError: the text is not a valid single-tree ``<robot>`` (message names file and element).
+    """
+    path, text, where, urdf_dir = _read_source(source, base_dir)
+    try:
+        root_elem = ET.fromstring(text)
+    except ET.ParseError as exc:
+        raise ParseError(f"{where}: not valid XML ({exc})") from None
+    if root_elem.tag != "robot":
+        raise ParseError(f"{where}: root element is <{root_elem.tag}>, expected <robot>")
+    links = _link_names(root_elem, where)
+    joints = _joints(root_elem, where, set(links))
+    root = _root_link(links, joints, where)
     geoms, missing = _collect_geometry(root_elem, urdf_dir, where)
-    cleaned = ET.tostring(root_elem, encoding="unicode")
     return OriginalHand(
         path=path,
-        urdf_text=cleaned,
-        root=roots[0],
+        urdf_text=ET.tostring(root_elem, encoding="unicode"),
+        root=root,
         links=tuple(links),
         joints=joints,
         geometries=tuple(geoms),

@@ -162,7 +162,7 @@ class SimHand:
         sp = registry.spec(name)
         oh = registry.load_original(name)
         params = get_hand(name, form)
-        am = sp.action_map(params.form, oh.movable_joints)
+        am = sp.action_map(params.form, oh)  # the OriginalHand: its mimic couplings come along
         lo = np.asarray(params.joint_lowers, float)
         up = np.asarray(params.joint_uppers, float)
         return cls.from_original(_absolute_text(oh), am, name=f"{name}:original", canon_limits=(lo, up))

@@ -1,0 +1,159 @@
+"""Any hand, no package edits: one reference string -> params, couplings and (when known) the original.
+
+:func:`resolve_hand` accepts
+
+* a registered hand name (package specs and user folders, see :mod:`ohra.hands.registry`);
+* a LEAP variant ``leap_XXXX``;
+* a hand spec YAML file (``*.yaml`` / ``*.yml``): parsed with the least-squares fit (kept for the
+  process while the file is unchanged), couplings from its URDF ``<mimic>`` tags and the spec;
+* a params JSON file: its params and optional ``"couplings"`` key; the original hand is known
+  when a spec is given (``spec=``) or a spec with the same stem lies beside the JSON.
+
+The result, a :class:`HandRef`, is what the ``ohra hand`` commands, :func:`ohra.original.fidelity.compare`
+and the viewers work from.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+from typing import Any, Union
+
+from ohra.canonical.couplings import Coupling, read_couplings
+from ohra.canonical.params import BaseParams, ExtendedParams, load_params
+from ohra.errors import HandNotFoundError, ParamsError
+
+Params = Union[BaseParams, ExtendedParams]
+SPEC_SUFFIXES = (".yaml", ".yml")
+
+
+@dataclass
+class HandRef:
+    """A resolved hand: params of one form, its couplings, and its spec when the original is known."""
+
+    name: str
+    form: str
+    params: Params
+    couplings: tuple[Coupling, ...] = ()
+    spec: Any = None  # HandSpec, or None (LEAP variants, params JSON without a spec)
+    result: Any = None  # the ParseResult when the hand was parsed from a spec
+    kind: str = "registered"  # registered | variant | spec | params
+
+    def require_spec(self, what: str):
+        if self.spec is None:
+            hint = " (pass its spec YAML, or put <name>.yaml beside the params JSON)" if self.kind == "params" else ""
+            raise HandNotFoundError(f"{what} needs the original hand, which is unknown for {self.name!r}{hint}")
+        return self.spec
+
+    def original(self):
+        """The :class:`~ohra.original.hand.OriginalHand` (loaded from the spec's URDF)."""
+        from ohra.original.parse import load_original_for
+
+        if self.result is not None:
+            return self.result.hand
+        return load_original_for(self.require_spec("the original hand"))
+
+    def action_map(self):
+        """The :class:`ohra.ActionMap` of this form (couplings included)."""
+        if self.result is not None:
+            return self.result.action_map
+        return self.require_spec("the action map").action_map(self.form, self.original())
+
+    def parse_result(self):
+        """A :class:`~ohra.original.parse.ParseResult` for these params (measured on the original)."""
+        from ohra.original.measure import measure
+        from ohra.original.parse import ParseResult
+
+        if self.result is not None and self.result.params is self.params:
+            return self.result
+        sp = self.require_spec("a fidelity report")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            m = measure(self.original(), sp, self.form)
+        notes = list(m.notes) + [f"override {o.key} = {o.value}: {o.reason}" for o in sp.overrides_for(self.form)]
+        return ParseResult(self.params, self.form, sp, m, self.params, None, notes)
+
+
+@lru_cache(maxsize=32)
+def _parse_cached(path: Path, mtime: float, form: str):
+    from ohra.original.parse import parse
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return parse(path, form, fit_params=True)
+
+
+def parse_spec_file(path: str | Path, form: str | None = None):
+    """ParseResult of a spec file (fit included), cached while the file is unchanged."""
+    from ohra.original.spec import load_spec
+
+    p = Path(path).expanduser().resolve()
+    sp = load_spec(p)
+    if form is None:
+        form = "base" if "base" in sp.forms else next(iter(sp.forms))
+    sp.form(form)
+    return _parse_cached(p, p.stat().st_mtime, form)
+
+
+def _in_form(params: Params, form: str | None, where: str) -> Params:
+    if form == "extended" and isinstance(params, BaseParams):
+        return params.to_extended()
+    if form == "base" and isinstance(params, ExtendedParams):
+        try:
+            return params.to_base()
+        except ParamsError as exc:
+            raise HandNotFoundError(f"{where}: {exc}") from None
+    return params
+
+
+def _from_params_file(p: Path, form: str | None, spec: str | Path | None) -> HandRef:
+    from ohra.original.spec import load_spec
+
+    params = load_params(p)
+    nat = params.form if params.form == "base" else "extended"
+    params = _in_form(params, form, str(p))
+    side = next((p.with_suffix(s) for s in SPEC_SUFFIXES if p.with_suffix(s).is_file()), None)
+    sp = load_spec(spec) if spec is not None else (load_spec(side) if side is not None else None)
+    return HandRef(p.stem if sp is None else sp.name, form or nat, params, read_couplings(p), sp, None, "params")
+
+
+def resolve_hand(ref: Any, form: str | None = None, spec: str | Path | None = None) -> HandRef:
+    """Resolve a hand reference (see the module docstring); ``form`` None picks the natural form.
+
+    Raises:
+        HandNotFoundError: names what was tried (registered names, variants, files).
+    """
+    from ohra.hands import registry
+    from ohra.hands.leap.variants import is_variant, leap_variant
+
+    if isinstance(ref, HandRef):
+        return ref
+    if form is not None and form not in ("base", "extended"):
+        raise HandNotFoundError(f"unknown form {form!r}; expected 'base' or 'extended'")
+    key = str(ref)
+    if is_variant(key):
+        if form == "base":
+            raise HandNotFoundError(f"{key} exists only in the extended form (LEAP flavour)")
+        return HandRef(key, "extended", leap_variant(key), kind="variant")
+    if key in registry.registered_hands():
+        f = registry._resolve_form(key, form)
+        return HandRef(key, f, registry.registered_params(key, f), registry.couplings(key, f), registry.spec(key))
+    p = Path(key).expanduser()
+    if p.suffix in SPEC_SUFFIXES:
+        if not p.is_file():
+            raise HandNotFoundError(f"hand spec not found: {p}")
+        res = parse_spec_file(p, form)
+        return HandRef(res.spec.name, res.form, res.params, res.couplings, res.spec, res, "spec")
+    if p.suffix == ".json" or p.is_file():
+        if not p.is_file():
+            raise HandNotFoundError(f"params file not found: {p}")
+        return _from_params_file(p, form, spec)
+    known = ", ".join(registry.registered_hands()) or "(no registered hands)"
+    raise HandNotFoundError(
+        f"unknown hand {key!r}: not a registered hand ({known}), not leap_XXXX, not a spec YAML or params JSON file"
+    )
+
+
+__all__ = ["HandRef", "resolve_hand", "parse_spec_file"]

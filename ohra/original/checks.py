@@ -1,0 +1,113 @@
+"""Guard rails: a spec whose palm frame or signs contradict the canonical conventions is an error.
+
+The canonical palm frame has ``+x`` along the palm normal (the side the fingers curl toward),
+``+z`` finger-forward and ``+y`` toward the thumb of a right hand (DESIGN.md, Conventions). A palm
+origin rotated by pi about z still gives a kinematically valid canonical hand, and flipping the
+signs that the axis checks ask for even reproduces the fidelity numbers — but the result is the
+mirror image of the convention (a right hand called left, fingers curling toward -x, flexion
+negative). These checks look at the measured fingers (non-thumb fingers with a flexion joint):
+
+* finger direction: fingers must point along ``+z`` of the palm frame;
+* curl direction: flexing a finger into its range must move its tip toward ``+x``;
+* flexion range: the canonical flexion range lies mostly on the positive side (fingers flex far
+  more than they hyperextend);
+
+and when one fails they say which of palm frame, signs or handedness is wrong.
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+from ohra.canonical.params import FINGERS, JOINT_INDEX
+from ohra.errors import SpecError
+from ohra.original.measure import Measurement
+from ohra.original.spec import HandSpec
+
+MIN_MID = 0.05  # rad: a flexion range whose middle is this close to 0 says nothing about its sign
+
+
+def _flexion_slots(m: Measurement, f: str) -> list[str]:
+    """Mapped movable j2-j4 slots of finger ``f`` whose signed axis is its flexion axis (within ~25
+    deg); none when the finger's flexion axes disagree in sign (a single slot's sign is wrong: the
+    axis checks of :mod:`ohra.original.estimate` name it)."""
+    fm = m.fingers[f]
+    out = []
+    for s in fm.slots:
+        if s.split("_joint")[1] not in ("2", "3", "4"):
+            continue
+        d = float(fm.a[s] @ fm.y)
+        if d < -0.9:
+            return []
+        k = JOINT_INDEX[s]
+        if d > 0.9 and m.upper[k] > m.lower[k]:
+            out.append(s)
+    return out
+
+
+def _named_side(spec: HandSpec) -> str | None:
+    """'right' / 'left' when the spec's name or URDF file says so, else None."""
+    text = f"{spec.name} {spec.urdf}".lower()
+    sides = {s for s in ("right", "left") if re.search(rf"(^|[^a-z]){s}|_{s[0]}(\.|_|$)", text)}
+    return sides.pop() if len(sides) == 1 else None
+
+
+def _thumb_side(m: Measurement) -> str | None:
+    """'right' when the thumb base sits on +y of the palm frame, 'left' on -y, None without a thumb."""
+    if "thumb" not in m.fingers:
+        return None
+    fm = m.fingers["thumb"]
+    y = float(fm.p[fm.slots[0]][1])
+    return None if abs(y) < 1e-4 else ("right" if y > 0 else "left")
+
+
+def check_palm_frame(m: Measurement, spec: HandSpec, form: str) -> list[str]:
+    """Raise :class:`SpecError` when the fingers contradict the palm frame convention; else notes.
+
+    Returns notes (e.g. handedness differing from the name when everything else is consistent).
+    """
+    fingers = [f for f in FINGERS[1:] if f in m.fingers]
+    where = f"{spec.source}: forms.{form}"
+    back = [f for f in fingers if float(m.fingers[f].z[2]) < 0]
+    if fingers and len(back) > len(fingers) / 2:
+        raise SpecError(f"{where}: the fingers ({', '.join(back)}) point toward -z of the palm frame: palm_origin "
+                        f"is rotated (z must point from the wrist toward the fingertips)")
+    curl, mids = [], []
+    for f in fingers:
+        slots = _flexion_slots(m, f)
+        mid = [0.5 * (m.lower[JOINT_INDEX[s]] + m.upper[JOINT_INDEX[s]]) for s in slots]
+        mid = [v for v in mid if abs(v) > MIN_MID]
+        if not mid:
+            continue
+        sign = 1.0 if np.mean(mid) > 0 else -1.0
+        mids.append((f, sign))
+        x_f = np.cross(m.fingers[f].y, m.fingers[f].z)  # where +flexion moves the tip
+        curl.append((f, float(sign * x_f[0])))
+    bad_curl = [f for f, c in curl if c < 0]
+    neg = [f for f, sgn in mids if sgn < 0]
+    named, thumb = _named_side(spec), _thumb_side(m)
+    if curl and len(bad_curl) > len(curl) / 2:
+        if neg and len(neg) == len(bad_curl):
+            what = ("the flexion joints' canonical ranges are negative: their signs were flipped to satisfy the axis "
+                    "checks, which hides a palm frame whose +x points to the back of the hand")
+        else:
+            what = "the palm normal +x points to the back of the hand"
+        mirror = (f"; the thumb sits on {'+' if thumb == 'right' else '-'}y, i.e. a {thumb} hand by the canonical "
+                  f"convention, although the hand is named {named}") if named and thumb and named != thumb else ""
+        fix = "undo those sign flips" if neg and len(neg) == len(bad_curl) else "keep the joints' signs (flexion positive)"
+        raise SpecError(
+            f"{where}: fingers {', '.join(bad_curl)} curl toward -x of the palm frame: {what}{mirror}. Rotate palm_origin "
+            f"by pi about z (rpy yaw + 3.1416) and {fix}"
+        )
+    if neg and len(neg) > len(mids) / 2:
+        raise SpecError(f"{where}: fingers {', '.join(neg)} flex toward negative canonical angles: the signs of their "
+                        f"flexion joints are reversed (canonical flexion is positive, toward the palm normal +x)")
+    if named and thumb and named != thumb:
+        return [f"check: the thumb sits on the {thumb}-hand side (y {'>' if thumb == 'right' else '<'} 0) of the palm "
+                f"frame although the hand is named {named}"]
+    return []
+
+
+__all__ = ["check_palm_frame"]
