@@ -163,7 +163,8 @@ def _check_axis(key: str, index: int, axis: np.ndarray, joint: str) -> None:
 def _check_capsule(key: str, index: int, length: float, radius: float, link: str) -> None:
     if length < 2.0 * radius - 1e-9:
         raise ParamsError(
-            f"{key!r}[{index}] = {length:g} m: capsule {link} is shorter than its diameter 2*{radius:g} m"
+            f"{key!r}[{index}] = {length:g} m: capsule {link} is shorter than its diameter "
+            f"2*'finger_radius' = 2*{radius:g} m (one of the two keys is wrong)"
         )
 
 
