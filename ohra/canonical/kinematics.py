@@ -23,6 +23,7 @@ import pinocchio as pin
 from ohra.errors import OhraError, ParamsError
 from ohra.canonical.params import FINGERS, JOINT_NAMES, BaseParams, ExtendedParams, load_params
 from ohra.canonical.urdfgen import palm_geometry, render
+from ohra.transforms import axis_angle_to_matrix
 
 Params = Union[BaseParams, ExtendedParams]
 SEGMENTS = ("proximal", "middle", "distal")
@@ -61,14 +62,6 @@ class _Tree:
     frame_names: tuple[str, ...]
     frame_joint: np.ndarray
     frame_placement: np.ndarray
-
-
-def _rotation_batch(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
-    """Rodrigues' rotation about a fixed unit ``axis`` for angles (N,) -> (N,3,3)."""
-    x, y, z = axis
-    K = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-    s, c = np.sin(angle)[:, None, None], np.cos(angle)[:, None, None]
-    return np.eye(3) + s * K + (1.0 - c) * (K @ K)
 
 
 def _joint_axis(jm: pin.JointModel) -> np.ndarray:
@@ -264,7 +257,7 @@ class HandModel:
                 R[:, :, u] = c * base_R[:, :, u] + sign * s * base_R[:, :, v]
                 R[:, :, v] = -sign * s * base_R[:, :, u] + c * base_R[:, :, v]
             else:
-                R = base_R @ _rotation_batch(a, ang)
+                R = base_R @ axis_angle_to_matrix(a, ang)
             Rs[j] = R
         return Rs, ts
 
