@@ -162,3 +162,21 @@ def test_blocks_of_a_real_hand_stack_in_family_order_with_one_contact_per_finger
     assert g.shape[0] == len(lo) == len(hi) == sum(len(b) for b in blocks)
     assert len(blocks[0]) == 3 and len(blocks[4]) == 6 and len(blocks[5]) == 6
     assert np.all(lo[rows["palm_clearance"]] == 0.0)  # a palm contact may touch
+
+
+def test_forces_start_as_unit_pushes_toward_the_object_centre():
+    from ohra.objects.model import ObjectModel
+    from ohra.synth.init import initial_poses
+    from ohra.synth.nlp import GraspNLP
+
+    hand = HandModel.from_params(get_hand("leap_2200"))
+    obj = ObjectModel.builtin("box")
+    nlp = GraspNLP(hand, obj)
+    st = initial_poses(hand, obj, 1, np.random.default_rng(0))[0]
+    p = np.concatenate([st["R0"].reshape(-1, order="F"), st["q_pref"][nlp.movable]])
+    x0 = nlp._initial_guess(p, st["t0"], st["q0"])
+    forces = x0[6 + nlp.nq :].reshape(-1, 3)
+    _, points, _ = nlp._pose_fn(x0, p)
+    toward = obj.center_mass - np.asarray(points)
+    assert np.linalg.norm(forces, axis=1) == pytest.approx(np.ones(3))
+    assert np.einsum("ij,ij->i", forces, toward / np.linalg.norm(toward, axis=1, keepdims=True)) == pytest.approx(np.ones(3))

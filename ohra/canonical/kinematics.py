@@ -4,6 +4,14 @@
 single configurations and Jacobians), a vectorised numpy forward kinematics over the same
 kinematic tree for batches of configurations, and Coal capsule geometry for collision queries.
 
+Why two forward-kinematics paths here (the package has two more: CasADi expressions for the grasp
+NLP in ``ohra.synth.fk`` and ``canonical_keypoints`` from parameter arrays for the parse fit):
+Pinocchio is the reference and the fastest for one configuration; on batches its per-call Python
+overhead dominates, and the numpy path evaluates thousands of configurations several times faster
+(also faster than evaluating the CasADi expressions numerically; ``benchmarks/bench_fk_paths.py``).
+Batches are what the synthesiser's finger-pair reach, the dataset distance checks and the samplers
+use. ``tests/test_fk_paths.py`` holds every path to Pinocchio to 1e-9 m.
+
 All poses are 4x4 homogeneous matrices in the canonical palm frame (the URDF root; +x palm normal,
 +y thumb side of a right hand, +z finger-forward), in metres. Configurations are always the 22-D
 canonical joint vector (``ohra.canonical.params.JOINT_NAMES`` order) in radians; absent joints must be 0.
