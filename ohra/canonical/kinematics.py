@@ -7,8 +7,8 @@ kinematic tree for batches of configurations, and Coal capsule geometry for coll
 Why two forward-kinematics paths here (the package has two more: CasADi expressions for the grasp
 NLP in ``ohra.synth.fk`` and ``canonical_keypoints`` from parameter arrays for the parse fit):
 Pinocchio is the reference and the fastest for one configuration; on batches its per-call Python
-overhead dominates, and the numpy path evaluates thousands of configurations several times faster
-(also faster than evaluating the CasADi expressions numerically; ``benchmarks/bench_fk_paths.py``).
+overhead dominates, and the numpy path evaluates 4096 configurations about 5x faster (also about 6x
+faster than evaluating the CasADi expressions numerically; ``benchmarks/results/fk_paths.md``).
 Batches are what the synthesiser's finger-pair reach, the dataset distance checks and the samplers
 use. ``tests/test_fk_paths.py`` holds every path to Pinocchio to 1e-9 m.
 
