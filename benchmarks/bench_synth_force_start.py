@@ -58,6 +58,34 @@ def run(hand_name: str, variant: str, seed: int, starts: int) -> list[dict]:
     return rows
 
 
+def summarise(rows: list[dict], hands: list[str]) -> list[dict]:
+    """One row per (hand or "all", variant): the table's columns."""
+    out = []
+    for hand in hands + ["all"]:
+        for variant in ("zero", "centre"):
+            rs = [r for r in rows if r["variant"] == variant and hand in ("all", r["hand"])]
+            ok = [r for r in rs if r["success"]]
+            out.append({"hand": hand, "variant": variant, "starts": len(rs), "converged": len(ok),
+                        "self_intersecting": sum(r["self_collision"] for r in rs),
+                        "median_objective": float(np.median([r["objective"] for r in ok])),
+                        "mean_iterations": float(np.mean([r["iterations"] for r in rs])),
+                        "mean_solve_s": float(np.mean([r["solve_s"] for r in rs]))})
+    return out
+
+
+def report(summary: list[dict], seeds: list[int], starts: int) -> None:
+    lines = [
+        f"The {len(BUILTINS)} built-in objects, {starts} starts each, seeds {seeds}: the same starts for both variants.",
+        "",
+        "| hand | initial forces | converged | self-intersecting | median objective | mean iterations | mean solve [s] |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in summary:
+        lines.append(f"| {r['hand']} | {r['variant']} | {r['converged']}/{r['starts']} | {r['self_intersecting']} | "
+                     f"{r['median_objective']:.3f} | {r['mean_iterations']:.0f} | {r['mean_solve_s']:.2f} |")
+    write_results("synth_force_start", {"summary": summary, "seeds": seeds, "starts": starts}, "\n".join(lines))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", nargs="+", type=int, default=[100, 200])
@@ -70,20 +98,7 @@ def main() -> None:
             for seed in args.seeds:
                 rows += run(hand, variant, seed, args.starts)
                 print(hand, variant, seed, flush=True)
-    lines = [
-        f"The {len(BUILTINS)} built-in objects, {args.starts} starts each, seeds {args.seeds}: the same starts for both variants.",
-        "",
-        "| hand | initial forces | converged | self-intersecting | median objective | mean iterations | mean solve [s] |",
-        "|---|---|---|---|---|---|---|",
-    ]
-    for hand in args.hands + ["all"]:
-        for variant in ("zero", "centre"):
-            rs = [r for r in rows if r["variant"] == variant and hand in ("all", r["hand"])]
-            ok = [r for r in rs if r["success"]]
-            lines.append(f"| {hand} | {variant} | {len(ok)}/{len(rs)} | {sum(r['self_collision'] for r in rs)} | "
-                         f"{np.median([r['objective'] for r in ok]):.3f} | {np.mean([r['iterations'] for r in rs]):.0f} | "
-                         f"{np.mean([r['solve_s'] for r in rs]):.2f} |")
-    write_results("synth_force_start", {"rows": rows, "seeds": args.seeds, "starts": args.starts}, "\n".join(lines))
+    report(summarise(rows, args.hands), args.seeds, args.starts)
 
 
 if __name__ == "__main__":
