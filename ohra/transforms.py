@@ -1,4 +1,7 @@
-"""Rigid transforms: fixed-axis rpy (URDF / scipy ``"xyz"``) and 4x4 homogeneous matrices."""
+"""Rigid transforms: fixed-axis rpy (URDF / scipy ``"xyz"``), axis-angle rotations and 4x4 matrices.
+
+numpy only; the CasADi twin of :func:`axis_angle_to_matrix` is :func:`ohra.synth.fk.rodrigues`.
+"""
 
 from __future__ import annotations
 
@@ -48,3 +51,22 @@ def invert(T: np.ndarray) -> np.ndarray:
     out[..., :3, 3] = -np.einsum("...ij,...j->...i", Rt, T[..., :3, 3])
     out[..., 3, 3] = 1.0
     return out
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    """Cross-product matrix ``[v]x`` (``[v]x @ u == v x u``); (...,3) -> (...,3,3)."""
+    v = np.asarray(v, dtype=float)
+    x, y, z = v[..., 0], v[..., 1], v[..., 2]
+    o = np.zeros_like(x)
+    return np.stack([np.stack([o, -z, y], -1), np.stack([z, o, -x], -1), np.stack([-y, x, o], -1)], -2)
+
+
+def axis_angle_to_matrix(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """Rodrigues' rotation ``I + sin(a) K + (1 - cos(a)) K^2``, ``K = [axis]x``, about a unit axis.
+
+    ``axis`` (...,3) unit vectors and ``angle`` (...) radians broadcast against each other ((3,) with
+    (N,) gives (N,3,3)); returns (...,3,3).
+    """
+    K = skew(axis)
+    a = np.asarray(angle, dtype=float)[..., None, None]
+    return np.eye(3) + np.sin(a) * K + (1.0 - np.cos(a)) * (K @ K)

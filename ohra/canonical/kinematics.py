@@ -4,6 +4,14 @@
 single configurations and Jacobians), a vectorised numpy forward kinematics over the same
 kinematic tree for batches of configurations, and Coal capsule geometry for collision queries.
 
+Why two forward-kinematics paths here (the package has two more: CasADi expressions for the grasp
+NLP in ``ohra.synth.fk`` and ``canonical_keypoints`` from parameter arrays for the parse fit):
+Pinocchio is the reference and the fastest for one configuration; on batches its per-call Python
+overhead dominates, and the numpy path evaluates 4096 configurations about 5x faster (also about 6x
+faster than evaluating the CasADi expressions numerically; ``benchmarks/results/fk_paths.md``).
+Batches are what the synthesiser's finger-pair reach, the dataset distance checks and the samplers
+use. ``tests/test_fk_paths.py`` holds every path to Pinocchio to 1e-9 m.
+
 All poses are 4x4 homogeneous matrices in the canonical palm frame (the URDF root; +x palm normal,
 +y thumb side of a right hand, +z finger-forward), in metres. Configurations are always the 22-D
 canonical joint vector (``ohra.canonical.params.JOINT_NAMES`` order) in radians; absent joints must be 0.
@@ -23,6 +31,7 @@ import pinocchio as pin
 from ohra.errors import OhraError, ParamsError
 from ohra.canonical.params import FINGERS, JOINT_NAMES, BaseParams, ExtendedParams, load_params
 from ohra.canonical.urdfgen import palm_geometry, render
+from ohra.transforms import axis_angle_to_matrix
 
 Params = Union[BaseParams, ExtendedParams]
 SEGMENTS = ("proximal", "middle", "distal")
@@ -61,14 +70,6 @@ class _Tree:
     frame_names: tuple[str, ...]
     frame_joint: np.ndarray
     frame_placement: np.ndarray
-
-
-def _rotation_batch(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
-    """Rodrigues' rotation about a fixed unit ``axis`` for angles (N,) -> (N,3,3)."""
-    x, y, z = axis
-    K = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-    s, c = np.sin(angle)[:, None, None], np.cos(angle)[:, None, None]
-    return np.eye(3) + s * K + (1.0 - c) * (K @ K)
 
 
 def _joint_axis(jm: pin.JointModel) -> np.ndarray:
@@ -264,7 +265,7 @@ class HandModel:
                 R[:, :, u] = c * base_R[:, :, u] + sign * s * base_R[:, :, v]
                 R[:, :, v] = -sign * s * base_R[:, :, u] + c * base_R[:, :, v]
             else:
-                R = base_R @ _rotation_batch(a, ang)
+                R = base_R @ axis_angle_to_matrix(a, ang)
             Rs[j] = R
         return Rs, ts
 

@@ -1,9 +1,12 @@
-"""Forward kinematics of a canonical hand as CasADi expressions.
+"""Forward kinematics of a canonical hand as CasADi expressions (and the CasADi Rodrigues).
 
-The PyPI Pinocchio wheels have no CasADi bindings, so the kinematic tree of :class:`HandModel`
-(joint placements, axes and frame placements, read from the Pinocchio model of the canonical URDF)
-is composed symbolically here: ``T_joint = T_parent @ T_placement @ Rot(axis, q)``. Tests check it
-against Pinocchio to 1e-9 m.
+Why this path stays (one of three beside Pinocchio, see ``tests/test_fk_paths.py``): the grasp NLP
+needs frame poses as symbolic expressions of the joints, and the PyPI Pinocchio wheels have no
+CasADi bindings. The kinematic tree of :class:`HandModel` (joint placements, axes and frame
+placements, read from the Pinocchio model of the canonical URDF) is composed symbolically here:
+``T_joint = T_parent @ T_placement @ Rot(axis, q)``. As a numeric batch evaluator it is no
+substitute for the numpy path (``benchmarks/results/fk_paths.md``: about 6x slower on 4096
+configurations). ``tests/test_fk_paths.py`` holds it to Pinocchio to 1e-9 m.
 """
 
 from __future__ import annotations
@@ -16,20 +19,37 @@ import numpy as np
 from ohra.canonical.kinematics import HandModel
 
 
+def rodrigues(axis: ca.SX | np.ndarray, angle: ca.SX) -> ca.SX:
+    """Rotation by ``angle`` [rad] about the unit ``axis`` (3-vector): ``I + sin K + (1 - cos) K^2``.
+
+    The CasADi twin of :func:`ohra.transforms.axis_angle_to_matrix` (one Rodrigues per backend).
+    """
+    K = ca.skew(ca.SX(axis) if isinstance(axis, np.ndarray) else axis)
+    return ca.SX.eye(3) + ca.sin(angle) * K + (1 - ca.cos(angle)) * (K @ K)
+
+
+def rotvec_matrix(w: ca.SX) -> ca.SX:
+    """Rotation matrix of a rotation vector ``w`` (3x1, rad), smooth at 0.
+
+    The angle is regularised (``|w| -> sqrt(|w|^2 + 1e-12)``) so the expression and its derivatives
+    stay finite at ``w = 0``, where it gives the identity (the axis ``w / |w|`` vanishes with ``w``).
+    """
+    th = ca.sqrt(ca.dot(w, w) + 1e-12)
+    return rodrigues(w / th, th)
+
+
 def _rot(axis: np.ndarray, angle: ca.SX) -> ca.SX:
     """Rotation matrix about a fixed unit axis (exact for basis axes, Rodrigues otherwise)."""
-    c, s = ca.cos(angle), ca.sin(angle)
     k = np.flatnonzero(np.abs(np.abs(axis) - 1.0) < 1e-12)
     if k.size == 1 and np.count_nonzero(axis) == 1:
+        c, s = ca.cos(angle), ca.sin(angle)
         i = int(k[0])
         sg = float(np.sign(axis[i]))
         u, v = (i + 1) % 3, (i + 2) % 3
         R = ca.SX.eye(3)
         R[u, u], R[u, v], R[v, u], R[v, v] = c, -sg * s, sg * s, c
         return R
-    x, y, z = (float(a) for a in axis)
-    K = ca.SX(np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]]))
-    return ca.SX.eye(3) + s * K + (1.0 - c) * (K @ K)
+    return rodrigues(np.asarray(axis, dtype=float), angle)
 
 
 def frame_transforms(hand: HandModel, q: ca.SX, frames: Sequence[str]) -> list[tuple[ca.SX, ca.SX]]:
