@@ -46,7 +46,7 @@ def _pinocchio(hm: HandModel, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _canonical_keypoints(params, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    from ohra.original.parse import canonical_keypoints, ext_arrays, ext_arrays_from_base
+    from ohra.original.keypoints import canonical_keypoints, ext_arrays, ext_arrays_from_base
 
     if isinstance(params, BaseParams):
         arr = ext_arrays_from_base(params.to_vector(), params.present_joints)

@@ -17,6 +17,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from ohra.errors import ParseError
+from ohra.transforms import axis_angle_to_matrix
 
 MOVABLE_TYPES = ("revolute", "continuous", "prismatic")
 KNOWN_TYPES = MOVABLE_TYPES + ("fixed", "floating", "planar")
@@ -184,7 +185,7 @@ class OriginalHand:
                 if j.type == "prismatic":
                     M[:, :3, 3] = val[:, None] * j.axis
                 else:
-                    M[:, :3, :3] = _rodrigues(j.axis, val)
+                    M[:, :3, :3] = axis_angle_to_matrix(j.axis, val)
                 T = T @ M
             poses[link] = T
         out = np.stack([poses[w] for w in want], axis=1)
@@ -264,14 +265,6 @@ def _joint_value(qb: np.ndarray, index: dict[str, int], joints: dict[str, Joint]
         master, mult, off = j.mimic
         return mult * _joint_value(qb, index, joints, master, over) + off
     return qb[:, index[name]]
-
-
-def _rodrigues(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
-    """(N,3,3) rotations about a fixed unit axis."""
-    x, y, z = axis
-    K = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-    s, c = np.sin(angle)[:, None, None], np.cos(angle)[:, None, None]
-    return np.eye(3) + s * K + (1.0 - c) * (K @ K)
 
 
 __all__ = ["OriginalHand", "Joint", "Geometry", "MissingMeshWarning", "MOVABLE_TYPES", "KNOWN_TYPES"]

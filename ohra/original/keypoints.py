@@ -17,7 +17,7 @@ import numpy as np
 
 from ohra.canonical.params import EXT_ROW_START, FINGERS, JOINT_INDEX, JOINT_NAMES, ExtendedParams, link_presence
 from ohra.original.measure import Measurement
-from ohra.transforms import invert, inverse_rpy
+from ohra.transforms import axis_angle_to_matrix, invert, inverse_rpy
 
 _X_AXIS_SLOTS = ("thumb_joint1", "thumb_joint3", "index_joint1", "middle_joint1", "ring_joint1", "little_joint1")
 
@@ -46,11 +46,8 @@ def _rot_batch(axis: np.ndarray, q: np.ndarray) -> np.ndarray:
     """(N,4,4) rotations by angles q (N,) about ``axis`` (normalised here; zero -> x)."""
     n = np.linalg.norm(axis)
     axis = axis / n if n > 1e-12 else np.array([1.0, 0.0, 0.0])
-    x, y, z = axis
-    K = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-    s, c = np.sin(q)[:, None, None], np.cos(q)[:, None, None]
     out = np.zeros((q.shape[0], 4, 4))
-    out[:, :3, :3] = np.eye(3) + s * K + (1.0 - c) * (K @ K)
+    out[:, :3, :3] = axis_angle_to_matrix(axis, q)
     out[:, 3, 3] = 1.0
     return out
 
