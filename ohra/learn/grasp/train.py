@@ -71,9 +71,12 @@ def _check_resume(ckpt: dict[str, Any], spec: RunSpec, digest: str, path: Path) 
         raise CheckpointError(f"{path}: checkpoint is at step {ckpt['step']}, beyond the requested {spec.train.steps} steps")
 
 
-def _payload(model: GraspModel, opt: torch.optim.Optimizer, spec: RunSpec, step: int, history: list, digest: str) -> dict:
+def _payload(model: GraspModel, opt: torch.optim.Optimizer, spec: RunSpec, step: int, history: list, digest: str,
+             window: tuple[dict[str, float], int]) -> dict:
+    # ``window``: loss sums and count since the last history entry (a checkpoint can fall between two)
     return {**model.payload(), "format": CHECKPOINT_FORMAT, "spec": spec.to_dict(), "optimizer": opt.state_dict(),
-            "step": int(step), "history": history, "data_digest": digest}
+            "step": int(step), "history": history, "data_digest": digest,
+            "window": {"sums": dict(window[0]), "count": int(window[1])}}
 
 
 def train_step(net: GraspNet, batch, joint_weight: float) -> dict[str, torch.Tensor]:
@@ -137,7 +140,7 @@ def train_grasp(data: str | Path | Sequence[str | Path], model_cfg: GraspModelCo
         torch.manual_seed(cfg.seed)
         net = GraspNet(model_cfg, cond.dim)
         opt = torch.optim.Adam(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
-        step, history = 0, []
+        step, history, window = 0, [], ({k: 0.0 for k in LOSS_TERMS}, 0)
         if ckpt is not None:
             try:
                 net.load_state_dict(ckpt["model"])
@@ -145,6 +148,7 @@ def train_grasp(data: str | Path | Sequence[str | Path], model_cfg: GraspModelCo
             except (RuntimeError, KeyError, ValueError) as exc:
                 raise CheckpointError(f"{ckpt_path}: incompatible checkpoint ({str(exc).splitlines()[0][:160]})") from None
             step, history = int(ckpt["step"]), list(ckpt["history"])
+            window = ({k: float(ckpt["window"]["sums"][k]) for k in LOSS_TERMS}, int(ckpt["window"]["count"]))
         meta = {"hands": td.hands, "data": spec.data, "data_digest": digest, **{k: v for k, v in td.summary().items()
                                                                                 if k in ("train_objects", "test_objects", "per_hand")}}
         model = GraspModel(net, cond, t_scale, model_cfg, meta)
@@ -152,7 +156,7 @@ def train_grasp(data: str | Path | Sequence[str | Path], model_cfg: GraspModelCo
             atomic_write_text(json.dumps(spec.to_dict(), indent=1) + "\n", run / "config.json")
         elapsed_before = float(history[-1]["elapsed_s"]) if history else 0.0
         net.train()
-        sums, count = {k: 0.0 for k in LOSS_TERMS}, 0
+        sums, count = window
         bar = tqdm(range(step, cfg.steps), initial=step, total=cfg.steps, desc="train grasp", unit="step",
                    disable=not progress, dynamic_ncols=True)
         t_run = time.perf_counter()
@@ -177,7 +181,7 @@ def train_grasp(data: str | Path | Sequence[str | Path], model_cfg: GraspModelCo
                 bar.set_postfix(diff=f"{entry['diffusion']:.4f}", joints=f"{entry['joints']:.4f}")
                 sums, count = {k: 0.0 for k in LOSS_TERMS}, 0
             if ckpt_path is not None and (done % cfg.checkpoint_every == 0 or done == cfg.steps):
-                atomic_save(_payload(model, opt, spec, done, history, digest), ckpt_path)
+                atomic_save(_payload(model, opt, spec, done, history, digest, (sums, count)), ckpt_path)
             if on_step is not None:
                 on_step(done, vals)
         bar.close()
