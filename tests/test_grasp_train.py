@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -12,7 +13,8 @@ torch = pytest.importorskip("torch")
 
 from grasp_fixtures import HANDS, tiny_model_config, tiny_train_config, write_dataset  # noqa: E402
 
-from ohra.errors import CheckpointError, DatasetError  # noqa: E402
+from ohra.errors import CheckpointError, DatasetError, GraspError  # noqa: E402
+from ohra.hands import get_hand  # noqa: E402
 from ohra.learn.grasp.data import TrainingData, check_disjoint, make_batch  # noqa: E402
 from ohra.learn.grasp.evaluate import check_unseen, diversity, evaluate_model, pair_seed  # noqa: E402
 from ohra.learn.grasp.model import load_grasp_model  # noqa: E402
@@ -43,6 +45,7 @@ def test_split_holds_out_test_objects_by_name_and_mesh(tmp_path):
     sphere_hash = ObjectModel.builtin("sphere").mesh_hash
     assert sphere_hash not in {o.mesh_hash for o in td.objects}
     assert len(td) == 3 * 2 * 6 and set(np.unique(td.obj_idx)) == {0, 1}
+    assert len(TrainingData.load(root, tiny_train_config(test_objects=("sphere",), max_per_pair=2))) == 3 * 2 * 2
 
 
 def test_check_disjoint_raises_on_overlap():
@@ -83,6 +86,10 @@ def test_batches_are_robot_balanced_and_deterministic(tmp_path):
     b2 = make_batch(td, cfg, 16, 0, *_tables(td), t_scale=1.0)
     assert torch.equal(b.t_norm, b2.t_norm) and torch.equal(b.clouds, b2.clouds)
     assert not torch.equal(make_batch(td, cfg, 16, 1, *_tables(td), t_scale=1.0).t_norm, b.t_norm)
+    one = replace(cfg, batch_size=64, objects_per_step=1)
+    for step in range(4):  # a pool of one object per step: one cloud, still every hand
+        b = make_batch(td, one, 16, step, *_tables(td), t_scale=1.0)
+        assert len(b.clouds) == 1 and len(np.unique(b.present.sum(1).numpy())) == 3
 
 
 def test_objects_are_encoded_once_per_copy_and_rotated_with_their_grasps(tmp_path):
@@ -197,6 +204,19 @@ def test_evaluate_model_runs_the_protocol(dataset):
     assert d["per_hand"]["barrett_hand"]["n"] == 2 and d["pairs"][0]["diversity_all"] is not None
     with pytest.raises(DatasetError, match="training set"):
         evaluate_model(model, ["barrett_hand"], ["builtin:box"], n=1)
+
+
+def test_original_replay_uses_the_same_grasps(dataset, hands_dir):
+    model = train_grasp(dataset, tiny_model_config(), tiny_train_config(steps=1), progress=False).model
+    can = evaluate_model(model, ["barrett_hand"], ["builtin:capsule"], n=2, seed=3)
+    orig = evaluate_model(model, ["barrett_hand"], ["builtin:capsule"], n=2, seed=3, original=True)
+    np.testing.assert_array_equal(can.pairs[0].grasps, orig.pairs[0].grasps)
+    assert orig.pairs[0].original and orig.meta["original"]
+    from ohra.canonical.params import BaseParams
+
+    with pytest.raises(GraspError, match="by name"):
+        evaluate_model(model, [BaseParams.from_vector(get_hand("barrett_hand").to_vector())], ["builtin:capsule"], n=1,
+                       original=True)
 
 
 # -- CLI ------------------------------------------------------------------------------------------------
