@@ -94,12 +94,37 @@ def time_train_step(cfg: GraspModelConfig, rows: int, clouds: int, steps: int) -
             "steps_per_s": 1 / s, "grasps_per_s": rows / s, "clouds_per_s": clouds / s}
 
 
-def evaluate(model: GraspModel, hands: list[str], objects: list[str], n: int, original: bool) -> dict:
+def evaluate(model: GraspModel, hands: list[str], objects: list[str], n: int, original: bool, data: list[str]) -> dict:
     from ohra.learn.grasp.evaluate import evaluate_model
 
     out = {"canonical": evaluate_model(model, hands, objects, n=n, seed=0).to_dict()}
     if original:
         out["original"] = evaluate_model(model, hands, objects, n=n, seed=0, original=True).to_dict()
+    if data:
+        out["stored"] = stored_reference(hands, objects, data)
+    return out
+
+
+def stored_reference(hands: list[str], objects: list[str], data: list[str]) -> dict:
+    """The datasets' own grasps of the evaluation objects (never trained on), re-evaluated: what the
+    protocol gives the synthesiser's filtered grasps, a reference for the model's rate."""
+    import warnings
+
+    from ohra.data import GraspDataset
+    from ohra.learn.grasp.model import resolve_object
+    from ohra.sim import GraspEvaluator
+
+    out = {}
+    for spec in objects:
+        obj = resolve_object(spec)
+        for h in hands:
+            g = GraspDataset(data, hands=[h], objects=[obj.name]).grasps().astype(float)
+            if not len(g):
+                continue
+            with GraspEvaluator(h, obj) as ev, warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                ok = ev.evaluate(g).success
+            out[f"{h}/{obj.name}"] = {"n": int(len(g)), "successes": int(ok.sum()), "success_rate": float(ok.mean())}
     return out
 
 
@@ -122,8 +147,8 @@ def table(res: dict) -> str:
                      f"({', '.join(f'{h} {c}' for h, c in tr['data']['per_hand'].items())}), "
                      f"objects {', '.join(tr['data']['train_objects'])} | {tr['train_seconds_total'] / 60:.1f} min | <= 60 min |")
     if "evaluation" in res:
-        lines += ["", "| hand | object | success (canonical) | success (original URDF) | change | approach spread | joint std | ms/grasp | paper (reported, Isaac Gym) |",
-                  "|---|---|---|---|---|---|---|---|---|"]
+        lines += ["", "| hand | object | success (canonical) | success (original URDF) | change | stored dataset grasps re-evaluated | approach spread | joint std | ms/grasp | paper (reported, Isaac Gym) |",
+                  "|---|---|---|---|---|---|---|---|---|---|"]
         ev = res["evaluation"]
         orig = {(p["hand"], p["object"]): p for p in ev.get("original", {}).get("pairs", [])}
         for p in ev["canonical"]["pairs"]:
@@ -131,10 +156,14 @@ def table(res: dict) -> str:
             d = p["diversity_all"] or {}
             ch = f"{100 * (o['success_rate'] - p['success_rate']):+.1f}" if o else "-"
             orig_s = f"{o['successes']}/{o['n']} ({100 * o['success_rate']:.0f} %)" if o else "-"
+            st = ev.get("stored", {}).get(f"{p['hand']}/{p['object']}")
+            st_s = f"{st['successes']}/{st['n']} ({100 * st['success_rate']:.0f} %)" if st else "-"
             lines.append(f"| {p['hand']} | {p['object']} | {p['successes']}/{p['n']} ({100 * p['success_rate']:.0f} %) | "
-                         f"{orig_s} | {ch} | {d.get('approach_spread', float('nan')):.2f} | "
+                         f"{orig_s} | {ch} | {st_s} | {d.get('approach_spread', float('nan')):.2f} | "
                          f"{d.get('joint_std_rad', float('nan')):.2f} rad | {p['sample_ms_per_grasp']:.2f} | "
                          f"{PAPER.get(p['hand'], '-')} % (replay {PAPER_REPLAY.get(p['hand'], '-')}) |")
+    if res.get("model_note"):
+        lines += ["", f"Model: {res['model_note']}"]
     return "\n".join(lines)
 
 
@@ -146,13 +175,14 @@ def main() -> None:
     ap.add_argument("--eval-hands", nargs="*", default=list(PAPER))
     ap.add_argument("-n", type=int, default=100)
     ap.add_argument("--original", action="store_true", help="also replay on the original URDFs")
+    ap.add_argument("--reference-data", nargs="*", default=[], help="datasets whose grasps of the evaluation objects are re-evaluated as a reference")
     ap.add_argument("--dgcnn-steps", type=int, default=2, help="timed DGCNN train steps (slow on a CPU)")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     model = load_grasp_model(args.model) if args.model else fresh_model(GraspModelConfig())
     obj = ObjectModel.builtin("capsule")
     res = {"threads": args.threads, "model": args.model or "fresh default architecture", "config": model.config.to_dict(),
-           "inference": time_inference(model, "shadow_hand_right", obj)}
+           "model_note": model.meta.get("note", ""), "inference": time_inference(model, "shadow_hand_right", obj)}
     tc = GraspTrainConfig()
     res["train_step"] = [time_train_step(GraspModelConfig(), tc.batch_size, 6, 20),
                          time_train_step(GraspModelConfig(encoder="dgcnn"), tc.batch_size, 6, args.dgcnn_steps)]
@@ -161,7 +191,8 @@ def main() -> None:
         if mpath.is_file():
             res["training"] = {k: v for k, v in json.loads(mpath.read_text()).items() if k != "history"}
         if args.eval_objects:
-            res["evaluation"] = evaluate(model, args.eval_hands, args.eval_objects, args.n, args.original)
+            res["evaluation"] = evaluate(model, args.eval_hands, args.eval_objects, args.n, args.original,
+                                         args.reference_data)
     res["peak_rss_mib"] = peak_rss_mib()
     res["load_average_1_5_15"] = list(os.getloadavg())  # the machine is shared: timings rise with its load
     write_results("grasp_model", res, table(res))
