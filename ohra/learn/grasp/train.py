@@ -19,7 +19,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
@@ -107,6 +107,91 @@ def heldout_losses(model: GraspModel, data: TrainingData, objects: Mapping[str, 
     return out
 
 
+@dataclass
+class _State:
+    """Everything a training loop reads and advances."""
+
+    td: TrainingData
+    model: GraspModel
+    opt: torch.optim.Optimizer
+    tables: tuple[torch.Tensor, torch.Tensor]  # hand conditions, presence masks (per training hand)
+    step: int = 0
+    history: list = field(default_factory=list)
+    window: tuple[dict[str, float], int] = ({}, 0)  # loss sums and count since the last history entry
+
+
+def _prepare(spec: RunSpec, paths: list, ckpt_path: Path | None, resume: bool,
+             objects: Mapping[str, ObjectModel] | None, vae_path: str | Path | None) -> _State:
+    """Data, condition, network and optimiser; restored from the checkpoint when resuming."""
+    cfg, model_cfg = spec.train, spec.model
+    td = TrainingData.load(paths, cfg, objects)
+    digest = td.digest()
+    ckpt = None
+    if resume:
+        if ckpt_path is None:
+            raise CheckpointError("resume needs a run directory")
+        ckpt = load_torch_file(ckpt_path, CHECKPOINT_FORMAT)
+        _check_resume(ckpt, spec, digest, ckpt_path)
+    cond = HandCondition.from_state(ckpt["condition"]) if ckpt else HandCondition.fit(model_cfg.condition, td.params, vae_path)
+    t_scale = float(ckpt["t_scale"]) if ckpt else td.translation_scale()
+    torch.manual_seed(cfg.seed)
+    net = GraspNet(model_cfg, cond.dim)
+    opt = torch.optim.Adam(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    summary = td.summary()
+    meta = {"hands": td.hands, "data": spec.data, "data_digest": digest,
+            **{k: summary[k] for k in ("train_objects", "test_objects", "per_hand")}}
+    state = _State(td, GraspModel(net, cond, t_scale, model_cfg, meta), opt, _tables(cond, td),
+                   window=({k: 0.0 for k in LOSS_TERMS}, 0))
+    if ckpt is not None:
+        try:
+            net.load_state_dict(ckpt["model"])
+            opt.load_state_dict(ckpt["optimizer"])
+            state.window = ({k: float(ckpt["window"]["sums"][k]) for k in LOSS_TERMS}, int(ckpt["window"]["count"]))
+        except (RuntimeError, KeyError, ValueError) as exc:
+            raise CheckpointError(f"{ckpt_path}: incompatible checkpoint ({str(exc).splitlines()[0][:160]})") from None
+        state.step, state.history = int(ckpt["step"]), list(ckpt["history"])
+    return state
+
+
+def _loop(st: _State, spec: RunSpec, ckpt_path: Path | None, progress: bool,
+          on_step: Callable[[int, dict[str, float]], None] | None) -> float:
+    """Train from ``st.step`` to ``spec.train.steps``; returns the wall time [s]."""
+    from tqdm import tqdm
+
+    cfg, net, opt = spec.train, st.model.net, st.opt
+    elapsed_before = float(st.history[-1]["elapsed_s"]) if st.history else 0.0
+    sums, count = st.window
+    net.train()
+    bar = tqdm(range(st.step, cfg.steps), initial=st.step, total=cfg.steps, desc="train grasp", unit="step",
+               disable=not progress, dynamic_ncols=True)
+    t_run = time.perf_counter()
+    for s in bar:
+        lr = learning_rate(cfg, s)
+        for group in opt.param_groups:
+            group["lr"] = lr
+        batch = make_batch(st.td, cfg, spec.model.n_points, s, *st.tables, st.model.t_scale)
+        terms = train_step(net, batch, cfg.joint_loss_weight)
+        opt.zero_grad(set_to_none=True)
+        terms["total"].backward()
+        opt.step()
+        vals = {k: float(terms[k].detach()) for k in LOSS_TERMS}
+        sums, count = {k: sums[k] + vals[k] for k in LOSS_TERMS}, count + 1
+        done = s + 1
+        if done % cfg.log_every == 0 or done == cfg.steps:
+            entry = {"step": done, "lr": lr, **{k: sums[k] / count for k in LOSS_TERMS},
+                     "elapsed_s": elapsed_before + time.perf_counter() - t_run}
+            st.history.append(entry)
+            bar.set_postfix(diff=f"{entry['diffusion']:.4f}", joints=f"{entry['joints']:.4f}")
+            sums, count = {k: 0.0 for k in LOSS_TERMS}, 0
+        if ckpt_path is not None and (done % cfg.checkpoint_every == 0 or done == cfg.steps):
+            atomic_save(_payload(st.model, opt, spec, done, st.history, st.model.meta["data_digest"], (sums, count)), ckpt_path)
+        if on_step is not None:
+            on_step(done, vals)
+    bar.close()
+    net.eval()
+    return time.perf_counter() - t_run
+
+
 def train_grasp(data: str | Path | Sequence[str | Path], model_cfg: GraspModelConfig = GraspModelConfig(),
                 cfg: GraspTrainConfig = GraspTrainConfig(), run_dir: str | Path | None = None, resume: bool = False,
                 progress: bool = True, objects: Mapping[str, ObjectModel] | None = None, vae_path: str | Path | None = None,
@@ -118,88 +203,29 @@ def train_grasp(data: str | Path | Sequence[str | Path], model_cfg: GraspModelCo
     ``resume``: continue ``run_dir/checkpoints/last.pt`` (same settings except ``steps``,
     ``checkpoint_every``, ``log_every``; same data). ``on_step(step, losses)`` runs after every step.
     """
-    from tqdm import tqdm
-
     paths = [data] if isinstance(data, (str, Path)) else list(data)
     spec = RunSpec([str(p) for p in paths], model_cfg, cfg)
     run = Path(run_dir) if run_dir is not None else None
     ckpt_path = run / "checkpoints" / "last.pt" if run is not None else None
     t_start = time.perf_counter()
     with torch_settings(cfg.threads):
-        td = TrainingData.load(paths, cfg, objects)
-        digest = td.digest()
-        ckpt = None
-        if resume:
-            if ckpt_path is None:
-                raise CheckpointError("resume needs a run directory")
-            ckpt = load_torch_file(ckpt_path, CHECKPOINT_FORMAT)
-            _check_resume(ckpt, spec, digest, ckpt_path)
-        cond = HandCondition.from_state(ckpt["condition"]) if ckpt else HandCondition.fit(model_cfg.condition, td.params, vae_path)
-        t_scale = float(ckpt["t_scale"]) if ckpt else td.translation_scale()
-        hand_table, present_table = _tables(cond, td)
-        torch.manual_seed(cfg.seed)
-        net = GraspNet(model_cfg, cond.dim)
-        opt = torch.optim.Adam(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
-        step, history, window = 0, [], ({k: 0.0 for k in LOSS_TERMS}, 0)
-        if ckpt is not None:
-            try:
-                net.load_state_dict(ckpt["model"])
-                opt.load_state_dict(ckpt["optimizer"])
-            except (RuntimeError, KeyError, ValueError) as exc:
-                raise CheckpointError(f"{ckpt_path}: incompatible checkpoint ({str(exc).splitlines()[0][:160]})") from None
-            step, history = int(ckpt["step"]), list(ckpt["history"])
-            window = ({k: float(ckpt["window"]["sums"][k]) for k in LOSS_TERMS}, int(ckpt["window"]["count"]))
-        meta = {"hands": td.hands, "data": spec.data, "data_digest": digest, **{k: v for k, v in td.summary().items()
-                                                                                if k in ("train_objects", "test_objects", "per_hand")}}
-        model = GraspModel(net, cond, t_scale, model_cfg, meta)
+        st = _prepare(spec, paths, ckpt_path, resume, objects, vae_path)
         if run is not None:
             atomic_write_text(json.dumps(spec.to_dict(), indent=1) + "\n", run / "config.json")
-        elapsed_before = float(history[-1]["elapsed_s"]) if history else 0.0
-        net.train()
-        sums, count = window
-        bar = tqdm(range(step, cfg.steps), initial=step, total=cfg.steps, desc="train grasp", unit="step",
-                   disable=not progress, dynamic_ncols=True)
-        t_run = time.perf_counter()
-        for s in bar:
-            lr = learning_rate(cfg, s)
-            for group in opt.param_groups:
-                group["lr"] = lr
-            batch = make_batch(td, cfg, model_cfg.n_points, s, hand_table, present_table, t_scale)
-            terms = train_step(net, batch, cfg.joint_loss_weight)
-            opt.zero_grad(set_to_none=True)
-            terms["total"].backward()
-            opt.step()
-            vals = {k: float(terms[k].detach()) for k in LOSS_TERMS}
-            for k in LOSS_TERMS:
-                sums[k] += vals[k]
-            count += 1
-            done = s + 1
-            if done % cfg.log_every == 0 or done == cfg.steps:
-                entry = {"step": done, "lr": lr, **{k: sums[k] / count for k in LOSS_TERMS},
-                         "elapsed_s": elapsed_before + time.perf_counter() - t_run}
-                history.append(entry)
-                bar.set_postfix(diff=f"{entry['diffusion']:.4f}", joints=f"{entry['joints']:.4f}")
-                sums, count = {k: 0.0 for k in LOSS_TERMS}, 0
-            if ckpt_path is not None and (done % cfg.checkpoint_every == 0 or done == cfg.steps):
-                atomic_save(_payload(model, opt, spec, done, history, digest, (sums, count)), ckpt_path)
-            if on_step is not None:
-                on_step(done, vals)
-        bar.close()
-        train_seconds = time.perf_counter() - t_run
-        net.eval()
-        n_steps = cfg.steps - step
+        first = st.step
+        seconds = _loop(st, spec, ckpt_path, progress, on_step)
+        n_steps, h = cfg.steps - first, st.history
         metrics: dict[str, Any] = {
-            "steps": cfg.steps, "train_seconds_this_run": train_seconds,
-            "train_seconds_total": history[-1]["elapsed_s"] if history else 0.0,
-            "steps_per_s": n_steps / train_seconds if train_seconds > 0 and n_steps else None,
-            "grasps_per_s": n_steps * cfg.batch_size / train_seconds if train_seconds > 0 and n_steps else None,
-            "final_losses": {k: history[-1][k] for k in LOSS_TERMS} if history else {},
-            "heldout_losses": heldout_losses(model, td, td.test_models),
-            "data": td.summary(), "translation_scale_m": t_scale, "condition": model_cfg.condition,
-            "encoder": model_cfg.encoder, "threads": cfg.threads, "history": history,
+            "steps": cfg.steps, "train_seconds_this_run": seconds, "train_seconds_total": h[-1]["elapsed_s"] if h else 0.0,
+            "steps_per_s": n_steps / seconds if seconds > 0 and n_steps else None,
+            "grasps_per_s": n_steps * cfg.batch_size / seconds if seconds > 0 and n_steps else None,
+            "final_losses": {k: h[-1][k] for k in LOSS_TERMS} if h else {},
+            "heldout_losses": heldout_losses(st.model, st.td, st.td.test_models),
+            "data": st.td.summary(), "translation_scale_m": st.model.t_scale, "condition": model_cfg.condition,
+            "encoder": model_cfg.encoder, "threads": cfg.threads, "history": h,
+            "wall_seconds": time.perf_counter() - t_start, "peak_rss_mib": _peak_rss_mib(),
         }
-        metrics["wall_seconds"] = time.perf_counter() - t_start
-        metrics["peak_rss_mib"] = _peak_rss_mib()
+    model = st.model
     if run is not None:
         atomic_save(model.payload(), run / "model.pt")
         atomic_write_text(json.dumps(metrics, indent=1) + "\n", run / "metrics.json")
