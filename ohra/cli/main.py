@@ -27,8 +27,9 @@ from typing import Sequence
 
 from ohra.errors import OhraError
 
-COMMANDS = ("hand", "eval", "synth", "learn")
-"""Command modules under ``ohra.cli``, registered in this order (``learn`` adds ``train`` and ``vae``)."""
+COMMANDS = ("hand", "eval", "synth", "learn", "grasp")
+"""Command modules under ``ohra.cli``, registered in this order (``learn`` adds ``train`` and ``vae``;
+``grasp`` adds ``grasp`` and ``train grasp``)."""
 
 EXIT_USAGE = 2
 

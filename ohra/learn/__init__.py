@@ -1,5 +1,6 @@
 """Learning on canonical hands: the synthetic hand sampler, the 66-D morphology encoding and the
-morphology VAE (16-D latent space; encode, decode and interpolate hands).
+morphology VAE (16-D latent space; encode, decode and interpolate hands), and the cross-embodiment
+grasp model (:mod:`ohra.learn.grasp`).
 
 The sampler and the encoding need only numpy and import eagerly. Everything that needs torch
 (the VAE model, training, ``load_vae``, ``encode``/``decode``/``interpolate``) is imported on first
@@ -57,6 +58,9 @@ _LAZY = {
     "decode": "morph",
     "interpolate": "morph",
     "Interpolation": "morph",
+    "load_grasp_model": "grasp.model",
+    "GraspModel": "grasp.model",
+    "train_grasp": "grasp.train",
 }
 
 

@@ -1,0 +1,157 @@
+"""``ohra grasp sample|eval`` and ``ohra train grasp``: the cross-embodiment grasp model from the shell.
+
+    ohra train grasp --data DIR [DIR ...] [--hands H ...] [--test-objects O ...] --condition vae|params
+                     [--encoder pointnet|dgcnn] [--steps N] [--batch-size B] [--seed S] [--threads T]
+                     -o RUN [--resume]
+    ohra grasp sample --hand H --object O [-n 100] [--seed S] [--model RUN] -o grasps.npz
+    ohra grasp eval --hands H ... --objects O ... [-n 100] [--seed S] [--original] [--model RUN] [-o report.json]
+
+Plugged into :mod:`ohra.cli.main` by ``register(subparsers)`` (adds the ``grasp`` group and
+``grasp`` under the ``train`` group, creating ``train`` if no other plugin did). torch is imported
+only when a command runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ohra.cli.main import subcommand_group
+from ohra.errors import OhraError
+
+
+def register(sub: Any) -> None:
+    """Add ``ohra grasp sample|eval`` and ``ohra train grasp``."""
+    register_train(subcommand_group(sub, "train", "train learned models (vae, grasp, ...)", "train_command"))
+    g = subcommand_group(sub, "grasp", "the cross-embodiment grasp model: sample and evaluate grasps", "grasp_command")
+    model_help = "run or model directory, or .pt file (default: the shipped model)"
+    p = g.add_parser("sample", help="sample grasps of a hand on an object -> .npz (key 'grasps', (N, 31))")
+    p.add_argument("--hand", required=True, help="registered hand, leap_XXXX, or a params JSON file")
+    p.add_argument("--object", required=True, help="mesh (.obj/.stl/.ply), object URDF or folder, or builtin:NAME")
+    p.add_argument("-n", type=int, default=100, help="number of grasps (default 100)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--model", help=model_help)
+    p.add_argument("-o", "--output", required=True, help="output .npz")
+    p.set_defaults(func=_cmd_sample)
+
+    p = g.add_parser("eval", help="sample N grasps per (hand, unseen object) and run the six-direction test")
+    p.add_argument("--hands", nargs="+", required=True)
+    p.add_argument("--objects", nargs="+", required=True, help="builtin:NAME, mesh files or folders")
+    p.add_argument("-n", type=int, default=100, help="grasps per (hand, object) (default 100)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--model", help=model_help)
+    p.add_argument("--original", action="store_true", help="replay on the hands' original URDFs through the action map")
+    p.add_argument("--workers", type=int, default=1, help="simulation processes (default 1)")
+    p.add_argument("--allow-seen", action="store_true", help="also evaluate objects the model was trained on")
+    p.add_argument("-o", "--output", help="write the JSON report here")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_eval)
+
+
+def register_train(train_sub: Any) -> None:
+    """Add ``grasp`` to the subparsers of ``ohra train``."""
+    from ohra.learn.grasp.config import CONDITIONS, ENCODERS, GraspModelConfig, GraspTrainConfig
+
+    m, t = GraspModelConfig(), GraspTrainConfig()
+    p = train_sub.add_parser("grasp", help="train the cross-embodiment grasp model on grasp datasets")
+    p.add_argument("--data", nargs="+", required=True, help="dataset directories (written by the synthesiser)")
+    p.add_argument("--hands", nargs="*", default=[], help="hands to train on (default: every hand in the data)")
+    p.add_argument("--test-objects", nargs="*", default=[], help="objects held out of training (evaluate on them)")
+    p.add_argument("--condition", choices=CONDITIONS, default=m.condition, help="hand condition (default vae)")
+    p.add_argument("--encoder", choices=ENCODERS, default=m.encoder, help="object encoder (default pointnet)")
+    p.add_argument("--steps", type=int, default=t.steps, help=f"training steps (default {t.steps})")
+    p.add_argument("--batch-size", type=int, default=t.batch_size)
+    p.add_argument("--lr", type=float, default=t.lr)
+    p.add_argument("--seed", type=int, default=t.seed)
+    p.add_argument("--threads", type=int, default=t.threads, help="torch CPU threads (results depend on it)")
+    p.add_argument("--rotated-copies", type=int, default=t.rotated_copies, help="rotated copies per object and batch (0: none)")
+    p.add_argument("--objects-per-step", type=int, default=t.objects_per_step, help="cap on distinct objects per batch (0: none)")
+    p.add_argument("--max-per-pair", type=int, default=t.max_per_pair, help="cap on grasps per (hand, object) (0: all)")
+    p.add_argument("--checkpoint-every", type=int, default=t.checkpoint_every)
+    p.add_argument("--vae", help="VAE for the 'vae' condition (default: the shipped one)")
+    p.add_argument("-o", "--output", required=True, help="run directory")
+    p.add_argument("--resume", action="store_true", help="continue from OUTPUT/checkpoints/last.pt")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_train)
+
+
+def run(args: argparse.Namespace) -> int:
+    return int(args.func(args) or 0)
+
+
+def _torch() -> None:
+    from ohra.learn import require_torch
+
+    require_torch()
+
+
+def _cmd_train(args: argparse.Namespace) -> int:
+    _torch()
+    from ohra.learn.grasp.config import GraspModelConfig, GraspTrainConfig
+    from ohra.learn.grasp.train import train_grasp
+
+    out = Path(args.output)
+    if not args.resume and (out / "checkpoints" / "last.pt").exists():
+        raise OhraError(f"{out} already holds a training run; pass --resume to continue it or choose another -o")
+    mcfg = GraspModelConfig(encoder=args.encoder, condition=args.condition)
+    tcfg = GraspTrainConfig(steps=args.steps, batch_size=args.batch_size, lr=args.lr, seed=args.seed, threads=args.threads,
+                            rotated_copies=args.rotated_copies, objects_per_step=args.objects_per_step,
+                            max_per_pair=args.max_per_pair, checkpoint_every=args.checkpoint_every,
+                            hands=tuple(args.hands), test_objects=tuple(args.test_objects))
+    res = train_grasp(args.data, mcfg, tcfg, out, resume=args.resume, progress=not args.quiet, vae_path=args.vae)
+    m = res.metrics
+    f = m["final_losses"]
+    print(f"trained {m['steps']} steps in {m['train_seconds_total']:.1f} s on {m['data']['grasps']} grasps "
+          f"({', '.join(f'{h} {c}' for h, c in m['data']['per_hand'].items())}); "
+          f"final loss diffusion {f.get('diffusion', float('nan')):.4f}, joints {f.get('joints', float('nan')):.4f}")
+    print(f"model: {out / 'model.pt'}  metrics: {out / 'metrics.json'}")
+    return 0
+
+
+def _load(model: str | None):
+    _torch()
+    from ohra.learn.grasp.model import load_grasp_model
+
+    return load_grasp_model(model)
+
+
+def _cmd_sample(args: argparse.Namespace) -> int:
+    from ohra.data.dataset import atomic_write_npz
+
+    model = _load(args.model)
+    timing: dict = {}
+    g = model.sample(args.hand, args.object, args.n, seed=args.seed, timing=timing)
+    out = Path(args.output)
+    if out.suffix != ".npz":
+        raise OhraError(f"-o must end in .npz, got {out}")
+    atomic_write_npz(out, {"grasps": g.astype(np.float64)})
+    print(f"wrote {len(g)} grasps of {args.hand} on {args.object} to {out} ({1e3 * timing['seconds'] / len(g):.2f} ms per grasp)")
+    return 0
+
+
+def _cmd_eval(args: argparse.Namespace) -> int:
+    from ohra.learn.grasp.evaluate import evaluate_model
+
+    if args.workers < 1:
+        raise OhraError(f"--workers must be >= 1, got {args.workers}")
+    model = _load(args.model)
+    rep = evaluate_model(model, args.hands, args.objects, n=args.n, seed=args.seed, original=args.original,
+                         workers=args.workers, progress=not args.quiet, allow_seen=args.allow_seen)
+    if args.output:
+        from ohra.data.dataset import atomic_write_json
+
+        atomic_write_json(args.output, rep.to_dict())
+    for p in rep.pairs:
+        d = p.diversity_all or {}
+        print(f"{p.hand:20s} {p.object:16s} {int(p.success.sum()):4d}/{len(p.success):<4d} "
+              f"({100 * p.success_rate:5.1f} %)  {1e3 * p.sample_seconds / len(p.success):6.2f} ms/grasp  "
+              f"approach spread {d.get('approach_spread', float('nan')):.2f}")
+    for h, r in rep.per_hand().items():
+        print(f"{h}: {100 * r['success_rate']:.1f} % of {r['n']} grasps{' (original URDF)' if args.original else ''}")
+    if args.output:
+        print(f"report: {args.output}", file=sys.stderr)
+    return 0

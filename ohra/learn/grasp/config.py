@@ -1,0 +1,150 @@
+"""Settings of the grasp model and of its training (plain dataclasses: no torch needed to read them).
+
+Both round-trip through JSON (``to_dict`` / ``from_dict``) and are stored next to every checkpoint,
+so a run directory says exactly what made it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, fields
+from typing import Any
+
+from ohra.errors import OhraError
+
+ENCODERS = ("pointnet", "dgcnn")
+CONDITIONS = ("vae", "params")
+
+
+class GraspConfigError(OhraError, ValueError):
+    """A grasp-model or training setting is out of range or unknown."""
+
+
+def _from_dict(cls, d: dict[str, Any]):
+    if not isinstance(d, dict):
+        raise GraspConfigError(f"{cls.__name__}: expected a mapping, got {type(d).__name__}")
+    names = {f.name for f in fields(cls)}
+    unknown = sorted(set(d) - names)
+    if unknown:
+        raise GraspConfigError(f"{cls.__name__}: unknown setting(s) {unknown}")
+    kw = {k: (tuple(v) if isinstance(v, list) else v) for k, v in d.items()}
+    return cls(**kw)
+
+
+@dataclass(frozen=True)
+class GraspModelConfig:
+    """Architecture of :class:`ohra.learn.grasp.model.GraspNet`.
+
+    ``encoder``: ``"pointnet"`` (shared MLP + max-pool; ~200 clouds/s forward+backward with 512 points
+    on one CPU core) or ``"dgcnn"`` (the paper's edge convolutions, k neighbours; ~3 clouds/s, i.e.
+    days per run on a CPU). ``condition``: ``"vae"`` (frozen VAE mean latent, the unified model) or
+    ``"params"`` (normalised raw canonical parameters, for hands the VAE cannot encode, e.g. LEAP
+    variants). Diffusion: x0 prediction over the wrist translation, ``train_steps`` noise levels,
+    DDIM with ``inference_steps`` at sampling time.
+    """
+
+    encoder: str = "pointnet"
+    n_points: int = 512  # object surface points fed to the encoder
+    encoder_channels: tuple[int, ...] = (64, 128, 256)  # per-point MLP widths (pointnet) / edge-conv widths (dgcnn)
+    object_dim: int = 256  # object feature size
+    dgcnn_k: int = 20
+    condition: str = "vae"
+    denoiser_hidden: tuple[int, ...] = (512, 256)
+    time_embed_dim: int = 64
+    joint_hidden: int = 256
+    joint_blocks: int = 2
+    train_steps: int = 1000
+    inference_steps: int = 10
+    clip_sample: float = 4.0  # |x0| bound in normalised translation units (std of the training translations)
+
+    def __post_init__(self) -> None:
+        if self.encoder not in ENCODERS:
+            raise GraspConfigError(f"encoder: expected one of {list(ENCODERS)}, got {self.encoder!r}")
+        if self.condition not in CONDITIONS:
+            raise GraspConfigError(f"condition: expected one of {list(CONDITIONS)}, got {self.condition!r}")
+        for name in ("n_points", "object_dim", "time_embed_dim", "joint_hidden", "train_steps", "inference_steps", "dgcnn_k"):
+            if int(getattr(self, name)) < 1:
+                raise GraspConfigError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if self.inference_steps > self.train_steps:
+            raise GraspConfigError(f"inference_steps ({self.inference_steps}) exceeds train_steps ({self.train_steps})")
+        if self.time_embed_dim % 2:
+            raise GraspConfigError(f"time_embed_dim must be even, got {self.time_embed_dim}")
+        if not self.encoder_channels or not self.denoiser_hidden:
+            raise GraspConfigError("encoder_channels and denoiser_hidden need at least one width")
+        if self.encoder == "dgcnn" and self.dgcnn_k > self.n_points:
+            raise GraspConfigError(f"dgcnn_k ({self.dgcnn_k}) exceeds n_points ({self.n_points})")
+        if not self.clip_sample > 0:
+            raise GraspConfigError(f"clip_sample must be positive, got {self.clip_sample}")
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in d.items()}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "GraspModelConfig":
+        return _from_dict(cls, d)
+
+
+@dataclass(frozen=True)
+class GraspTrainConfig:
+    """Training settings. One step = one robot-balanced batch of ``batch_size`` grasps.
+
+    Every distinct object of a batch is encoded ``rotated_copies`` times (each copy under its own
+    uniformly random rotation, applied to the cloud and to the grasps assigned to it; 0: no
+    rotation augmentation, one unrotated copy) and the feature is shared by its grasps, so the
+    encoder cost scales with objects, not grasps. ``objects_per_step`` caps the distinct objects of
+    a batch (0: no cap). Randomness of step ``s`` comes from ``(seed, s)`` alone, so training is
+    reproducible and a resumed run equals an uninterrupted one.
+    """
+
+    steps: int = 3000
+    batch_size: int = 128
+    lr: float = 1e-3
+    lr_min: float = 1e-6  # cosine annealing floor
+    weight_decay: float = 0.0
+    seed: int = 0
+    threads: int = 1
+    checkpoint_every: int = 250  # steps
+    log_every: int = 25  # steps between history entries
+    rotated_copies: int = 1
+    objects_per_step: int = 0
+    point_noise: float = 0.002  # m, i.i.d. Gaussian noise on training clouds (reference value)
+    surface_pool: int = 4096  # surface points pre-sampled per object; each step draws n_points of them
+    joint_loss_weight: float = 1.0
+    hands: tuple[str, ...] = ()  # empty: every hand of the dataset
+    test_objects: tuple[str, ...] = ()  # held out of training
+    max_per_pair: int = 0  # cap on grasps per (hand, object) (0: all)
+
+    RESUMABLE_CHANGES = ("steps", "checkpoint_every", "log_every")
+
+    def __post_init__(self) -> None:
+        for name in ("steps", "batch_size", "threads", "checkpoint_every", "log_every", "surface_pool"):
+            if int(getattr(self, name)) < 1:
+                raise GraspConfigError(f"{name} must be >= 1, got {getattr(self, name)}")
+        for name in ("rotated_copies", "objects_per_step", "max_per_pair"):
+            if int(getattr(self, name)) < 0:
+                raise GraspConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
+        if not (self.lr > 0 and self.lr_min >= 0 and self.point_noise >= 0 and self.joint_loss_weight >= 0):
+            raise GraspConfigError("lr must be positive; lr_min, point_noise and joint_loss_weight non-negative")
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in d.items()}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "GraspTrainConfig":
+        return _from_dict(cls, d)
+
+
+@dataclass
+class RunSpec:
+    """What a run directory's ``config.json`` holds: data location, model and training settings."""
+
+    data: list[str] = field(default_factory=list)
+    model: GraspModelConfig = field(default_factory=GraspModelConfig)
+    train: GraspTrainConfig = field(default_factory=GraspTrainConfig)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"data": list(self.data), "model": self.model.to_dict(), "train": self.train.to_dict()}
+
+
+__all__ = ["GraspModelConfig", "GraspTrainConfig", "GraspConfigError", "RunSpec", "ENCODERS", "CONDITIONS"]

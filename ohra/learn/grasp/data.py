@@ -1,0 +1,239 @@
+"""Grasp datasets as training tensors: object split, object clouds, robot-balanced batches.
+
+:class:`TrainingData` reads one or more dataset directories (:class:`ohra.data.GraspDataset`),
+drops the held-out test objects (by name *and* mesh hash, so a renamed copy of a test object is
+held out too; the split is checked disjoint), resolves every training object to an
+:class:`~ohra.objects.model.ObjectModel` (built-ins by name, meshes by the manifest's ``source``,
+or from a mapping the caller gives) and pre-samples a pool of surface points per object.
+
+:func:`make_batch` draws step ``s`` of a run from ``numpy.random.default_rng([seed, s])`` alone:
+robot-balanced (each row picks a hand uniformly, then one of that hand's grasps uniformly, as the
+reference did), every distinct object of the batch encoded ``rotated_copies`` times under
+uniformly random rotations that are applied to its cloud and to the grasps assigned to it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import numpy as np
+import torch
+
+from ohra.canonical.params import BaseParams, ExtendedParams, load_params
+from ohra.data import GraspDataset
+from ohra.errors import DatasetError, ObjectError, OhraError
+from ohra.learn.grasp.config import GraspTrainConfig
+from ohra.objects.model import ObjectModel
+
+SURFACE_SEED = 0
+
+
+def object_key(name: str, mesh_hash: str) -> str:
+    return f"{name}-{mesh_hash[:8]}"
+
+
+def _manifest_params(root: Path, hand: str) -> BaseParams | ExtendedParams:
+    """The hand's params as stored in the dataset manifest (registered hands as a fallback)."""
+    try:
+        d = json.loads((root / "manifest.json").read_text())["hands"][hand].get("params")
+    except (OSError, KeyError, json.JSONDecodeError):
+        d = None
+    if d:
+        try:
+            return load_params(d)
+        except OhraError as exc:
+            raise DatasetError(f"{root / 'manifest.json'}: params of hand {hand!r} are invalid ({exc})") from None
+    from ohra.hands import get_hand
+
+    return get_hand(hand)
+
+
+def _resolve_object(root: Path, name: str, info: dict, given: Mapping[str, ObjectModel]) -> ObjectModel:
+    want = str(info.get("mesh_hash", ""))
+    if name in given:
+        obj = given[name]
+    else:
+        src = str(info.get("source", ""))
+        try:
+            if src == "builtin":
+                obj = ObjectModel.builtin(name)
+            elif src:
+                path = Path(src) if Path(src).exists() else root / src
+                obj = ObjectModel.load(path, name=name)
+            else:
+                raise ObjectError("the manifest gives no source")
+        except OhraError as exc:
+            raise DatasetError(f"{root}: cannot load training object {name!r} ({exc}); pass it in `objects`") from None
+    if want and obj.mesh_hash != want:
+        raise DatasetError(f"{root}: object {name!r} has mesh hash {obj.mesh_hash}, the dataset was made with {want}")
+    return obj
+
+
+def check_disjoint(train: Mapping[str, str], test: Mapping[str, str]) -> None:
+    """Raise :class:`DatasetError` if a training object (name -> mesh hash) is also a test object
+    by name or by mesh hash."""
+    names = sorted(set(train) & set(test))
+    hashes = sorted(set(train.values()) & {h for h in test.values() if h})
+    if names or hashes:
+        raise DatasetError(f"train and test objects overlap: names {names}, mesh hashes {hashes}")
+
+
+@dataclass
+class TrainingData:
+    """Training grasps as arrays, with their hands and objects (rows aligned)."""
+
+    t: np.ndarray  # (G, 3) palm position in the object frame [m]
+    rot6d: np.ndarray  # (G, 6)
+    q: np.ndarray  # (G, 22) [rad]
+    hand_idx: np.ndarray  # (G,) into hands
+    obj_idx: np.ndarray  # (G,) into objects
+    hands: list[str]
+    params: list[BaseParams | ExtendedParams]
+    objects: list[ObjectModel]
+    surface: list[np.ndarray]  # per object (P, 3) float32 surface points [m]
+    test_objects: dict[str, str]  # name -> mesh hash ('' when the test object is not in the data)
+    test_grasps: dict[tuple[str, str], np.ndarray]  # (hand, object) -> (M, 31) held-out grasps
+    test_models: dict[str, ObjectModel]  # held-out objects that could be loaded (for held-out losses)
+
+    @classmethod
+    def load(cls, paths: str | Path | Sequence[str | Path], cfg: GraspTrainConfig,
+             objects: Mapping[str, ObjectModel] | None = None) -> "TrainingData":
+        roots = [Path(paths)] if isinstance(paths, (str, Path)) else [Path(p) for p in paths]
+        if not roots:
+            raise DatasetError("no dataset directory given")
+        ds = GraspDataset(roots, hands=list(cfg.hands) or None)
+        if not ds.entries:
+            raise DatasetError(f"{', '.join(map(str, roots))}: no grasps for hands {list(cfg.hands) or 'any'}")
+        known = {h for _, h, _, _ in ds.entries}
+        missing = [h for h in cfg.hands if h not in known]
+        if missing:
+            raise DatasetError(f"hand(s) {missing} have no grasps in {', '.join(map(str, roots))}")
+        test_names = set(cfg.test_objects)
+        test = {n: "" for n in test_names}
+        for _, _, o, sh in ds.entries:
+            if o in test_names:
+                test[o] = str(sh.get("object", {}).get("mesh_hash", ""))
+        test_hashes = {h for h in test.values() if h}
+        cap = cfg.max_per_pair or None
+        hands: list[str] = []
+        params: list = []
+        obj_keys: list[str] = []
+        objs: list[ObjectModel] = []
+        rows, h_idx, o_idx, held, held_src = [], [], [], {}, {}
+        for (root, h, o, sh), (_, _, shard) in zip(ds.entries, ds):  # iteration follows the entries
+            g = np.asarray(shard, dtype=np.float64)[:cap]
+            mesh_hash = str(sh.get("object", {}).get("mesh_hash", ""))
+            if o in test_names or mesh_hash in test_hashes:
+                held[(h, o)] = g
+                held_src[o] = (root, sh.get("object", {}))
+                continue
+            if len(g) == 0:
+                continue
+            if h not in hands:
+                hands.append(h)
+                params.append(_manifest_params(root, h))
+            key = object_key(o, mesh_hash)
+            if key not in obj_keys:
+                obj_keys.append(key)
+                objs.append(_resolve_object(root, o, sh.get("object", {}), objects or {}))
+            rows.append(g)
+            h_idx.append(np.full(len(g), hands.index(h)))
+            o_idx.append(np.full(len(g), obj_keys.index(key)))
+        if not rows:
+            raise DatasetError("no training grasps left after holding out the test objects")
+        check_disjoint({o.name: o.mesh_hash for o in objs}, test)
+        g = np.concatenate(rows)
+        surface = [np.asarray(o.sample_surface(cfg.surface_pool, seed=SURFACE_SEED)[0], dtype=np.float32) for o in objs]
+        test_models = {}
+        for o, (root, info) in held_src.items():
+            try:
+                test_models[o] = _resolve_object(root, o, info, objects or {})
+            except DatasetError:
+                pass  # only the held-out losses need it
+        return cls(g[:, :3], g[:, 3:9], g[:, 9:], np.concatenate(h_idx), np.concatenate(o_idx), hands, params,
+                   objs, surface, test, held, test_models)
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def digest(self) -> str:
+        """Content hash of the training arrays and object clouds (a resumed run must see the same data)."""
+        h = hashlib.sha256()
+        for a in (self.t, self.rot6d, self.q, self.hand_idx, self.obj_idx, *self.surface):
+            h.update(np.ascontiguousarray(a).tobytes())
+        h.update(json.dumps(self.hands).encode())
+        return h.hexdigest()[:16]
+
+    def translation_scale(self) -> float:
+        """RMS palm-position coordinate [m]: translations are divided by it before diffusion."""
+        return float(np.sqrt(np.mean(self.t**2)))
+
+    def summary(self) -> dict:
+        counts = {h: int((self.hand_idx == i).sum()) for i, h in enumerate(self.hands)}
+        return {"grasps": len(self), "per_hand": counts, "train_objects": {o.name: o.mesh_hash for o in self.objects},
+                "test_objects": dict(self.test_objects),
+                "test_grasps": {f"{h}/{o}": int(len(g)) for (h, o), g in self.test_grasps.items()}}
+
+
+@dataclass
+class Batch:
+    clouds: torch.Tensor  # (K, N, 3) object clouds (rotated copies)
+    cloud_idx: torch.Tensor  # (B,) row -> cloud
+    hand: torch.Tensor  # (B, H) hand conditions
+    rot6d: torch.Tensor  # (B, 6)
+    t_norm: torch.Tensor  # (B, 3) normalised translation
+    q: torch.Tensor  # (B, 22)
+    present: torch.Tensor  # (B, 22) bool
+    generator: torch.Generator  # noise of the diffusion loss
+
+
+def _rows(data: TrainingData, cfg: GraspTrainConfig, rng: np.random.Generator) -> np.ndarray:
+    """Robot-balanced row indices of one batch (optionally from a random pool of objects)."""
+    n_obj = len(data.objects)
+    pool_mask = np.ones(len(data), bool)
+    if 0 < cfg.objects_per_step < n_obj:
+        pool = rng.choice(n_obj, cfg.objects_per_step, replace=False)
+        pool_mask = np.isin(data.obj_idx, pool)
+    cands = [np.flatnonzero(pool_mask & (data.hand_idx == i)) for i in range(len(data.hands))]
+    live = [c for c in cands if len(c)]
+    which = rng.integers(len(live), size=cfg.batch_size)
+    return np.array([live[w][rng.integers(len(live[w]))] for w in which])
+
+
+def make_batch(data: TrainingData, cfg: GraspTrainConfig, n_points: int, step: int, hand_table: torch.Tensor,
+               present_table: torch.Tensor, t_scale: float) -> Batch:
+    """Batch of training step ``step`` (see the module docstring); deterministic in (cfg.seed, step)."""
+    from ohra.learn.grasp.model import random_rotations
+
+    rng = np.random.default_rng([cfg.seed, step])
+    rows = _rows(data, cfg, rng)
+    copies = max(cfg.rotated_copies, 1)
+    objs = np.unique(data.obj_idx[rows])
+    clouds, rots = [], []
+    for o in objs:
+        pool = data.surface[o]
+        for _ in range(copies):
+            pts = pool[rng.choice(len(pool), n_points, replace=False)].astype(np.float64)
+            if cfg.point_noise > 0:
+                pts = pts + rng.normal(0.0, cfg.point_noise, pts.shape)
+            R = random_rotations(1, rng)[0] if cfg.rotated_copies > 0 else np.eye(3)
+            clouds.append(pts @ R.T)
+            rots.append(R)
+    copy_of = rng.integers(copies, size=len(rows))
+    cloud_idx = np.searchsorted(objs, data.obj_idx[rows]) * copies + copy_of
+    R = np.stack(rots)[cloud_idx]  # (B, 3, 3)
+    t = np.einsum("bij,bj->bi", R, data.t[rows])
+    r6 = data.rot6d[rows]
+    r6 = np.concatenate([np.einsum("bij,bj->bi", R, r6[:, :3]), np.einsum("bij,bj->bi", R, r6[:, 3:])], axis=1)
+    hi = torch.from_numpy(data.hand_idx[rows])
+    gen = torch.Generator().manual_seed(int(rng.integers(2**62)))
+    f32 = lambda a: torch.from_numpy(np.asarray(a, dtype=np.float32))  # noqa: E731
+    return Batch(f32(np.stack(clouds)), torch.from_numpy(cloud_idx), hand_table[hi], f32(r6), f32(t / t_scale),
+                 f32(data.q[rows]), present_table[hi], gen)
+
+
+__all__ = ["TrainingData", "Batch", "make_batch", "check_disjoint", "object_key"]

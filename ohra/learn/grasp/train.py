@@ -1,0 +1,237 @@
+"""Training of the grasp model: seeded, deterministic, resumable, with a metrics JSON.
+
+A run directory holds::
+
+    config.json            data directories, model and training settings
+    checkpoints/last.pt    network + optimiser + step + loss history + condition + scale (every
+                           ``checkpoint_every`` steps and at the end; written atomically)
+    model.pt               the trained model (what :func:`load_grasp_model` reads)
+    metrics.json           loss history, final and held-out losses, throughput, data summary
+
+Determinism: on CPU with a fixed thread count, the same settings and data give bit-identical
+weights. Batch ``s`` and its diffusion noise come from ``(seed, s)`` only and the learning rate is
+a function of ``s`` (cosine from ``lr`` to ``lr_min`` over ``steps``), so the checkpoint needs no
+random state and a resumed run equals an uninterrupted one.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+import torch
+
+from ohra.errors import CheckpointError
+from ohra.learn.grasp.condition import HandCondition
+from ohra.learn.grasp.config import GraspModelConfig, GraspTrainConfig, RunSpec
+from ohra.learn.grasp.data import TrainingData, make_batch
+from ohra.learn.grasp.model import CHECKPOINT_FORMAT, GraspModel, GraspNet
+from ohra.io import write_text
+from ohra.learn.train_vae import _peak_rss_mib, atomic_save, load_torch_file, torch_settings
+from ohra.objects.model import ObjectModel
+
+LOSS_TERMS = ("total", "diffusion", "joints")
+TEST_SEED = 7919  # noise levels of the held-out loss (fixed, so it compares across runs)
+
+
+@dataclass
+class GraspTrainResult:
+    model: GraspModel
+    metrics: dict[str, Any]
+    run_dir: Path | None
+
+
+def learning_rate(cfg: GraspTrainConfig, step: int) -> float:
+    """Cosine annealing from ``lr`` (step 0) to ``lr_min`` (step ``steps``)."""
+    return cfg.lr_min + 0.5 * (cfg.lr - cfg.lr_min) * (1.0 + math.cos(math.pi * min(step, cfg.steps) / cfg.steps))
+
+
+def _tables(cond: HandCondition, data: TrainingData) -> tuple[torch.Tensor, torch.Tensor]:
+    hand = torch.from_numpy(np.stack([cond.vector(p) for p in data.params]).astype(np.float32))
+    present = torch.from_numpy(np.stack([p.present_joints for p in data.params]))
+    return hand, present
+
+
+def _check_resume(ckpt: dict[str, Any], spec: RunSpec, digest: str, path: Path) -> None:
+    old = ckpt["spec"]
+    if old["model"] != spec.model.to_dict():
+        raise CheckpointError(f"{path}: cannot resume, the model settings differ from the checkpoint's")
+    new_train = spec.train.to_dict()
+    for f in fields(GraspTrainConfig):
+        if f.name not in GraspTrainConfig.RESUMABLE_CHANGES and old["train"].get(f.name) != new_train[f.name]:
+            raise CheckpointError(f"{path}: cannot resume, the checkpoint was trained with {f.name}="
+                                  f"{old['train'].get(f.name)!r}, this run asks for {new_train[f.name]!r}")
+    if ckpt.get("data_digest") != digest:
+        raise CheckpointError(f"{path}: training data differ from the checkpoint's (digest mismatch)")
+    if int(ckpt["step"]) > spec.train.steps:
+        raise CheckpointError(f"{path}: checkpoint is at step {ckpt['step']}, beyond the requested {spec.train.steps} steps")
+
+
+def _payload(model: GraspModel, opt: torch.optim.Optimizer, spec: RunSpec, step: int, history: list, digest: str,
+             window: tuple[dict[str, float], int]) -> dict:
+    # ``window``: loss sums and count since the last history entry (a checkpoint can fall between two)
+    return {**model.payload(), "format": CHECKPOINT_FORMAT, "spec": spec.to_dict(), "optimizer": opt.state_dict(),
+            "step": int(step), "history": history, "data_digest": digest,
+            "window": {"sums": dict(window[0]), "count": int(window[1])}}
+
+
+def train_step(net: GraspNet, batch, joint_weight: float) -> dict[str, torch.Tensor]:
+    """Losses of one batch: each cloud encoded once, its feature shared by the rows that use it."""
+    feats = net.encoder(batch.clouds)[batch.cloud_idx]
+    terms = net.losses(feats, batch.hand, batch.rot6d, batch.t_norm, batch.q, batch.present, batch.generator)
+    terms["total"] = terms["diffusion"] + joint_weight * terms["joints"]
+    return terms
+
+
+@torch.no_grad()
+def heldout_losses(model: GraspModel, data: TrainingData, objects: Mapping[str, ObjectModel]) -> dict[str, dict[str, float]]:
+    """Mean losses on the held-out grasps of the training hands (objects never trained on)."""
+    out: dict[str, dict[str, float]] = {}
+    for (hand, name), g in sorted(data.test_grasps.items()):
+        if hand not in data.hands or name not in objects or len(g) == 0:
+            continue
+        p = data.params[data.hands.index(hand)]
+        n = len(g)
+        cloud = model.object_cloud(objects[name])
+        feat = model.net.encoder(cloud[None]).expand(n, -1)
+        hvec = torch.from_numpy(model.condition.vector(p).astype(np.float32)).expand(n, -1)
+        f32 = lambda a: torch.from_numpy(np.asarray(a, dtype=np.float32))  # noqa: E731
+        present = torch.from_numpy(np.asarray(p.present_joints)).expand(n, -1)
+        terms = model.net.losses(feat, hvec, f32(g[:, 3:9]), f32(g[:, :3] / model.t_scale), f32(g[:, 9:]), present,
+                                 torch.Generator().manual_seed(TEST_SEED))
+        out[f"{hand}/{name}"] = {k: float(v) for k, v in terms.items()} | {"n": n}
+    return out
+
+
+@dataclass
+class _State:
+    """Everything a training loop reads and advances."""
+
+    td: TrainingData
+    model: GraspModel
+    opt: torch.optim.Optimizer
+    tables: tuple[torch.Tensor, torch.Tensor]  # hand conditions, presence masks (per training hand)
+    step: int = 0
+    history: list = field(default_factory=list)
+    window: tuple[dict[str, float], int] = ({}, 0)  # loss sums and count since the last history entry
+
+
+def _prepare(spec: RunSpec, paths: list, ckpt_path: Path | None, resume: bool,
+             objects: Mapping[str, ObjectModel] | None, vae_path: str | Path | None) -> _State:
+    """Data, condition, network and optimiser; restored from the checkpoint when resuming."""
+    cfg, model_cfg = spec.train, spec.model
+    td = TrainingData.load(paths, cfg, objects)
+    digest = td.digest()
+    ckpt = None
+    if resume:
+        if ckpt_path is None:
+            raise CheckpointError("resume needs a run directory")
+        ckpt = load_torch_file(ckpt_path, CHECKPOINT_FORMAT)
+        _check_resume(ckpt, spec, digest, ckpt_path)
+    cond = HandCondition.from_state(ckpt["condition"]) if ckpt else HandCondition.fit(model_cfg.condition, td.params, vae_path)
+    t_scale = float(ckpt["t_scale"]) if ckpt else td.translation_scale()
+    torch.manual_seed(cfg.seed)
+    net = GraspNet(model_cfg, cond.dim)
+    opt = torch.optim.Adam(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    summary = td.summary()
+    meta = {"hands": td.hands, "data": spec.data, "data_digest": digest,
+            **{k: summary[k] for k in ("train_objects", "test_objects", "per_hand")}}
+    state = _State(td, GraspModel(net, cond, t_scale, model_cfg, meta), opt, _tables(cond, td),
+                   window=({k: 0.0 for k in LOSS_TERMS}, 0))
+    if ckpt is not None:
+        try:
+            net.load_state_dict(ckpt["model"])
+            opt.load_state_dict(ckpt["optimizer"])
+            state.window = ({k: float(ckpt["window"]["sums"][k]) for k in LOSS_TERMS}, int(ckpt["window"]["count"]))
+        except (RuntimeError, KeyError, ValueError) as exc:
+            raise CheckpointError(f"{ckpt_path}: incompatible checkpoint ({str(exc).splitlines()[0][:160]})") from None
+        state.step, state.history = int(ckpt["step"]), list(ckpt["history"])
+    return state
+
+
+def _loop(st: _State, spec: RunSpec, ckpt_path: Path | None, progress: bool,
+          on_step: Callable[[int, dict[str, float]], None] | None) -> float:
+    """Train from ``st.step`` to ``spec.train.steps``; returns the wall time [s]."""
+    from tqdm import tqdm
+
+    cfg, net, opt = spec.train, st.model.net, st.opt
+    elapsed_before = float(st.history[-1]["elapsed_s"]) if st.history else 0.0
+    sums, count = st.window
+    net.train()
+    bar = tqdm(range(st.step, cfg.steps), initial=st.step, total=cfg.steps, desc="train grasp", unit="step",
+               disable=not progress, dynamic_ncols=True)
+    t_run = time.perf_counter()
+    for s in bar:
+        lr = learning_rate(cfg, s)
+        for group in opt.param_groups:
+            group["lr"] = lr
+        batch = make_batch(st.td, cfg, spec.model.n_points, s, *st.tables, st.model.t_scale)
+        terms = train_step(net, batch, cfg.joint_loss_weight)
+        opt.zero_grad(set_to_none=True)
+        terms["total"].backward()
+        opt.step()
+        vals = {k: float(terms[k].detach()) for k in LOSS_TERMS}
+        sums, count = {k: sums[k] + vals[k] for k in LOSS_TERMS}, count + 1
+        done = s + 1
+        if done % cfg.log_every == 0 or done == cfg.steps:
+            entry = {"step": done, "lr": lr, **{k: sums[k] / count for k in LOSS_TERMS},
+                     "elapsed_s": elapsed_before + time.perf_counter() - t_run}
+            st.history.append(entry)
+            bar.set_postfix(diff=f"{entry['diffusion']:.4f}", joints=f"{entry['joints']:.4f}")
+            sums, count = {k: 0.0 for k in LOSS_TERMS}, 0
+        if ckpt_path is not None and (done % cfg.checkpoint_every == 0 or done == cfg.steps):
+            atomic_save(_payload(st.model, opt, spec, done, st.history, st.model.meta["data_digest"], (sums, count)), ckpt_path)
+        if on_step is not None:
+            on_step(done, vals)
+    bar.close()
+    net.eval()
+    return time.perf_counter() - t_run
+
+
+def train_grasp(data: str | Path | Sequence[str | Path], model_cfg: GraspModelConfig = GraspModelConfig(),
+                cfg: GraspTrainConfig = GraspTrainConfig(), run_dir: str | Path | None = None, resume: bool = False,
+                progress: bool = True, objects: Mapping[str, ObjectModel] | None = None, vae_path: str | Path | None = None,
+                on_step: Callable[[int, dict[str, float]], None] | None = None) -> GraspTrainResult:
+    """Train a grasp model on the dataset(s) ``data`` (see the module docstring for the outputs).
+
+    ``objects``: ObjectModels by name for training objects the manifests cannot locate.
+    ``vae_path``: the VAE of a ``vae`` condition (default: the shipped one; stored in the model).
+    ``resume``: continue ``run_dir/checkpoints/last.pt`` (same settings except ``steps``,
+    ``checkpoint_every``, ``log_every``; same data). ``on_step(step, losses)`` runs after every step.
+    """
+    paths = [data] if isinstance(data, (str, Path)) else list(data)
+    spec = RunSpec([str(p) for p in paths], model_cfg, cfg)
+    run = Path(run_dir) if run_dir is not None else None
+    ckpt_path = run / "checkpoints" / "last.pt" if run is not None else None
+    t_start = time.perf_counter()
+    with torch_settings(cfg.threads):
+        st = _prepare(spec, paths, ckpt_path, resume, objects, vae_path)
+        if run is not None:
+            write_text(run / "config.json", json.dumps(spec.to_dict(), indent=1) + "\n")
+        first = st.step
+        seconds = _loop(st, spec, ckpt_path, progress, on_step)
+        n_steps, h = cfg.steps - first, st.history
+        metrics: dict[str, Any] = {
+            "steps": cfg.steps, "train_seconds_this_run": seconds, "train_seconds_total": h[-1]["elapsed_s"] if h else 0.0,
+            "steps_per_s": n_steps / seconds if seconds > 0 and n_steps else None,
+            "grasps_per_s": n_steps * cfg.batch_size / seconds if seconds > 0 and n_steps else None,
+            "final_losses": {k: h[-1][k] for k in LOSS_TERMS} if h else {},
+            "heldout_losses": heldout_losses(st.model, st.td, st.td.test_models),
+            "data": st.td.summary(), "translation_scale_m": st.model.t_scale, "condition": model_cfg.condition,
+            "encoder": model_cfg.encoder, "threads": cfg.threads, "history": h,
+            "wall_seconds": time.perf_counter() - t_start, "peak_rss_mib": _peak_rss_mib(),
+        }
+    model = st.model
+    if run is not None:
+        atomic_save(model.payload(), run / "model.pt")
+        write_text(run / "metrics.json", json.dumps(metrics, indent=1) + "\n")
+        model.path = run / "model.pt"
+    return GraspTrainResult(model, metrics, run)
+
+
+__all__ = ["train_grasp", "GraspTrainResult", "learning_rate", "heldout_losses", "train_step"]

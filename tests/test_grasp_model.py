@@ -1,0 +1,286 @@
+"""The grasp model: scheduler, encoders, conditions, sampling convention, joint limits, checkpoints."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from grasp_fixtures import tiny_model_config, tiny_train_config, write_dataset  # noqa: E402
+from scipy.spatial.transform import Rotation  # noqa: E402
+
+from ohra.errors import CheckpointError, GraspError, HandNotFoundError, ObjectError, OhraError, ParamsError  # noqa: E402
+from ohra.hands import get_hand  # noqa: E402
+from ohra.learn.grasp import GraspConfigError, GraspModelConfig  # noqa: E402
+from ohra.learn.grasp.condition import PARAMS_DIM, HandCondition, params_vector  # noqa: E402
+from ohra.learn.grasp.diffusion import DDIMScheduler, cosine_alphas_cumprod  # noqa: E402
+from ohra.learn.grasp.encoder import DGCNNEncoder, PointNetEncoder  # noqa: E402
+from ohra.learn.grasp.model import load_grasp_model  # noqa: E402
+from ohra.learn.grasp.train import train_grasp  # noqa: E402
+from ohra.objects.model import ObjectModel  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory):
+    return write_dataset(tmp_path_factory.mktemp("grasps"))
+
+
+@pytest.fixture(scope="module")
+def vae_model(dataset, tmp_path_factory):
+    run = tmp_path_factory.mktemp("run_vae")
+    return train_grasp(dataset, tiny_model_config(), tiny_train_config(), run, progress=False).model
+
+
+@pytest.fixture(scope="module")
+def params_model(dataset):
+    return train_grasp(dataset, tiny_model_config(condition="params"), tiny_train_config(), progress=False).model
+
+
+@pytest.fixture(scope="module")
+def capsule():
+    return ObjectModel.builtin("capsule")
+
+
+# -- scheduler -------------------------------------------------------------------------------------
+def test_schedule_is_squared_cosine_and_trailing():
+    ab = cosine_alphas_cumprod(1000)
+    assert ab[0] == pytest.approx(1.0, abs=1e-4) and ab[-1] < 1e-6
+    assert np.all(np.diff(ab) < 0)
+    assert DDIMScheduler(1000, 10).timesteps() == [999, 899, 799, 699, 599, 499, 399, 299, 199, 99]
+
+
+def test_ddim_with_a_perfect_denoiser_returns_the_known_x0():
+    s = DDIMScheduler(1000, 10)
+    x0 = torch.tensor([[0.3, -1.2, 0.7], [2.0, 0.0, -0.5]])
+    out = s.sample(lambda x, t: x0, (2, 3), torch.Generator().manual_seed(0))
+    assert torch.allclose(out, x0, atol=1e-6)
+
+
+def _gaussian_oracle(s: DDIMScheduler, mu: torch.Tensor, sd: float):
+    """Exact E[x0 | x_t] for data ~ N(mu, sd^2 I)."""
+    def predict(x, t):
+        ab = float(s.alphas_cumprod[t])
+        return mu + ab**0.5 * sd**2 / (ab * sd**2 + 1 - ab) * (x - ab**0.5 * mu)
+    return predict
+
+
+@pytest.mark.parametrize("steps, std_range", [(10, (0.8, 0.9)), (1000, (0.98, 1.02))])
+def test_ddim_with_the_exact_denoiser_of_a_gaussian_recovers_it(steps, std_range):
+    """The deterministic sampler maps noise onto N(mu, sd^2): the mean exactly, the spread up to the
+    known shrinkage of a 10-step discretisation (a wrong update formula fails both)."""
+    s = DDIMScheduler(1000, steps)
+    mu, sd = torch.tensor([0.3, -0.6, 0.15]), 0.5
+    x = s.sample(_gaussian_oracle(s, mu, sd), (20000, 3), torch.Generator().manual_seed(0))
+    assert torch.allclose(x.mean(0), mu, atol=0.02)
+    ratio = float(x.std(0).mean()) / sd
+    assert std_range[0] < ratio < std_range[1]
+
+
+def test_add_noise_matches_the_schedule():
+    s = DDIMScheduler(1000, 10)
+    x0, eps = torch.ones(3, 3), torch.zeros(3, 3)
+    xt = s.add_noise(x0, eps, torch.tensor([0, 500, 999]))
+    assert torch.allclose(xt[:, 0], s.alphas_cumprod[[0, 500, 999]].sqrt())
+
+
+# -- encoders --------------------------------------------------------------------------------------
+@pytest.mark.parametrize("enc", [PointNetEncoder((8, 16), 12), DGCNNEncoder((8, 16), 12, k=5)])
+def test_encoders_are_permutation_invariant(enc):
+    pts = torch.randn(2, 40, 3, generator=torch.Generator().manual_seed(0))
+    f = enc(pts)
+    assert f.shape == (2, 12)
+    perm = torch.randperm(40, generator=torch.Generator().manual_seed(1))
+    assert torch.allclose(enc(pts[:, perm]), f, atol=1e-5)
+    assert not torch.allclose(enc(pts * 2.0), f)
+
+
+def test_dgcnn_model_trains_and_samples(dataset):
+    cfg = tiny_model_config(encoder="dgcnn", dgcnn_k=8)
+    res = train_grasp(dataset, cfg, tiny_train_config(steps=2), progress=False)
+    assert res.model.sample("barrett_hand", "builtin:capsule", 3).shape == (3, 31)
+
+
+# -- sampling ----------------------------------------------------------------------------------------
+def test_sample_shape_and_convention(vae_model, capsule):
+    R = Rotation.random(5, random_state=3).as_matrix()
+    g = vae_model.sample("allegro_hand_left", capsule, 5, rotations=R, seed=1)
+    assert g.shape == (5, 31) and g.dtype == np.float64 and np.all(np.isfinite(g))
+    np.testing.assert_allclose(g[:, 3:6], R[:, :, 0], atol=1e-12)
+    np.testing.assert_allclose(g[:, 6:9], R[:, :, 1], atol=1e-12)
+    # rot6d input gives the same grasps as matrices
+    g6 = vae_model.sample("allegro_hand_left", capsule, 5, rotations=g[:, 3:9], seed=1)
+    np.testing.assert_allclose(g6, g, atol=1e-6)
+    # no rotations given: uniformly random ones, proper rotations
+    from ohra.rotations import rot6d_to_matrix
+
+    Rr = rot6d_to_matrix(vae_model.sample("allegro_hand_left", capsule, 200, seed=2)[:, 3:9])
+    np.testing.assert_allclose(np.linalg.det(Rr), 1.0, atol=1e-6)
+    assert np.abs(Rr[:, :, 0].mean(axis=0)).max() < 0.15  # palm normals spread over the sphere
+
+
+def test_translations_are_denormalised(vae_model, capsule):
+    """Palm positions come out in metres, on the scale of the training data (not unit-variance)."""
+    last = vae_model.net.denoiser.body[-1]
+    state = {k: v.clone() for k, v in last.state_dict().items()}
+    try:
+        with torch.no_grad():  # a denoiser that always predicts x0 = b (normalised units)
+            last.weight.zero_()
+            last.bias.copy_(torch.tensor([1.0, -2.0, 9.0]))
+        g = vae_model.sample("barrett_hand", capsule, 4, seed=0)
+    finally:
+        last.load_state_dict(state)
+    clip = vae_model.config.clip_sample
+    np.testing.assert_allclose(g[:, :3], np.tile([1.0, -2.0, clip], (4, 1)) * vae_model.t_scale, rtol=1e-5)
+    # RMS coordinate of the training palms: |t| = object radius + 3 cm, equal counts per object
+    r_train = np.array([ObjectModel.builtin(o).radius + 0.03 for o in ("sphere", "box", "cylinder")])
+    assert vae_model.t_scale == pytest.approx(np.sqrt(np.mean(r_train**2) / 3), rel=1e-5)
+
+
+def test_same_seed_same_grasps(vae_model, capsule):
+    a = vae_model.sample("shadow_hand_right", capsule, 8, seed=11)
+    b = vae_model.sample("shadow_hand_right", capsule, 8, seed=11)
+    c = vae_model.sample("shadow_hand_right", capsule, 8, seed=12)
+    np.testing.assert_array_equal(a, b)
+    assert not np.allclose(a, c)
+
+
+def _push_joints(model, value: float) -> None:
+    """Bias the joint network far outside every limit, so only the clamp keeps outputs valid."""
+    with torch.no_grad():
+        model.net.joints.out[-1].bias.fill_(value)
+
+
+@pytest.mark.parametrize("bias", [6.0, -6.0])
+@pytest.mark.parametrize("hand", ["allegro_hand_left", "barrett_hand", "shadow_hand_right", "dex3_right", "leap_hand_right"])
+def test_joints_within_limits_absent_zero_vae(vae_model, capsule, hand, bias):
+    _check_limits(vae_model, hand, capsule, bias)
+
+
+@pytest.mark.parametrize("bias", [6.0, -6.0])
+@pytest.mark.parametrize("hand", ["leap_3303", "leap_1111", "barrett_hand"])
+def test_joints_within_limits_absent_zero_params(params_model, capsule, hand, bias):
+    """LEAP variants (never trained on, no base form) work with the params condition."""
+    _check_limits(params_model, hand, capsule, bias)
+
+
+def _check_limits(model, hand, obj, bias):
+    state = {k: v.clone() for k, v in model.net.joints.state_dict().items()}
+    try:
+        _push_joints(model, bias)
+        g = model.sample(hand, obj, 16, seed=0)
+    finally:
+        model.net.joints.load_state_dict(state)
+    p = get_hand(hand)
+    q = g[:, 9:]
+    lo, up = np.asarray(p.joint_lowers), np.asarray(p.joint_uppers)
+    assert np.all(q >= lo) and np.all(q <= up)
+    absent = ~np.asarray(p.present_joints)
+    assert absent.any() == (hand != "shadow_hand_right")  # every other hand here lacks some joints
+    assert np.all(q[:, absent] == 0.0)
+    movable = np.asarray(p.movable_joints)
+    np.testing.assert_allclose(q[:, movable], np.broadcast_to(up if bias > 0 else lo, q.shape)[:, movable], atol=1e-6)
+
+
+def test_vae_condition_refuses_hands_without_base_form(vae_model, capsule):
+    with pytest.raises(ParamsError, match="condition='params'"):
+        vae_model.sample("leap_3303", capsule, 2)
+
+
+def test_bad_inputs_raise_ohra_errors(vae_model, capsule):
+    for n in (0, -3, 2.5, True, "4"):
+        with pytest.raises(GraspError, match="n must be a positive integer"):
+            vae_model.sample("barrett_hand", capsule, n)
+    with pytest.raises(GraspError, match=r"expected shape \(3, 3, 3\)"):
+        vae_model.sample("barrett_hand", capsule, 3, rotations=np.eye(3)[None].repeat(2, 0))
+    with pytest.raises(GraspError, match=r"rotations\[1\] is not a rotation"):
+        vae_model.sample("barrett_hand", capsule, 2, rotations=np.stack([np.eye(3), 2 * np.eye(3)]))
+    with pytest.raises(GraspError, match=r"rotations\[0\] is not a rotation"):
+        vae_model.sample("barrett_hand", capsule, 1, rotations=np.diag([1.0, 1.0, -1.0]))
+    with pytest.raises(GraspError, match="NaN"):
+        vae_model.sample("barrett_hand", capsule, 1, rotations=np.full((1, 6), np.nan))
+    with pytest.raises(HandNotFoundError, match="no_such_hand"):
+        vae_model.sample("no_such_hand", capsule, 1)
+    with pytest.raises(ObjectError, match="no_such_object"):
+        vae_model.sample("barrett_hand", "builtin:no_such_object", 1)
+    with pytest.raises(ObjectError, match="not found"):
+        vae_model.sample("barrett_hand", "/nonexistent/mesh.obj", 1)
+    with pytest.raises(GraspConfigError, match="encoder"):
+        GraspModelConfig(encoder="transformer")
+    with pytest.raises(GraspConfigError, match="inference_steps"):
+        GraspModelConfig(inference_steps=2000)
+    with pytest.raises(GraspConfigError, match="unknown setting"):
+        GraspModelConfig.from_dict({"encoder": "pointnet", "layers": 3})
+
+
+# -- conditions ------------------------------------------------------------------------------------
+def test_params_condition_statistics_and_floor():
+    hands = [get_hand(h) for h in ("allegro_hand_left", "barrett_hand", "shadow_hand_right")]
+    c = HandCondition.fit("params", hands)
+    assert c.dim == PARAMS_DIM == len(params_vector(hands[0]))
+    x = np.stack([c.vector(h) for h in hands])
+    np.testing.assert_allclose(x.mean(axis=0), 0.0, atol=1e-9)
+    assert np.all(c.scale > 0)
+    # an unseen LEAP variant gives a bounded vector despite dimensions constant over the training hands
+    v = c.vector(get_hand("leap_3303"))
+    assert np.all(np.isfinite(v)) and np.abs(v).max() < 100
+    back = HandCondition.from_state({k: (np.asarray(w) if k != "kind" else w) for k, w in c.state().items()})
+    np.testing.assert_array_equal(back.vector(hands[1]), c.vector(hands[1]))
+
+
+def test_vae_condition_is_the_mean_latent_in_eval_mode():
+    from ohra.learn.morph import load_vae
+
+    c = HandCondition.fit("vae", [])
+    mu, _ = load_vae().encode("barrett_hand")
+    np.testing.assert_allclose(c.vector("barrett_hand"), mu, atol=1e-6)
+    assert not c.vae.model.training
+
+
+# -- checkpoints -----------------------------------------------------------------------------------
+def test_saved_model_samples_identically(vae_model, capsule, tmp_path):
+    vae_model.save(tmp_path)
+    back = load_grasp_model(tmp_path)
+    np.testing.assert_array_equal(back.sample("barrett_hand", capsule, 6, seed=4), vae_model.sample("barrett_hand", capsule, 6, seed=4))
+    assert back.meta["hands"] == vae_model.meta["hands"]
+
+
+def test_loaded_model_keeps_its_own_vae(vae_model, tmp_path):
+    """The VAE travels inside the checkpoint: the condition does not depend on the shipped VAE."""
+    vae_model.save(tmp_path)
+    back = load_grasp_model(tmp_path)
+    assert back.condition.vae is not vae_model.condition.vae
+    np.testing.assert_array_equal(back.condition.vector("dex3_right"), vae_model.condition.vector("dex3_right"))
+
+
+def test_bad_checkpoints_raise(tmp_path, vae_model):
+    with pytest.raises(CheckpointError, match="no grasp model at"):
+        load_grasp_model(tmp_path / "missing")
+    (tmp_path / "model.pt").write_bytes(b"not a checkpoint")
+    with pytest.raises(CheckpointError, match="corrupt"):
+        load_grasp_model(tmp_path)
+    payload = vae_model.payload()
+    payload["hand_dim"] = 99
+    torch.save(payload, tmp_path / "model.pt")
+    with pytest.raises(CheckpointError, match="incompatible grasp model"):
+        load_grasp_model(tmp_path)
+
+
+def test_shipped_model_loads_or_says_it_is_missing():
+    from ohra.learn.grasp.model import default_model_dir
+
+    if (default_model_dir() / "model.pt").is_file():
+        m = load_grasp_model()
+        assert m.sample("barrett_hand", "builtin:capsule", 2).shape == (2, 31)
+    else:
+        with pytest.raises(CheckpointError, match="no grasp model is shipped"):
+            load_grasp_model()
+
+
+def test_lazy_exports():
+    import ohra.learn
+
+    assert ohra.learn.load_grasp_model is load_grasp_model
+    with pytest.raises(AttributeError):
+        ohra.learn.grasp.no_such_name  # noqa: B018
+    assert issubclass(GraspConfigError, OhraError)

@@ -1,0 +1,248 @@
+"""Grasp-model data, batches, training (determinism, exact resume), object split, evaluation, CLI."""
+
+from __future__ import annotations
+
+import importlib
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from grasp_fixtures import HANDS, tiny_model_config, tiny_train_config, write_dataset  # noqa: E402
+
+from ohra.errors import CheckpointError, DatasetError, GraspError  # noqa: E402
+from ohra.hands import get_hand  # noqa: E402
+from ohra.learn.grasp.data import TrainingData, check_disjoint, make_batch  # noqa: E402
+from ohra.learn.grasp.evaluate import check_unseen, diversity, evaluate_model, pair_seed  # noqa: E402
+from ohra.learn.grasp.model import load_grasp_model  # noqa: E402
+from ohra.learn.grasp.train import learning_rate, train_grasp  # noqa: E402
+from ohra.objects.model import ObjectModel  # noqa: E402
+from ohra.rotations import rot6d_to_matrix  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory):
+    return write_dataset(tmp_path_factory.mktemp("grasps"))
+
+
+def _tables(td):
+    hand = torch.zeros(len(td.hands), 4)
+    present = torch.from_numpy(np.stack([p.present_joints for p in td.params]))
+    return hand, present
+
+
+# -- data and split --------------------------------------------------------------------------------
+def test_split_holds_out_test_objects_by_name_and_mesh(tmp_path):
+    """A renamed copy of a test object (same mesh) is held out too; the split is disjoint."""
+    root = write_dataset(tmp_path, objects=("sphere", "box", "capsule"), renamed={"ball": "sphere"})
+    td = TrainingData.load(root, tiny_train_config(test_objects=("sphere",)))
+    train = {o.name for o in td.objects}
+    assert train == {"box", "capsule"}
+    assert {o for _, o in td.test_grasps} == {"sphere", "ball"}
+    sphere_hash = ObjectModel.builtin("sphere").mesh_hash
+    assert sphere_hash not in {o.mesh_hash for o in td.objects}
+    assert len(td) == 3 * 2 * 6 and set(np.unique(td.obj_idx)) == {0, 1}
+    assert len(TrainingData.load(root, tiny_train_config(test_objects=("sphere",), max_per_pair=2))) == 3 * 2 * 2
+
+
+def test_check_disjoint_raises_on_overlap():
+    check_disjoint({"box": "aa"}, {"sphere": "bb"})
+    with pytest.raises(DatasetError, match="names \\['box'\\]"):
+        check_disjoint({"box": "aa"}, {"box": "cc"})
+    with pytest.raises(DatasetError, match="mesh hashes \\['aa'\\]"):
+        check_disjoint({"box": "aa"}, {"cube": "aa"})
+
+
+def test_model_records_its_split_and_refuses_seen_objects(dataset):
+    model = train_grasp(dataset, tiny_model_config(), tiny_train_config(steps=1), progress=False).model
+    assert set(model.meta["train_objects"]) == {"sphere", "box", "cylinder"}
+    assert set(model.meta["test_objects"]) == {"capsule"}
+    check_unseen(model, [ObjectModel.builtin("capsule")])
+    with pytest.raises(DatasetError, match="training set"):
+        check_unseen(model, [ObjectModel.builtin("box")])
+
+
+def test_bad_data_raise(tmp_path, dataset):
+    with pytest.raises(DatasetError, match="no manifest"):
+        TrainingData.load(tmp_path, tiny_train_config())
+    with pytest.raises(DatasetError, match="no_such_hand"):
+        TrainingData.load(dataset, tiny_train_config(hands=("barrett_hand", "no_such_hand")))
+    with pytest.raises(DatasetError, match="no training grasps left"):
+        TrainingData.load(dataset, tiny_train_config(test_objects=("sphere", "box", "cylinder", "capsule")))
+
+
+def test_batches_are_robot_balanced_and_deterministic(tmp_path):
+    root = write_dataset(tmp_path, objects=("sphere", "box"), counts={"allegro_hand_left": 60, "barrett_hand": 3,
+                                                                      "shadow_hand_right": 6})
+    cfg = tiny_train_config(batch_size=3000, test_objects=())
+    td = TrainingData.load(root, cfg)
+    assert np.bincount(td.hand_idx).tolist() == [120, 6, 12]
+    b = make_batch(td, cfg, 16, 0, *_tables(td), t_scale=1.0)
+    frac = np.bincount(b.present.sum(1).numpy())  # hands differ in their number of present joints
+    assert sorted(frac[frac > 0] / 3000) == pytest.approx([1 / 3] * 3, abs=0.04)
+    b2 = make_batch(td, cfg, 16, 0, *_tables(td), t_scale=1.0)
+    assert torch.equal(b.t_norm, b2.t_norm) and torch.equal(b.clouds, b2.clouds)
+    assert not torch.equal(make_batch(td, cfg, 16, 1, *_tables(td), t_scale=1.0).t_norm, b.t_norm)
+    one = replace(cfg, batch_size=64, objects_per_step=1)
+    for step in range(4):  # a pool of one object per step: one cloud, still every hand
+        b = make_batch(td, one, 16, step, *_tables(td), t_scale=1.0)
+        assert len(b.clouds) == 1 and len(np.unique(b.present.sum(1).numpy())) == 3
+
+
+def test_objects_are_encoded_once_per_copy_and_rotated_with_their_grasps(tmp_path):
+    """Each distinct object appears rotated_copies times in a batch; its points seen from the palm
+    frame are those of the unrotated object (cloud and grasp turned by the same rotation)."""
+    root = write_dataset(tmp_path, objects=("box", "cylinder"))
+    cfg = tiny_train_config(batch_size=40, rotated_copies=2, point_noise=0.0, test_objects=())
+    td = TrainingData.load(root, cfg)
+    b = make_batch(td, cfg, 32, 3, *_tables(td), t_scale=1.0)
+    assert b.clouds.shape == (4, 32, 3) and b.cloud_idx.max() <= 3
+    for r in range(0, 40, 7):
+        t, R = b.t_norm[r].double().numpy(), rot6d_to_matrix(b.rot6d[r].double().numpy())
+        local = (b.clouds[b.cloud_idx[r]].double().numpy() - t) @ R  # cloud in the palm frame
+        # the same grasp unrotated: find it among the data by its joints
+        i = int(np.flatnonzero(np.all(np.abs(td.q - b.q[r].double().numpy()) < 1e-6, axis=1))[0])
+        R0 = rot6d_to_matrix(td.rot6d[i])
+        pool_local = (td.surface[td.obj_idx[i]].astype(float) - td.t[i]) @ R0
+        d = np.linalg.norm(local[:, None] - pool_local[None], axis=2).min(axis=1)
+        assert d.max() < 1e-5
+
+
+def test_learning_rate_is_cosine():
+    cfg = tiny_train_config(steps=100, lr=1e-3, lr_min=1e-5)
+    assert learning_rate(cfg, 0) == pytest.approx(1e-3)
+    assert learning_rate(cfg, 50) == pytest.approx(0.5 * (1e-3 + 1e-5))
+    assert learning_rate(cfg, 100) == pytest.approx(1e-5)
+
+
+# -- training ----------------------------------------------------------------------------------------
+def test_training_twice_gives_the_same_losses_and_weights(dataset):
+    a = train_grasp(dataset, tiny_model_config(), tiny_train_config(), progress=False)
+    b = train_grasp(dataset, tiny_model_config(), tiny_train_config(), progress=False)
+    assert [h["total"] for h in a.metrics["history"]] == [h["total"] for h in b.metrics["history"]]
+    for (k, v), w in zip(a.model.net.state_dict().items(), b.model.net.state_dict().values()):
+        assert torch.equal(v, w), k
+    c = train_grasp(dataset, tiny_model_config(), tiny_train_config(seed=1), progress=False)
+    assert c.metrics["history"][-1]["total"] != a.metrics["history"][-1]["total"]
+
+
+def test_training_reduces_the_loss(dataset):
+    res = train_grasp(dataset, tiny_model_config(), tiny_train_config(steps=60, log_every=10, lr=3e-3), progress=False)
+    h = res.metrics["history"]
+    assert h[-1]["total"] < 0.7 * h[0]["total"]
+    assert set(res.metrics["heldout_losses"]) == {f"{h}/capsule" for h in HANDS}
+
+
+class _Stop(Exception):
+    pass
+
+
+def test_resume_equals_an_uninterrupted_run(dataset, tmp_path):
+    full = train_grasp(dataset, tiny_model_config(), tiny_train_config(), tmp_path / "full", progress=False)
+
+    def stop(step, _):
+        if step == 4:  # after the checkpoint at step 3, before the one at 6
+            raise _Stop
+
+    with pytest.raises(_Stop):
+        train_grasp(dataset, tiny_model_config(), tiny_train_config(), tmp_path / "cut", progress=False, on_step=stop)
+    resumed = train_grasp(dataset, tiny_model_config(), tiny_train_config(), tmp_path / "cut", resume=True, progress=False)
+    assert resumed.metrics["history"] == [{**h, "elapsed_s": r["elapsed_s"]} for h, r in
+                                          zip(full.metrics["history"], resumed.metrics["history"])]
+    for (k, v), w in zip(full.model.net.state_dict().items(), resumed.model.net.state_dict().values()):
+        assert torch.equal(v, w), k
+    # the run directory holds what it says
+    run = tmp_path / "full"
+    assert json.loads((run / "config.json").read_text())["train"]["steps"] == 6
+    assert json.loads((run / "metrics.json").read_text())["steps"] == 6
+    a = load_grasp_model(run).sample("barrett_hand", "builtin:capsule", 4, seed=0)
+    np.testing.assert_array_equal(a, full.model.sample("barrett_hand", "builtin:capsule", 4, seed=0))
+    # a longer run continues from the finished one
+    longer = train_grasp(dataset, tiny_model_config(), tiny_train_config(steps=8), run, resume=True, progress=False)
+    assert longer.metrics["history"][-1]["step"] == 8
+
+
+def test_resume_refuses_other_settings_or_data(dataset, tmp_path):
+    train_grasp(dataset, tiny_model_config(), tiny_train_config(), tmp_path, progress=False)
+    with pytest.raises(CheckpointError, match="batch_size"):
+        train_grasp(dataset, tiny_model_config(), tiny_train_config(batch_size=8), tmp_path, resume=True, progress=False)
+    with pytest.raises(CheckpointError, match="model settings"):
+        train_grasp(dataset, tiny_model_config(object_dim=16), tiny_train_config(), tmp_path, resume=True, progress=False)
+    other = write_dataset(tmp_path / "other", seed=1)  # same hands and objects, other grasps
+    with pytest.raises(CheckpointError, match="data differ"):
+        train_grasp(other, tiny_model_config(), tiny_train_config(), tmp_path, resume=True, progress=False)
+    with pytest.raises(CheckpointError, match="not found"):
+        train_grasp(dataset, tiny_model_config(), tiny_train_config(), tmp_path / "none", resume=True, progress=False)
+
+
+# -- evaluation --------------------------------------------------------------------------------------
+def test_diversity_measures():
+    g = np.zeros((4, 31))
+    g[:, 3], g[:, 7] = 1.0, 1.0  # identity rotations
+    g[:, :3] = [0.1, 0.0, 0.0]
+    d = diversity(g, np.ones(22, bool))
+    assert d["approach_spread"] == pytest.approx(0.0) and d["joint_std_rad"] == 0.0
+    g[2:, :3] = [-0.1, 0.0, 0.0]
+    g[:, 9] = [0.0, 1.0, 0.0, 1.0]
+    d = diversity(g, np.ones(22, bool))
+    assert d["approach_spread"] == pytest.approx(1.0)
+    assert d["joint_std_rad"] == pytest.approx(0.5 / 22)
+    assert diversity(g[:1], np.ones(22, bool)) is None
+
+
+def test_evaluate_model_runs_the_protocol(dataset):
+    model = train_grasp(dataset, tiny_model_config(), tiny_train_config(steps=2), progress=False).model
+    rep = evaluate_model(model, ["barrett_hand"], ["builtin:capsule"], n=2, seed=5)
+    (p,) = rep.pairs
+    assert p.success.shape == (2,) and p.grasps.shape == (2, 31) and p.sim_seconds > 0
+    np.testing.assert_array_equal(p.grasps, model.sample("barrett_hand", "builtin:capsule", 2,
+                                                         seed=pair_seed(5, "barrett_hand", p.object_hash)))
+    d = rep.to_dict()
+    assert d["per_hand"]["barrett_hand"]["n"] == 2 and d["pairs"][0]["diversity_all"] is not None
+    with pytest.raises(DatasetError, match="training set"):
+        evaluate_model(model, ["barrett_hand"], ["builtin:box"], n=1)
+
+
+def test_original_replay_uses_the_same_grasps(dataset, hands_dir):
+    model = train_grasp(dataset, tiny_model_config(), tiny_train_config(steps=1), progress=False).model
+    can = evaluate_model(model, ["barrett_hand"], ["builtin:capsule"], n=2, seed=3)
+    orig = evaluate_model(model, ["barrett_hand"], ["builtin:capsule"], n=2, seed=3, original=True)
+    np.testing.assert_array_equal(can.pairs[0].grasps, orig.pairs[0].grasps)
+    assert orig.pairs[0].original and orig.meta["original"]
+    from ohra.canonical.params import BaseParams
+
+    with pytest.raises(GraspError, match="by name"):
+        evaluate_model(model, [BaseParams.from_vector(get_hand("barrett_hand").to_vector())], ["builtin:capsule"], n=1,
+                       original=True)
+
+
+# -- CLI ------------------------------------------------------------------------------------------------
+@pytest.fixture
+def cli(monkeypatch):
+    main_mod = importlib.import_module("ohra.cli.main")
+    if "grasp" not in main_mod.PLUGINS:
+        monkeypatch.setattr(main_mod, "PLUGINS", tuple(main_mod.PLUGINS) + ("grasp",))
+    return main_mod.main
+
+
+def test_cli_train_sample_and_errors(cli, dataset, tmp_path, capsys):
+    run = tmp_path / "run"
+    args = ["train", "grasp", "--data", str(dataset), "--test-objects", "capsule", "--steps", "2", "--batch-size", "8",
+            "-o", str(run), "--quiet"]
+    assert cli(args) == 0
+    assert "trained 2 steps" in capsys.readouterr().out
+    assert cli(args) == 2  # already a run there
+    assert "--resume" in capsys.readouterr().err
+    out = tmp_path / "g.npz"
+    assert cli(["grasp", "sample", "--model", str(run), "--hand", "barrett_hand", "--object", "builtin:capsule",
+                "-n", "5", "-o", str(out)]) == 0
+    with np.load(out) as z:
+        assert z["grasps"].shape == (5, 31)
+    assert cli(["grasp", "sample", "--model", str(run), "--hand", "nope", "--object", "builtin:capsule", "-o", str(out)]) == 2
+    assert "nope" in capsys.readouterr().err
+    assert cli(["grasp", "eval", "--model", str(run), "--hands", "barrett_hand", "--objects", "builtin:box", "-n", "1"]) == 2
+    assert "training set" in capsys.readouterr().err
+    assert cli(["train", "grasp", "--data", str(tmp_path / "none"), "-o", str(tmp_path / "r2"), "--quiet"]) == 2
