@@ -1,5 +1,8 @@
 """Kinematics and collision geometry of a canonical hand.
 
+(Over 400 lines because the numpy batch FK must walk exactly the tree the Pinocchio model is built
+from; they are kept side by side so a change to one is seen in the other.)
+
 :class:`HandModel` wraps a Pinocchio model of a canonical URDF (the reference implementation for
 single configurations and Jacobians), a vectorised numpy forward kinematics over the same
 kinematic tree for batches of configurations, and Coal capsule geometry for collision queries.
