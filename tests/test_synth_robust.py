@@ -64,3 +64,15 @@ def test_stored_grasps_replay_to_the_same_verdicts(tmp_path):
     assert np.array_equal(shard["grasps"], shard["raw"][kept]) and np.array_equal(shard["grasps_post"], shard["post"][kept])
     assert np.all(shard["sim_success"][kept]) and np.all(shard["robust_trials"][kept] == 1)
     assert np.array_equal(GraspDataset(tmp_path, which="post").grasps(), shard["grasps_post"])
+
+
+def test_rounding_to_float32_never_leaves_the_joint_limits():
+    lower = np.full(22, -0.1234567891234)
+    upper = np.full(22, 0.9876543219876)
+    g = np.zeros((2, 31))
+    g[:, 3:9] = [1, 0, 0, 0, 1, 0]
+    g[0, 9:], g[1, 9:] = upper, lower
+    s = as_stored(g, lower, upper)
+    assert np.all(s[0, 9:] <= upper) and np.all(s[1, 9:] >= lower)
+    assert np.array_equal(s, s.astype(np.float32).astype(np.float64))
+    assert np.abs(s[:, 9:] - g[:, 9:]).max() < 1e-7

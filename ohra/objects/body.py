@@ -156,7 +156,8 @@ class Body:
         self.primitives = primitives
         self._exact = primitive_sdf(primitives) if primitives else exact_sdf
         # outward face planes of each piece: n . x + d <= 0 inside (Qhull's, robust to sliver faces)
-        self._planes = [ConvexHull(np.asarray(p.vertices)).equations for p in pieces]
+        # (coplanar triangles share a plane: a box has 6, a 96-segment cylinder 98, not 2x as many)
+        self._planes = [np.unique(np.round(ConvexHull(np.asarray(p.vertices)).equations, 12), axis=0) for p in pieces]
         self._boxes = np.array([p.bounds for p in pieces])
 
     @property
@@ -172,8 +173,13 @@ class Body:
         """(N,) min over pieces of the largest face-plane distance: < 0 exactly inside the union."""
         p = np.asarray(points, dtype=float).reshape(-1, 3)
         out = np.full(len(p), np.inf)
-        for eq in self._planes:
-            out = np.minimum(out, (p @ eq[:, :3].T + eq[:, 3]).max(axis=1))
+        for eq, (lo, hi) in zip(self._planes, self._boxes):
+            # outside a piece's bounds the value only matters if no other piece is nearer: the
+            # distance to the box is a lower bound on it, so far points skip the plane products
+            gap = np.linalg.norm(np.maximum(np.maximum(lo - p, p - hi), 0.0), axis=1)
+            near = gap < out
+            if near.any():
+                out[near] = np.minimum(out[near], (p[near] @ eq[:, :3].T + eq[:, 3]).max(axis=1))
         return out
 
     @cached_property
@@ -185,7 +191,8 @@ class Body:
             s, _ = trimesh.sample.sample_surface(p, max(int(n_total * a / areas.sum()), 64), seed=k)
             pts.append(np.vstack([s, p.vertices]))
         P = np.vstack(pts)
-        P = P[self.piece_value(P) > -1e-6]  # samples buried inside another piece are not on the union's surface
+        if len(self.pieces) > 1:
+            P = P[self.piece_value(P) > -1e-6]  # samples buried inside another piece are not on the union's surface
         return cKDTree(P), P, math.sqrt(areas.sum() / max(len(P), 1))
 
     @property

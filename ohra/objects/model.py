@@ -161,6 +161,7 @@ class ObjectModel:
         self._pieces_label = pieces_label
         self.primitives = primitives  # exact solids for the simulator (built-ins, procedural), else None
         self._exact_sdf = exact_sdf
+        self.procedural_params: dict | None = None  # family, seed and sampled sizes of a procedural object
 
     # -- construction ------------------------------------------------------------------------------
     @classmethod
@@ -412,6 +413,7 @@ class ObjectModel:
             "mass_properties": {"method": mp.method, "estimated": mp.estimated},
             "body": {"kind": self.body.kind, "pieces": len(self.body.pieces), "fidelity": self.fidelity.to_dict()},
             "repair": self.repair_report.__dict__,
+            **({"procedural": self.procedural_params} if self.procedural_params else {}),
         }
 
 

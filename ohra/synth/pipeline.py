@@ -174,7 +174,7 @@ def synthesize_shard(name: str, params: Params, obj: ObjectModel, settings: Synt
         if r["success"] and hand.self_collision(r["grasp"][9:]):
             r["status"], r["success"] = "Self_Collision", False
         code = STATUS_CODES.get(r["status"], STATUS_CODES["other"])
-        g = as_stored(r["grasp"])
+        g = as_stored(r["grasp"], hand.lower, hand.upper)
         solved = code < len(SUCCESS_STATUSES) and r["violation"] <= 1e-3
         row = {"raw": g, "status": code, "viol": r["violation"], "iters": r["iterations"], "solved": solved,
                "contacts": len(r["contacts"]), "q1": ferrari_canny(r["contacts"], obj, settings.nlp.mu, settings.nlp.torque_length,

@@ -42,9 +42,18 @@ class RobustnessSettings:
                 raise ValueError(f"RobustnessSettings.{name} must be >= 0, got {getattr(self, name)}")
 
 
-def as_stored(grasps: np.ndarray) -> np.ndarray:
-    """The float64 grasps that shards store exactly: rounded through float32."""
-    return np.asarray(grasps, dtype=np.float32).astype(np.float64)
+def as_stored(grasps: np.ndarray, lower: np.ndarray | None = None, upper: np.ndarray | None = None) -> np.ndarray:
+    """The float64 grasps that shards store exactly: rounded through float32. With (22,) joint
+    limits, a joint that rounding pushed past a limit is moved to the nearest float32 inside it
+    (a solution at its limit would otherwise be clamped, with a warning, by the evaluator)."""
+    g = np.array(grasps, dtype=np.float32)
+    if lower is not None:
+        q = g[..., 9:]
+        lo32, hi32 = np.asarray(lower, dtype=np.float32), np.asarray(upper, dtype=np.float32)
+        lo_in = np.where(lo32 < lower, np.nextafter(lo32, np.float32(np.inf)), lo32)
+        hi_in = np.where(hi32 > upper, np.nextafter(hi32, np.float32(-np.inf)), hi32)
+        g[..., 9:] = np.clip(q, lo_in, np.maximum(hi_in, lo_in))
+    return g.astype(np.float64)
 
 
 def _rotvec_matrix(w: np.ndarray) -> np.ndarray:
@@ -73,4 +82,4 @@ def perturb(grasp: np.ndarray, settings: RobustnessSettings, rng: np.random.Gene
         t = T[:3, 3] + settings.translation_m * d / np.linalg.norm(d)
         R = _rotvec_matrix(settings.rotation_rad * a / np.linalg.norm(a)) @ T[:3, :3]
         out[k] = np.concatenate([t, matrix_to_rot6d(R), np.clip(q + dq, lower, upper)])
-    return as_stored(out)
+    return as_stored(out, lower, upper)
