@@ -87,10 +87,13 @@ class GraspDataset:
         max_per_pair: at most this many grasps per (hand, object) pair.
         which: ``"pre"`` (default): the grasps exactly as evaluated, which passed the test and
             its robustness trials; ``"post"``: the same grasps after the nominal test.
+        split: ``"train"`` or ``"test"``: only objects of that side of the recipe's split.
     """
 
     def __init__(self, path: str | Path, hands: list[str] | None = None, objects: list[str] | None = None,
-                 max_per_pair: int | None = None, which: str = "pre"):
+                 max_per_pair: int | None = None, which: str = "pre", split: str | None = None):
+        if split not in (None, "train", "test"):
+            raise DatasetError(f"split must be 'train', 'test' or None, got {split!r}")
         if which not in ("pre", "post"):
             raise DatasetError(f"which must be 'pre' or 'post', got {which!r}")
         self.roots = [Path(path)] if not isinstance(path, (list, tuple)) else [Path(p) for p in path]
@@ -101,12 +104,15 @@ class GraspDataset:
             if manifest is None:
                 raise DatasetError(f"{root}: no manifest.json (not an ohra grasp dataset)")
             fmt = manifest.get("format", "ohra-grasps/1")
+            if split and split not in manifest.get("split", {}):
+                raise DatasetError(f"{root}: the manifest records no object split (build the dataset from a recipe)")
+            side = set(manifest["split"][split]) if split else None
             for hand, entry in manifest.get("hands", {}).items():
                 if hands and hand not in hands:
                     continue
                 for key, sh in entry.get("shards", {}).items():
                     name = sh.get("object", {}).get("name", key)
-                    if objects and key not in objects and name not in objects:
+                    if (objects and key not in objects and name not in objects) or (side is not None and key not in side):
                         continue
                     self.entries.append((root, hand, key, {**sh, "_format": fmt, "_name": name}))
         self.max_per_pair = max_per_pair
