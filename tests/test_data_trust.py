@@ -151,3 +151,11 @@ def test_shards_are_byte_deterministic(tmp_path):
     fa, fb = (next((tmp_path / d).rglob("*.npz")) for d in ("a", "b"))
     assert fa.read_bytes() == fb.read_bytes()
     assert file_digest(fa) == json.loads((tmp_path / "a" / "manifest.json").read_text())["hands"]["leap_2200"]["shards"]["box"]["sha256"]
+
+
+def test_two_pool_workers_write_the_same_shards_as_one(tmp_path):
+    objs = [ObjectModel.builtin("box"), ObjectModel.procedural("capsule", 2)]  # both must pickle into the workers
+    a = synthesize(HAND, objs, tmp_path / "one", FAST, progress=False)
+    b = synthesize(HAND, objs, tmp_path / "two", FAST, workers=2, progress=False)
+    sha = lambda m: {k: s["sha256"] for k, s in m["hands"]["leap_2200"]["shards"].items()}  # noqa: E731
+    assert sha(a) == sha(b) and len(sha(a)) == 2

@@ -85,11 +85,16 @@ class Fidelity:
 
 
 # -- primitives --------------------------------------------------------------------------------------
-def primitive_sdf(prims: list[dict]) -> SDF:
+class PrimitiveSDF:
     """Signed distance [m] to the union of primitive dicts (see :mod:`ohra.objects.builtin`): exact
-    outside and on the surface; inside, the distance to the nearest primitive's surface."""
+    outside and on the surface; inside, the distance to the nearest primitive's surface. A class,
+    not a closure, so objects pickle into worker processes."""
 
-    def one(p: np.ndarray, pr: dict) -> np.ndarray:
+    def __init__(self, prims: list[dict]):
+        self.prims = prims
+
+    @staticmethod
+    def _one(p: np.ndarray, pr: dict) -> np.ndarray:
         x = p - np.asarray(pr["pos"], dtype=float)
         s = pr["size"]
         if pr["type"] == "sphere":
@@ -105,11 +110,14 @@ def primitive_sdf(prims: list[dict]) -> SDF:
             return np.linalg.norm(x - np.stack([0 * z, 0 * z, z], axis=1), axis=1) - s[0]
         raise ValueError(f"unknown primitive type {pr['type']!r}")
 
-    def sdf(points: np.ndarray) -> np.ndarray:
+    def __call__(self, points: np.ndarray) -> np.ndarray:
         p = np.asarray(points, dtype=float).reshape(-1, 3)
-        return np.min([one(p, pr) for pr in prims], axis=0)
+        return np.min([self._one(p, pr) for pr in self.prims], axis=0)
 
-    return sdf
+
+def primitive_sdf(prims: list[dict]) -> SDF:
+    """The :class:`PrimitiveSDF` of ``prims``."""
+    return PrimitiveSDF(prims)
 
 
 def _primitive_mass(pr: dict) -> tuple[float, np.ndarray]:
