@@ -52,6 +52,7 @@ class World:
         pb.setGravity(0, 0, 0, physicsClientId=c)
         pb.setTimeStep(protocol.dt, physicsClientId=c)
         pb.setPhysicsEngineParameter(numSubSteps=int(protocol.substeps), numSolverIterations=int(protocol.solver_iterations),
+                                     solverResidualThreshold=float(protocol.solver_residual_threshold),
                                      deterministicOverlappingPairs=1, physicsClientId=c)
         self._load_hand()
         self._make_object_shape()
