@@ -113,7 +113,11 @@ def _table(rows: list[dict], args, n_ycb: int, n_proc: int, mem: float, load: tu
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
-        rp = f"{r['replay_exact']:.0%} | {r['replay_fresh_perturbation']:.0%}" if "replay_exact" in r else "– | –"
+        rp = "– | –"
+        if r.get("replayed"):
+            rp = f"{r['replay_exact']:.0%} of {r['replayed']} | {r['replay_fresh_perturbation']:.0%}"
+        elif "replay_exact" in r:
+            rp = "none kept | –"
         lines.append(
             f"| {r['hand']} | {r['object_set']} | {r['backend']} | {r['workers']} | {r['solves']} | {r['solver_success']:.0%} | "
             f"{r['sim_pass']:.0%} | {r['kept']} | {r['converged_to_verified']:.0%} | {r['wall_s']:.0f} | {r['solve_s_per_candidate']:.2f} | "
@@ -124,30 +128,68 @@ def _table(rows: list[dict], args, n_ycb: int, n_proc: int, mem: float, load: tu
     return "\n".join(lines)
 
 
+_JOB: dict = {}
+
+
+def _call(spec: tuple):
+    return _JOB["fn"](*spec)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--grasps-per-object", type=int, default=8)
     ap.add_argument("--hands", nargs="+", default=HANDS)
     ap.add_argument("--workers", nargs="+", type=int, default=[1, 2])
+    ap.add_argument("--scaling-hands", nargs="*", default=["leap_3333"],
+                    help="hands measured with every --workers count (the others with 1 worker only)")
     ap.add_argument("--procedural-seed", type=int, default=1000)
     ap.add_argument("--ray-hand", default="leap_3333", help="hand measured on the Ray backend too (1 and 2 workers); '' to skip")
     ap.add_argument("--keep", type=Path, default=None, help="keep the datasets under this folder (bench_levers.py reads them)")
+    ap.add_argument("--parallel", type=int, default=1, help="run this many one-worker measurements at once (CPU-time rates stay valid)")
+    ap.add_argument("--from-json", action="store_true", help="only rewrite results/synth.md from results/synth.json")
     args = ap.parse_args()
+    if args.from_json:
+        import json
+
+        from _common import RESULTS
+
+        d = json.loads((RESULTS / "synth.json").read_text())
+        args.grasps_per_object = d["grasps_per_object"]
+        rows = d["rows"]
+        n_ycb = next(r["objects"] for r in rows if r["object_set"] == "ycb")
+        n_proc = next(r["objects"] for r in rows if r["object_set"] == "procedural")
+        write_results("synth", d, _table(rows, args, n_ycb, n_proc, d["peak_rss_mib"], tuple(d["load_average"])))
+        return
     warnings.simplefilter("ignore")  # object-body notes are in the manifests
     ycb = resolve_objects([str(objects_root() / "ycb")])
     proc = [o for f in FAMILIES for o in procedural_objects(f, 2, args.procedural_seed)]
     settings = SynthSettings(grasps_per_object=args.grasps_per_object, seed=0)
     rows, skipped = [], {}
+    single, scaling = [], []  # one-worker runs may share the machine (--parallel); scaling runs go alone
     for hand in args.hands:
         try:
             get_hand(hand)
         except OhraError as exc:
             skipped[hand] = str(exc)
             continue
-        for w in args.workers:
-            rows.append(run(hand, ycb, settings, w, "ycb", keep=args.keep, do_replay=(w == 1)))
+        single += [(hand, "ycb", 1), (hand, "procedural", 1)]
+        scaling += [(hand, "ycb", w) for w in args.workers if w != 1 and hand in args.scaling_hands]
+    sets = {"ycb": ycb, "procedural": proc}
+    job = lambda h, s, w: run(h, sets[s], settings, w, s, keep=args.keep, do_replay=(s == "ycb" and w == 1))  # noqa: E731
+    if args.parallel > 1:
+        import multiprocessing as mp
+
+        _JOB["fn"] = job
+        with mp.get_context("fork").Pool(args.parallel) as pool:
+            for r in pool.imap(_call, single):
+                rows.append(r)
+                print(r, flush=True)
+    else:
+        for spec in single:
+            rows.append(job(*spec))
             print(rows[-1], flush=True)
-        rows.append(run(hand, proc, settings, 1, "procedural", keep=args.keep))
+    for spec in scaling:
+        rows.append(job(*spec))
         print(rows[-1], flush=True)
     if args.ray_hand:
         try:

@@ -76,3 +76,18 @@ def test_rounding_to_float32_never_leaves_the_joint_limits():
     assert np.all(s[0, 9:] <= upper) and np.all(s[1, 9:] >= lower)
     assert np.array_equal(s, s.astype(np.float32).astype(np.float64))
     assert np.abs(s[:, 9:] - g[:, 9:]).max() < 1e-7
+
+
+def test_candidates_too_deep_in_the_body_are_not_simulated(tmp_path):
+    """With an impossible penetration limit every converged candidate is pre-filtered: none simulated."""
+    obj = ObjectModel.builtin("box")
+    hands = [("leap_2200", get_hand("leap_2200"))]
+    strict = SynthSettings(grasps_per_object=2, seed=1, max_penetration_m=-1.0)  # demands 1 m of clearance
+    synthesize(hands, [obj], tmp_path / "a", strict, progress=False)
+    sh = GraspDataset(tmp_path / "a").load_shard("leap_2200", "box")
+    assert sh["solver_success"].any()
+    assert np.array_equal(sh["prefiltered"], sh["solver_success"]) and not sh["sim_success"].any() and len(sh["grasps"]) == 0
+    assert np.all(np.isnan(sh["post"][sh["prefiltered"]]))
+    synthesize(hands, [obj], tmp_path / "b", SynthSettings(grasps_per_object=2, seed=1, max_penetration_m=None), progress=False)
+    sh = GraspDataset(tmp_path / "b").load_shard("leap_2200", "box")
+    assert not sh["prefiltered"].any() and np.all(np.isfinite(sh["post"][sh["solver_success"]]))
