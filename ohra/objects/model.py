@@ -16,7 +16,6 @@ from __future__ import annotations
 import hashlib
 import warnings
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 
@@ -27,54 +26,11 @@ from scipy.spatial import cKDTree
 from ohra.errors import ObjectError, ObjectWarning
 from ohra.objects.body import BODY_TOLERANCE_M, SDF, Body, Fidelity, MassProperties, fidelity
 from ohra.objects.decompose import DECOMPOSITION_NAMES, check_solid, load_convex_pieces, vhacd_pieces
+from ohra.objects.repair import RepairReport, repair_mesh
 from ohra.objects.sdf import SDFGrid
 
 DEFAULT_DENSITY = 500.0  # kg/m^3, the evaluation protocol's object density
 MESH_SUFFIXES = (".obj", ".stl", ".ply", ".off", ".glb")
-
-
-@dataclass
-class RepairReport:
-    """What :func:`repair_mesh` did and what it means."""
-
-    merged_vertices: int
-    removed_faces: int
-    watertight_before: bool
-    watertight: bool
-    winding_consistent: bool
-    note: str = ""
-
-
-def repair_mesh(mesh: trimesh.Trimesh) -> tuple[trimesh.Trimesh, RepairReport]:
-    """Merge vertices, drop degenerate/duplicate faces, fill small holes, orient faces outward."""
-    with np.errstate(divide="ignore", invalid="ignore"):  # trimesh probes the volume of open meshes
-        return _repair(mesh)
-
-
-def _repair(mesh: trimesh.Trimesh) -> tuple[trimesh.Trimesh, RepairReport]:
-    m = mesh.copy()
-    was = bool(m.is_watertight)
-    nv, nf = len(m.vertices), len(m.faces)
-    m.merge_vertices(merge_tex=True, merge_norm=True)
-    merged = m.copy() if m.is_watertight else None
-    m.update_faces(m.nondegenerate_faces())
-    m.update_faces(m.unique_faces())
-    m.remove_unreferenced_vertices()
-    if not m.is_watertight:
-        trimesh.repair.fill_holes(m)
-    trimesh.repair.fix_winding(m)
-    trimesh.repair.fix_normals(m)
-    if merged is not None and not m.is_watertight:
-        # dropping degenerate or duplicate faces opened a closed surface: keep the merged one
-        m = merged
-        trimesh.repair.fix_normals(m)
-    if m.is_watertight and m.volume < 0:
-        m.invert()
-    note = ""
-    if not m.is_watertight:
-        note = ("still not watertight after repair: the object is grasped and simulated as its convex "
-                "body (hull or decomposition), whose volume and mass properties are reported")
-    return m, RepairReport(nv - len(m.vertices), nf - len(m.faces), was, bool(m.is_watertight), bool(m.is_winding_consistent), note)
 
 
 def _load_mesh_file(path: Path, scale: np.ndarray | None = None) -> trimesh.Trimesh:
