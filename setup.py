@@ -38,6 +38,8 @@ setup(
     extras_require={
         # torch: on the CPU-only build machines install the provided CPU wheel first (see .ci/run).
         "learn": ["torch>=2.1"],
+        # a cluster backend for dataset builds and evaluation (the default is a local process pool)
+        "ray": ["ray>=2.9"],
         "dev": ["pytest>=7", "hypothesis>=6", "nbclient>=0.8", "nbformat>=5", "ipykernel>=6"],
     },
     entry_points={"console_scripts": ["ohra=ohra.cli:main"]},

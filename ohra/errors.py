@@ -52,3 +52,7 @@ class CheckpointError(OhraError, ValueError):
 
 class DatasetError(OhraError, ValueError):
     """A grasp dataset is malformed or does not match its manifest."""
+
+
+class ObjectWarning(UserWarning):
+    """Something about an object was estimated or approximated (mass properties, its simulated body)."""

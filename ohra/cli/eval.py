@@ -34,6 +34,8 @@ def register(subparsers) -> None:
     p.add_argument("--object", required=True, help="mesh (.obj/.stl/.ply), object URDF or folder, or builtin:NAME")
     p.add_argument("--key", default=None, help="array name inside the .npz (default: 'grasps' or the only array)")
     p.add_argument("--workers", type=int, default=1, help="processes (default 1)")
+    p.add_argument("--backend", choices=("process", "ray"), default="process", help="process pool (default) or Ray")
+    p.add_argument("--address", default=None, help="Ray cluster address (with --backend ray; default: a local cluster)")
     p.add_argument("--mode", choices=("eval", "filter"), default="eval", help="filter also needs the object within 5 cm of the origin")
     p.add_argument("--strict", action="store_true", help="strict preset: friction 1.0, gravity during the perturbations")
     p.add_argument("--isaac-step", action="store_true", help="Isaac's literal time step (100 Hz x 2 substeps) instead of 240 Hz")
@@ -95,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # already reported above
-        rep = ev.evaluate(g, mode=args.mode, workers=args.workers, progress=not args.quiet)
+        rep = ev.evaluate(g, mode=args.mode, workers=args.workers, progress=not args.quiet, backend=args.backend, address=args.address)
     wall = time.perf_counter() - t0
     ev.close()
     rep.meta.update({"grasp_file": str(args.grasps), "original_hand": bool(args.original), "wall_s": wall,

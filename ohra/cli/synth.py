@@ -24,13 +24,21 @@ EPILOG = "Exit codes: 0 ok, 2 bad input. The dataset is a directory with manifes
 def configure(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """Add the synth options to ``p`` and make :func:`run` its command; returns ``p``."""
     p.add_argument("--hand", required=True, help="registered hand, leap_XXXX, a params JSON, or all-leap")
-    p.add_argument("--objects", nargs="+", default=["builtin"], help="builtin | builtin:NAME | mesh/URDF file | folder (default: builtin)")
+    p.add_argument("--objects", nargs="+", default=["builtin"],
+                   help="builtin | builtin:NAME | procedural:FAMILY:SEED | mesh/URDF file | folder (default: builtin)")
+    p.add_argument("--scale", type=float, default=None, help="multiply the coordinates of object files (0.001 for millimetre meshes)")
+    p.add_argument("--cap", type=int, default=None, help="stop a (hand, object) pair once this many grasps are kept")
+    p.add_argument("--robust-trials", type=int, default=None,
+                   help="perturbed re-tests a kept grasp must also pass (default 2; 0 = off); sizes: ohra.synth.robust")
     p.add_argument("--grasps-per-object", type=int, default=8, help="solver restarts per object (default 8)")
     p.add_argument("--workers", type=int, default=1, help="worker processes (default 1)")
     p.add_argument("--seed", type=int, default=0, help="seed of the solver starts (default 0)")
     p.add_argument("--out", default="out/grasps", help="dataset directory (default out/grasps)")
     p.add_argument("--no-filter", action="store_true", help="skip the PyBullet filter")
-    p.add_argument("--resume", action="store_true", help="skip shards that are complete")
+    p.add_argument("--resume", action="store_true", help="skip shards that are complete (sha256 checked)")
+    p.add_argument("--overwrite", action="store_true", help="replace a dataset in --out made with other settings (deletes its shards)")
+    p.add_argument("--backend", choices=("process", "ray"), default="process", help="process pool (default) or Ray")
+    p.add_argument("--address", default=None, help="Ray cluster address (with --backend ray; default: a local cluster)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
     return p
@@ -70,16 +78,33 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise OhraError(f"--out {out} exists and is not a directory")
-    from ohra.objects.model import resolve_objects
+    from dataclasses import replace
+
+    from ohra.objects.resolve import resolve_objects
     from ohra.synth.pipeline import SynthSettings, synthesize
 
     hands = _hands(args.hand)
-    objects = resolve_objects(args.objects)
-    settings = SynthSettings(grasps_per_object=args.grasps_per_object, seed=args.seed, filter=not args.no_filter)
-    man = synthesize(hands, objects, out, settings, workers=args.workers, resume=args.resume, progress=not args.quiet)
+    objects = resolve_objects(args.objects, scale=args.scale)
+    settings = SynthSettings(grasps_per_object=args.grasps_per_object, seed=args.seed, filter=not args.no_filter, cap=args.cap)
+    if args.robust_trials is not None:
+        settings = replace(settings, robustness=replace(settings.robustness, trials=args.robust_trials))
+    man = synthesize(hands, objects, out, settings, workers=args.workers, resume=args.resume, progress=not args.quiet,
+                     overwrite=args.overwrite, backend=args.backend, address=args.address)
+    print_summary(man, out, filtered=not args.no_filter)
+    return 0
+
+
+def print_summary(man: dict, out: Path, filtered: bool = True) -> None:
+    """One line per hand (candidates, converged, kept, pass rate) and one per pair where nothing converged."""
     for name, entry in man["hands"].items():
         c = entry["counts"]
-        rate = c["grasps"] / max(c["solved"], 1)
-        print(f"{name}: {c['candidates']} solves, {c['solved']} converged, {c['grasps']} passed the filter "
-              f"(pass rate {rate:.0%}) -> {out.resolve()}")
-    return 0
+        if filtered:
+            rate = c["grasps"] / max(c["solved"], 1)
+            print(f"{name}: {c['candidates']} solves, {c['solved']} converged, {c.get('sim_passed', c['grasps'])} passed the filter, "
+                  f"{c['grasps']} also passed the robustness trials (kept {rate:.0%} of converged) -> {out.resolve()}")
+        else:
+            print(f"{name}: {c['candidates']} solves, {c['solved']} converged, {c['grasps']} kept without the filter "
+                  f"(not simulated) -> {out.resolve()}")
+        for key, sh in entry["shards"].items():
+            if sh.get("diagnosis"):
+                print(f"  {key}: {sh['diagnosis']}")

@@ -1,21 +1,31 @@
 """Grasp datasets: atomic shard/manifest writes and the lazy :class:`GraspDataset` reader.
 
 A dataset is a directory with ``manifest.json`` and one ``.npz`` shard per (hand, object) under
-``<hand>/``. ``grasps`` in a shard are (M,31) float32 ``[t, rot6d, q22]`` post-simulation grasps.
+``<hand>/``. In format ``ohra-grasps/2`` a shard's ``grasps`` are the (M,31) float32
+``[t, rot6d, q22]`` vectors exactly as the simulator evaluated them (the *pre-test* grasps, which
+passed the six-direction test and its robustness trials), and ``grasps_post`` the same grasps
+after the nominal test (hand pose relative to the settled object, settled joints: what the
+reference datasets store). :class:`GraspDataset` returns the pre-test grasps unless asked for
+``which="post"``. Format 1 shards hold only post-test ``grasps``.
+
+Shards are byte-deterministic (fixed zip timestamps), so the same seed gives the same bytes on
+any backend, and their sha256 in the manifest tells a complete shard from a damaged one.
 """
 
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import re
+import zipfile
 from pathlib import Path
 from typing import Iterator
 
 import numpy as np
 
 from ohra.errors import DatasetError
-from ohra.io import write_json, write_npz
+from ohra.io import write_bytes, write_json
 
 
 def shard_name(obj_name: str, mesh_hash: str) -> str:
@@ -23,9 +33,32 @@ def shard_name(obj_name: str, mesh_hash: str) -> str:
     return f"{safe}-{mesh_hash[:8]}.npz"
 
 
+def npz_bytes(arrays: dict[str, np.ndarray]) -> bytes:
+    """A compressed ``.npz`` of ``arrays`` whose bytes depend only on the arrays (``np.savez``
+    stamps each member with the current time)."""
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        for key, val in arrays.items():
+            info = zipfile.ZipInfo(f"{key}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+            info.compress_type = zipfile.ZIP_DEFLATED
+            with zf.open(info, "w", force_zip64=True) as fh:
+                np.lib.format.write_array(fh, np.asanyarray(val), allow_pickle=False)
+    return buf.getvalue()
+
+
+def atomic_write_bytes(path: str | Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically, honouring the umask (see :mod:`ohra.io`)."""
+    write_bytes(path, data)
+
+
 def atomic_write_npz(path: str | Path, arrays: dict[str, np.ndarray]) -> None:
-    """Write ``arrays`` to ``path`` atomically (never a partial shard); see :mod:`ohra.io`."""
-    write_npz(path, arrays)
+    """Write ``arrays`` to ``path`` atomically (never a partial shard), byte-identical for equal arrays."""
+    write_bytes(path, npz_bytes(arrays))
+
+
+def file_digest(path: str | Path) -> str:
+    """SHA-256 of a file's bytes (16 hex, as manifests store it)."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
 
 
 def atomic_write_json(path: str | Path, data: dict) -> None:
@@ -34,27 +67,42 @@ def atomic_write_json(path: str | Path, data: dict) -> None:
 
 
 class GraspDataset:
-    """Lazy reader of a grasp dataset directory (filter by hand/object, cap per pair, merge)."""
+    """Lazy reader of grasp dataset directories (filter by hand/object, cap per pair, merge).
+
+    Args:
+        path: a dataset directory or a list of them.
+        hands, objects: keep only these hand names / object names or manifest keys.
+        max_per_pair: at most this many grasps per (hand, object) pair.
+        which: ``"pre"`` (default): the grasps exactly as evaluated, which passed the test and
+            its robustness trials; ``"post"``: the same grasps after the nominal test.
+        split: ``"train"`` or ``"test"``: only objects of that side of the recipe's split.
+    """
 
     def __init__(self, path: str | Path, hands: list[str] | None = None, objects: list[str] | None = None,
-                 max_per_pair: int | None = None):
+                 max_per_pair: int | None = None, which: str = "pre", split: str | None = None):
+        if split not in (None, "train", "test"):
+            raise DatasetError(f"split must be 'train', 'test' or None, got {split!r}")
+        if which not in ("pre", "post"):
+            raise DatasetError(f"which must be 'pre' or 'post', got {which!r}")
         self.roots = [Path(path)] if not isinstance(path, (list, tuple)) else [Path(p) for p in path]
+        self.which = which
         self.entries: list[tuple[Path, str, str, dict]] = []
         for root in self.roots:
-            man = root / "manifest.json"
-            if not man.is_file():
+            manifest = read_manifest(root / "manifest.json")
+            if manifest is None:
                 raise DatasetError(f"{root}: no manifest.json (not an ohra grasp dataset)")
-            try:
-                manifest = json.loads(man.read_text())
-            except json.JSONDecodeError as exc:
-                raise DatasetError(f"{man}: malformed JSON ({exc})") from None
+            fmt = manifest.get("format", "ohra-grasps/1")
+            if split and split not in manifest.get("split", {}):
+                raise DatasetError(f"{root}: the manifest records no object split (build the dataset from a recipe)")
+            side = set(manifest["split"][split]) if split else None
             for hand, entry in manifest.get("hands", {}).items():
                 if hands and hand not in hands:
                     continue
-                for obj, sh in entry.get("shards", {}).items():
-                    if objects and obj not in objects:
+                for key, sh in entry.get("shards", {}).items():
+                    name = sh.get("object", {}).get("name", key)
+                    if (objects and key not in objects and name not in objects) or (side is not None and key not in side):
                         continue
-                    self.entries.append((root, hand, obj, sh))
+                    self.entries.append((root, hand, key, {**sh, "_format": fmt, "_name": name}))
         self.max_per_pair = max_per_pair
 
     @classmethod
@@ -63,40 +111,75 @@ class GraspDataset:
         out.roots = [r for d in datasets for r in d.roots]
         out.entries = [e for d in datasets for e in d.entries]
         out.max_per_pair = min((d.max_per_pair for d in datasets if d.max_per_pair), default=None)
+        out.which = datasets[0].which if datasets else "pre"
         return out
 
     @property
     def pairs(self) -> list[tuple[str, str]]:
+        """(hand, object key) of every shard."""
         return [(h, o) for _, h, o, _ in self.entries]
 
     def load_shard(self, hand: str, obj: str) -> dict[str, np.ndarray]:
-        for root, h, o, sh in self.entries:
-            if (h, o) == (hand, obj):
-                return self._read(root, sh)
-        raise DatasetError(f"no shard for hand {hand!r} and object {obj!r}")
+        """All arrays of the shard of ``hand`` and ``obj`` (a manifest key or an unambiguous object name)."""
+        hits = [e for e in self.entries if e[1] == hand and e[2] == obj] or \
+               [e for e in self.entries if e[1] == hand and e[3]["_name"] == obj]
+        if len(hits) > 1:
+            raise DatasetError(f"object name {obj!r} names {len(hits)} shards of hand {hand!r}; use one of their keys: "
+                               + ", ".join(e[2] for e in hits))
+        if not hits:
+            raise DatasetError(f"no shard for hand {hand!r} and object {obj!r}")
+        return self._read(hits[0][0], hits[0][3])
 
     def _read(self, root: Path, sh: dict) -> dict[str, np.ndarray]:
         path = root / sh["file"]
         if not path.is_file():
             raise DatasetError(f"shard listed in the manifest is missing: {path}")
-        digest = hashlib.sha256(path.read_bytes()).hexdigest()[:16]
+        digest = file_digest(path)
         if sh.get("sha256") and digest != sh["sha256"]:
             raise DatasetError(f"{path}: content hash {digest} does not match the manifest ({sh['sha256']})")
-        with np.load(path) as z:
-            data = {k: z[k] for k in z.files}
-        g = data.get("grasps")
-        if g is None or g.ndim != 2 or g.shape[1] != 31 or len(g) != sh.get("n_grasps", len(g)):
-            raise DatasetError(f"{path}: grasps have shape {None if g is None else g.shape}, manifest says ({sh.get('n_grasps')}, 31)")
+        try:
+            with np.load(path) as z:
+                data = {k: z[k] for k in z.files}
+        except Exception as exc:  # zipfile / numpy raise several types for damaged files
+            raise DatasetError(f"{path}: cannot read shard ({exc})") from None
+        for key in ("grasps", "grasps_post") if sh["_format"] != "ohra-grasps/1" else ("grasps",):
+            g = data.get(key)
+            if g is None or g.ndim != 2 or g.shape[1] != 31 or len(g) != sh.get("n_grasps", len(g)):
+                raise DatasetError(f"{path}: {key} have shape {None if g is None else g.shape}, manifest says ({sh.get('n_grasps')}, 31)")
         return data
+
+    def _grasps(self, root: Path, sh: dict) -> np.ndarray:
+        data = self._read(root, sh)
+        if sh["_format"] == "ohra-grasps/1":
+            if self.which == "pre":
+                raise DatasetError(f"{root / sh['file']}: format 1 shards store post-test grasps only; use which='post'")
+            return data["grasps"]
+        return data["grasps" if self.which == "pre" else "grasps_post"]
 
     def __iter__(self) -> Iterator[tuple[str, str, np.ndarray]]:
         for root, h, o, sh in self.entries:
-            g = self._read(root, sh)["grasps"]
+            g = self._grasps(root, sh)
             yield h, o, g[: self.max_per_pair] if self.max_per_pair else g
 
     def grasps(self) -> np.ndarray:
+        """(M,31) float32 grasps of all selected pairs (see ``which``)."""
         parts = [g for _, _, g in self]
         return np.concatenate(parts) if parts else np.zeros((0, 31), np.float32)
 
     def __len__(self) -> int:
         return sum(min(sh["n_grasps"], self.max_per_pair or sh["n_grasps"]) for _, _, _, sh in self.entries)
+
+
+def read_manifest(path: str | Path) -> dict | None:
+    """The manifest at ``path`` (None if absent); :class:`DatasetError` naming the file if it is not
+    a readable manifest (truncated JSON, not an object, no ``hands``)."""
+    path = Path(path)
+    if not path.is_file():
+        return None
+    try:
+        data = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise DatasetError(f"{path}: corrupt manifest ({exc}); delete it (and the shards) or write to another directory") from None
+    if not isinstance(data, dict) or not isinstance(data.get("hands"), dict):
+        raise DatasetError(f"{path}: not an ohra grasp manifest (no 'hands' object); delete it or write to another directory")
+    return data

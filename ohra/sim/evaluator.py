@@ -211,6 +211,16 @@ def _worker_run(args: tuple[int, np.ndarray, str]) -> tuple[int, GraspResult]:
     return i, run_grasp(_WORKER["world"], g, mode)
 
 
+def _chunk_run(task: tuple) -> list[tuple[int, GraspResult]]:
+    """One backend task: a fresh world for (hand, object, protocol), then its chunk of grasps."""
+    hand, obj, protocol, idx, grasps, mode = task
+    world = World(hand, obj, protocol)
+    try:
+        return [(int(i), run_grasp(world, g, mode)) for i, g in zip(idx, grasps)]
+    finally:
+        world.close()
+
+
 class GraspEvaluator:
     """Evaluate canonical grasps of one hand on one object with the six-direction protocol.
 
@@ -264,8 +274,10 @@ class GraspEvaluator:
         return g, out
 
     def evaluate(self, grasps: np.ndarray, mode: str = "eval", workers: int = 1, progress: bool = False,
-                 chunksize: int = 1) -> EvalReport:
-        """Run the protocol on (N,31) grasps; ``mode`` ``"eval"`` or ``"filter"``; ``workers`` processes."""
+                 chunksize: int = 1, backend: str = "process", address: str | None = None) -> EvalReport:
+        """Run the protocol on (N,31) grasps; ``mode`` ``"eval"`` or ``"filter"``; ``workers`` processes
+        (``backend="ray"``: Ray tasks of about N / (4 workers) grasps each, on a local cluster with
+        ``workers`` CPUs or the cluster at ``address``; see :mod:`ohra.data.backends`)."""
         if mode not in ("eval", "filter"):
             raise GraspError(f"mode must be 'eval' or 'filter', got {mode!r}")
         if int(workers) < 1:
@@ -276,13 +288,23 @@ class GraspEvaluator:
         results: list[GraspResult | None] = [None] * len(g)
         bar = _progress(len(g), progress)
         try:
-            for i, r in self._iter(g, mode, int(workers), int(chunksize)):
+            it = self._iter(g, mode, int(workers), int(chunksize)) if backend == "process" and not address else \
+                self._iter_backend(g, mode, int(workers), backend, address)
+            for i, r in it:
                 results[i] = r
                 bar.update(1)
         finally:
             bar.close()
         meta = {"hand": self.hand.name, "object": self.obj.name, "object_hash": self.obj.mesh_hash, "workers": int(workers)}
         return EvalReport([r for r in results if r is not None], mode, self.protocol, meta)
+
+    def _iter_backend(self, g: np.ndarray, mode: str, workers: int, backend: str, address: str | None) -> Iterable[tuple[int, GraspResult]]:
+        from ohra.data.backends import run_tasks
+
+        n_chunks = max(1, min(len(g), 4 * workers))
+        tasks = [(self.hand, self.obj, self.protocol, idx, g[idx], mode) for idx in np.array_split(np.arange(len(g)), n_chunks) if len(idx)]
+        for chunk in run_tasks(_chunk_run, tasks, backend=backend, workers=workers, address=address):
+            yield from chunk
 
     def _iter(self, g: np.ndarray, mode: str, workers: int, chunksize: int) -> Iterable[tuple[int, GraspResult]]:
         if workers == 1 or len(g) < 2:

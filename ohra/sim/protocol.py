@@ -34,6 +34,7 @@ class Protocol:
     dt: float = 1.0 / 240.0  # s, simulation step (Isaac reference: 100 Hz x 2 substeps; see module doc)
     substeps: int = 1  # physics substeps per step
     solver_iterations: int = 100  # PyBullet constraint-solver iterations (PhysX TGS 8 position iterations has no equivalent)
+    solver_residual_threshold: float = 1e-7  # PyBullet's: the solver stops early once its residual is below this
     squeeze_time: float = 1.0  # s, phase 1 (no external force)
     direction_time: float = 1.0  # s per perturbation direction
     force_per_mass: float = 0.5  # N/kg: the force is 0.5 * m newtons, re-applied every step

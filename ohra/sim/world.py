@@ -52,6 +52,7 @@ class World:
         pb.setGravity(0, 0, 0, physicsClientId=c)
         pb.setTimeStep(protocol.dt, physicsClientId=c)
         pb.setPhysicsEngineParameter(numSubSteps=int(protocol.substeps), numSolverIterations=int(protocol.solver_iterations),
+                                     solverResidualThreshold=float(protocol.solver_residual_threshold),
                                      deterministicOverlappingPairs=1, physicsClientId=c)
         self._load_hand()
         self._make_object_shape()
@@ -232,9 +233,11 @@ class World:
                                baseInertialFramePosition=Ti[:3, 3].tolist(),
                                baseInertialFrameOrientation=matrix_to_quat(Ti[:3, :3]).tolist(), physicsClientId=c)
         mu = math.sqrt(self.protocol.friction)
+        # collisionMargin 0: PyBullet inflates convex meshes by a 1 mm margin, which would make the
+        # simulated object larger than the body the solver grasped (primitives include their margin)
         pb.changeDynamics(b, -1, lateralFriction=mu, spinningFriction=0.0, rollingFriction=0.0, restitution=0.0,
                           linearDamping=0.0, angularDamping=0.0, localInertiaDiagonal=self.obj_inertia_diag.tolist(),
-                          physicsClientId=c)
+                          collisionMargin=0.0, physicsClientId=c)
         pb.setCollisionFilterGroupMask(b, -1, OBJECT_BIT, PALM_BIT | FINGER_BITS, physicsClientId=c)
         self.obj_body = b
         return b

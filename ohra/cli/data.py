@@ -1,0 +1,74 @@
+"""``ohra data build RECIPE.yaml`` and ``ohra data info DIR``: grasp datasets from recipes.
+
+Plugged into :mod:`ohra.cli.main` through ``register(subparsers)``; ``python -m ohra.data`` runs
+the same commands on their own. Bad input is one line on stderr and exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any, Sequence
+
+
+def register(sub: Any) -> None:
+    data = sub.add_parser("data", help="grasp datasets: build from a recipe, summarise")
+    dsub = data.add_subparsers(dest="data_command", metavar="ACTION", parser_class=type(data))
+    dsub.required = True
+
+    p = dsub.add_parser("build", help="synthesise the dataset a recipe describes (resumable)")
+    p.add_argument("recipe", help="recipe YAML (hands, objects, grasps per pair, cap, split, seed, protocol)")
+    p.add_argument("--out", default=None, help="dataset directory (default out/<recipe name>)")
+    p.add_argument("--workers", type=int, default=1, help="processes, or local Ray CPUs (default 1)")
+    p.add_argument("--resume", action="store_true", help="keep pairs whose shards are complete (sha256 checked)")
+    p.add_argument("--overwrite", action="store_true", help="replace a dataset made with other settings (deletes its shards)")
+    p.add_argument("--backend", choices=("process", "ray"), default="process", help="process pool (default) or Ray")
+    p.add_argument("--address", default=None, help="Ray cluster address (with --backend ray; default: a local cluster)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_build)
+
+    p = dsub.add_parser("info", help="summary table of a dataset directory")
+    p.add_argument("dir", help="dataset directory (holds manifest.json)")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(func=_info)
+
+
+def _build(args: argparse.Namespace) -> int:
+    from ohra.cli.synth import print_summary
+    from ohra.data.build import build
+    from ohra.data.recipe import Recipe
+
+    recipe = Recipe.load(args.recipe)
+    out = args.out or f"out/{recipe.name}"
+    man = build(recipe, out, workers=args.workers, resume=args.resume, overwrite=args.overwrite, backend=args.backend,
+                address=args.address, progress=not args.quiet)
+    print_summary(man, Path(out), filtered=recipe.filter)
+    split = man.get("split", {})
+    print(f"objects: {len(split.get('train', []))} train / {len(split.get('test', []))} test; {man['core_hours']:.3f} core-hours")
+    return 0
+
+
+def _info(args: argparse.Namespace) -> int:
+    from ohra.data.build import format_summary, summary
+
+    s = summary(args.dir)
+    print(json.dumps(s, indent=1) if args.json else format_summary(s))
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m ohra.data``: the ``ohra data`` commands on their own."""
+    from ohra.cli.main import _Parser
+    from ohra.errors import OhraError
+
+    parser = _Parser(prog="python -m ohra.data")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    register(sub)
+    args = parser.parse_args(["data", *(sys.argv[1:] if argv is None else argv)])
+    try:
+        return int(args.func(args) or 0)
+    except OhraError as exc:
+        print(f"ohra data: error: {exc}", file=sys.stderr)
+        return 2

@@ -1,0 +1,5 @@
+import sys
+
+from ohra.cli.data import main
+
+sys.exit(main())

@@ -1,0 +1,113 @@
+"""The manifest of a grasp dataset directory: opening it for a run, resuming, object keys.
+
+Rules (what ``--resume`` and a repeated run may assume):
+
+- One directory holds one set of synthesis settings. A run whose settings differ from the
+  manifest's is refused with the differing keys named (``DatasetError``) unless ``overwrite``,
+  which deletes the shards the old manifest lists and starts a new manifest: no shard is left
+  behind that no manifest lists. The same holds for a hand whose parameters changed.
+- With the same settings, a run recomputes the pairs it is given and keeps every other pair;
+  with ``resume`` it skips a pair whose shard exists, has the sha256 the manifest records and was
+  made from the same object (mesh and body hash). A truncated or edited shard is recomputed.
+- A manifest that is not valid JSON is an error naming the file, never silently replaced.
+- Objects are keyed by name; objects sharing a name (``a/mug.stl`` and ``b/mug.stl``) get the
+  name plus their mesh hash prefix, so each has its own manifest entry.
+"""
+
+from __future__ import annotations
+
+import json
+from collections import Counter
+from pathlib import Path
+
+from ohra.data.dataset import file_digest, read_manifest
+from ohra.errors import DatasetError
+
+FORMAT = "ohra-grasps/2"
+
+
+def object_keys(objects) -> list[str]:
+    """Unique manifest keys for ``objects`` (in order): the name, or name-<mesh hash> on a clash."""
+    counts = Counter(o.name for o in objects)
+    keys = [o.name if counts[o.name] == 1 else f"{o.name}-{o.mesh_hash[:8]}" for o in objects]
+    dup = [k for k, c in Counter(keys).items() if c > 1]
+    if dup:
+        raise DatasetError(f"object(s) {', '.join(dup)} given twice with the same mesh; list each object once")
+    return keys
+
+
+def _flatten(d: dict, prefix: str = "") -> dict:
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out.update(_flatten(v, f"{prefix}{k}."))
+        else:
+            out[f"{prefix}{k}"] = v
+    return out
+
+
+def settings_diff(old: dict, new: dict) -> list[str]:
+    """``key: old -> new`` for every setting that differs (nested keys dotted)."""
+    a, b = _flatten(old), _flatten(new)
+    return [f"{k}: {a.get(k, '(absent)')} -> {b.get(k, '(absent)')}" for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)]
+
+
+def remove_listed_shards(root: Path, manifest: dict) -> int:
+    """Delete the shard files ``manifest`` lists under ``root``; returns how many existed."""
+    n = 0
+    for entry in manifest.get("hands", {}).values():
+        for sh in entry.get("shards", {}).values():
+            f = root / sh.get("file", "")
+            if f.is_file() and f.suffix == ".npz":
+                f.unlink()
+                n += 1
+    return n
+
+
+def open_manifest(root: Path, settings: dict, digest: str, overwrite: bool, header: dict) -> dict:
+    """The manifest a run into ``root`` continues (see the module rules); ``header`` adds version
+    and format fields to a new one."""
+    man_path = root / "manifest.json"
+    old = read_manifest(man_path)
+    if old is not None and old.get("settings_digest") != digest:
+        if not overwrite:
+            diff = settings_diff(old.get("settings", {}), settings)
+            raise DatasetError(f"{man_path} was written with other settings ({'; '.join(diff[:4]) or 'format changed'}"
+                               f"{' ...' if len(diff) > 4 else ''}); write to another directory or pass --overwrite "
+                               "to delete its shards and start again")
+        remove_listed_shards(root, old)
+        old = None
+    manifest = {**header, "format": FORMAT, "settings": json.loads(json.dumps(settings, default=str)),
+                "settings_digest": digest, "hands": {}}
+    if old is not None:
+        manifest["hands"] = old.get("hands", {})
+        for k in ("split", "recipe", "core_hours"):
+            if k in old:
+                manifest[k] = old[k]
+    return manifest
+
+
+def hand_entry(root: Path, manifest: dict, name: str, params_dict: dict, phash: str, overwrite: bool) -> dict:
+    """The manifest entry of hand ``name``; a changed hand is an error unless ``overwrite``
+    (then its old shards are deleted)."""
+    entry = manifest["hands"].get(name)
+    if entry is not None and entry.get("params_hash") != phash:
+        if not overwrite:
+            raise DatasetError(f"hand {name!r} in {root / 'manifest.json'} has other parameters (hash {entry.get('params_hash')} "
+                               f"vs {phash}); write to another directory or pass --overwrite")
+        remove_listed_shards(root, {"hands": {name: entry}})
+        entry = None
+    if entry is None:
+        entry = manifest["hands"][name] = {"params": params_dict, "params_hash": phash, "shards": {}}
+    return entry
+
+
+def shard_complete(root: Path, sh: dict | None, obj_desc: dict) -> bool:
+    """Whether a manifest shard entry can be kept on resume: same object, file present, same sha256."""
+    if not sh:
+        return False
+    o = sh.get("object", {})
+    if o.get("mesh_hash") != obj_desc["mesh_hash"] or o.get("body_hash") != obj_desc["body_hash"]:
+        return False
+    f = root / sh.get("file", "")
+    return f.is_file() and bool(sh.get("sha256")) and file_digest(f) == sh["sha256"]

@@ -1,0 +1,94 @@
+"""Seeded procedural objects: a training set of hundreds of graspable shapes without a download.
+
+``ObjectModel.procedural(family, seed)`` (``procedural:FAMILY:SEED`` on the command line) gives a
+deterministic, watertight, convex shape named ``FAMILY-SEED`` whose every full extent lies in
+[3, 20] cm (``EXTENT_M``):
+
+- ``box``: edge lengths uniform in the range;
+- ``cylinder``: diameter and length uniform in the range;
+- ``capsule``: diameter in [3, 10] cm, total length (cylinder + two caps) in [diameter, 20] cm;
+- ``ellipsoid``: axis lengths uniform in the range;
+- ``superquadric``: axis lengths uniform in the range and shape exponents ``e1`` (along z) and
+  ``e2`` (around z) uniform in [0.25, 1.75]: from box-like through ellipsoids to pinched, always
+  convex (a superquadric is convex for exponents up to 2).
+
+Boxes, cylinders and capsules are PyBullet primitives with a closed-form signed distance and
+closed-form mass properties (exact for solver and simulator alike); ellipsoids and superquadrics
+have no closed-form distance and are simulated and grasped as the convex hull of a 642-vertex mesh (more vertices make every PyBullet contact slower)
+(``exact`` would be an approximation there: see :mod:`ohra.objects.body`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+
+import numpy as np
+import trimesh
+
+from ohra.errors import ObjectError
+
+FAMILIES = ("superquadric", "box", "cylinder", "capsule", "ellipsoid")
+EXTENT_M = (0.03, 0.20)  # every full extent of a procedural object [m]
+EXPONENTS = (0.25, 1.75)  # superquadric shape exponents
+
+
+def _rng(family: str, seed: int) -> np.random.Generator:
+    # the family is part of the stream: box 3 and cylinder 3 do not share their numbers
+    h = int.from_bytes(hashlib.sha256(f"procedural:{family}".encode()).digest()[:4], "little")
+    return np.random.default_rng([h, int(seed) & 0xFFFFFFFF])
+
+
+def _prim(kind: str, size) -> dict:
+    return {"type": kind, "size": tuple(float(x) for x in size), "pos": (0.0, 0.0, 0.0)}
+
+
+def superquadric_mesh(axes: np.ndarray, e1: float, e2: float, subdivisions: int = 3) -> trimesh.Trimesh:
+    """Watertight mesh of the superquadric ``(|x/a|^(2/e2) + |y/b|^(2/e2))^(e2/e1) + |z/c|^(2/e1) = 1``:
+    an icosphere's vertices pushed radially onto the surface (a superquadric is star-shaped, so the
+    topology stays closed)."""
+    ico = trimesh.creation.icosphere(subdivisions=subdivisions, radius=1.0)
+    u = np.asarray(ico.vertices)
+    a, b, c = axes
+    f = (np.abs(u[:, 0] / a) ** (2 / e2) + np.abs(u[:, 1] / b) ** (2 / e2)) ** (e2 / e1) + np.abs(u[:, 2] / c) ** (2 / e1)
+    # the inside-outside function is homogeneous of degree 2/e1 along a ray: F(s u) = s^(2/e1) F(u)
+    v = u * (f ** (-e1 / 2))[:, None]
+    return trimesh.Trimesh(v, ico.faces, process=False)
+
+
+def procedural_parts(family: str, seed: int) -> tuple[trimesh.Trimesh, list[dict] | None, dict]:
+    """(surface mesh, primitives or None, sampled parameters) of ``family`` and ``seed``."""
+    if family not in FAMILIES:
+        raise ObjectError(f"unknown procedural family {family!r}; known: {', '.join(FAMILIES)}")
+    rng = _rng(family, seed)
+    lo, hi = EXTENT_M
+    if family == "box":
+        ext = rng.uniform(lo, hi, 3)
+        return trimesh.creation.box(extents=ext), [_prim("box", ext / 2)], {"extents_m": ext.tolist()}
+    if family == "cylinder":
+        d, length = rng.uniform(lo, hi, 2)
+        m = trimesh.creation.cylinder(radius=d / 2, height=length, sections=96)
+        return m, [_prim("cylinder", (d / 2, length))], {"diameter_m": float(d), "length_m": float(length)}
+    if family == "capsule":
+        d = rng.uniform(lo, 0.10)
+        total = rng.uniform(d, hi)
+        m = trimesh.creation.capsule(height=total - d, radius=d / 2, count=[48, 48])
+        return m, [_prim("capsule", (d / 2, total - d))], {"diameter_m": float(d), "length_m": float(total)}
+    axes = rng.uniform(lo, hi, 3) / 2
+    e1, e2 = rng.uniform(*EXPONENTS, 2) if family == "superquadric" else (1.0, 1.0)
+    return superquadric_mesh(axes, e1, e2), None, {"semi_axes_m": axes.tolist(), "e1": float(e1), "e2": float(e2)}
+
+
+def make_procedural(cls, family: str, seed: int, density: float):
+    """The :class:`~ohra.objects.model.ObjectModel` of ``family`` and ``seed`` (see the module doc)."""
+    mesh, prims, params = procedural_parts(family, int(seed))
+    obj = cls(mesh, f"{family}-{int(seed)}", density, None, None if prims is None else [mesh.convex_hull],
+              repair=False, primitives=prims)
+    obj.procedural_params = {"family": family, "seed": int(seed), **params}
+    return obj
+
+
+def procedural_objects(family: str, count: int, seed: int = 0, density: float | None = None) -> list:
+    """``count`` objects of ``family`` with seeds ``seed .. seed + count - 1``."""
+    from ohra.objects.model import DEFAULT_DENSITY, ObjectModel
+
+    return [ObjectModel.procedural(family, s, density or DEFAULT_DENSITY) for s in range(int(seed), int(seed) + int(count))]

@@ -1,0 +1,66 @@
+"""Objects named on the command line or in recipes, and the size check before synthesis."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ohra.errors import ObjectError
+from ohra.objects.model import MESH_SUFFIXES, ObjectModel, builtin_object_names
+
+# largest extent [m] of an object a hand can grasp; outside it the units are almost surely wrong
+# (a millimetre mesh read as metres is a 75 m apple) or the object is a speck or a wall
+GRASPABLE_EXTENT_M = (0.01, 0.5)
+
+
+def resolve_objects(spec: list[str] | str | None, scale: float | None = None) -> list[ObjectModel]:
+    """Objects from specs: ``builtin`` (all built-ins), ``builtin:NAME``, ``procedural:FAMILY:SEED``,
+    a mesh/URDF file, or a folder (each sub-folder or mesh file in it). ``scale`` multiplies the
+    coordinates of objects read from files (e.g. 0.001 for millimetre meshes)."""
+    specs = [spec] if isinstance(spec, str) else list(spec or ["builtin"])
+    out: list[ObjectModel] = []
+    for s in specs:
+        if s == "builtin":
+            out += [ObjectModel.builtin(n) for n in builtin_object_names()]
+        elif s.startswith("builtin:"):
+            out.append(ObjectModel.builtin(s.split(":", 1)[1]))
+        elif s.startswith("procedural:"):
+            out.append(parse_procedural(s))
+        else:
+            out += _from_path(Path(s), scale)
+    return out
+
+
+def parse_procedural(spec: str) -> ObjectModel:
+    """``procedural:FAMILY:SEED`` -> :meth:`ObjectModel.procedural`."""
+    parts = spec.split(":")
+    if len(parts) != 3 or not parts[2].lstrip("-").isdigit():
+        raise ObjectError(f"procedural object spec {spec!r}: expected procedural:FAMILY:SEED (SEED an integer)")
+    return ObjectModel.procedural(parts[1], int(parts[2]))
+
+
+def _from_path(p: Path, scale: float | None) -> list[ObjectModel]:
+    if not p.exists():
+        raise ObjectError(f"object file or folder not found: {p}")
+    if p.is_dir() and not any(p.glob("*.obj")) and not (p / "model.urdf").exists():
+        subs = sorted(d for d in p.iterdir() if d.is_dir())
+        files = sorted(f for f in p.iterdir() if f.suffix.lower() in MESH_SUFFIXES)
+        if not subs and not files:
+            raise ObjectError(f"{p}: folder holds no objects")
+        return [ObjectModel.load(d, scale=scale) for d in subs] + [ObjectModel.load(f, scale=scale) for f in files]
+    return [ObjectModel.load(p, scale=scale)]
+
+
+def size_problem(obj: ObjectModel, extent_range: tuple[float, float] = GRASPABLE_EXTENT_M) -> str | None:
+    """Why ``obj`` cannot be a graspable object (largest extent outside ``extent_range``), with the
+    power-of-ten ``--scale`` that would bring it to ~10 cm; None when its size is plausible."""
+    ext = float(np.max(obj.extents))
+    lo, hi = extent_range
+    if lo <= ext <= hi:
+        return None
+    k = round(math.log10(0.1 / ext))
+    hint = f"if its units are wrong, --scale {10.0 ** k:g} makes it {100 * ext * 10.0 ** k:.3g} cm" if k else ""
+    return (f"object {obj.name!r}: largest extent {ext:.4g} m ({obj.mass:.4g} kg at {obj.density:g} kg/m^3) is outside the "
+            f"graspable range {lo:g}-{hi:g} m" + (f"; {hint}" if hint else ""))

@@ -1,0 +1,96 @@
+"""Dataset recipes: parsing, hand and object selection, split, build, resume and the info table."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from ohra.data.build import build, format_summary, summary
+from ohra.data.dataset import GraspDataset
+from ohra.data.recipe import Recipe, RecipeError
+
+TINY = """
+name: tiny
+seed: 3
+hands: [leap_2200]
+objects:
+  - builtin:box
+  - {procedural: box, count: 2, seed: 5}
+grasps_per_pair: 1
+split: {test: [box-6]}
+filter: false
+"""
+
+
+def _data(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "ohra.data", *args], capture_output=True, text=True, timeout=600)
+
+
+def test_the_digit_sum_rule_selects_leap_variants_of_that_complexity():
+    r = Recipe.from_dict({"hands": [{"pattern": "leap_*", "digit_sum": [11, 12]}], "objects": ["builtin"]})
+    names = [n for n, _ in r.resolve_hands()]
+    assert names == ["leap_2333", "leap_3233", "leap_3323", "leap_3332", "leap_3333"]
+    r = Recipe.from_dict({"hands": ["leap_3333", "leap_3*33", "leap_3333"], "objects": ["builtin"]})
+    assert [n for n, _ in r.resolve_hands()] == ["leap_3333", "leap_3033", "leap_3133", "leap_3233"]
+
+
+@pytest.mark.parametrize("recipe, message", [
+    ({"hands": ["leap_3333"], "objects": ["builtin"], "grasp_per_pair": 3}, "unknown key.*grasp_per_pair"),
+    ({"hands": [], "objects": ["builtin"]}, "'hands' must be a non-empty list"),
+    ({"hands": [{"pattern": "nohand_*"}], "objects": ["builtin"]}, "matches no hand"),
+    ({"hands": ["leap_3333"], "objects": [{"glob": "/nonexistent/*.obj"}]}, "matches nothing"),
+    ({"hands": ["leap_3333"], "objects": ["builtin"], "cap": 0}, "'cap' must be an integer >= 1"),
+    ({"hands": ["leap_3333"], "objects": ["builtin"], "protocol": {"preset": "reference", "frction": 1}}, "protocol/robustness"),
+])
+def test_bad_recipes_name_the_problem(recipe, message):
+    with pytest.raises(RecipeError, match=message):
+        r = Recipe.from_dict(recipe, "r.yaml")
+        r.resolve_hands(), r.resolve_objects(), r.synth_settings()
+
+
+def test_the_seeded_split_is_stable_and_disjoint():
+    r = Recipe.from_dict({"hands": ["leap_3333"], "objects": ["builtin"], "split": {"test_fraction": 0.34, "seed": 1}})
+    keys = [f"o{i}" for i in range(9)]
+    a, b = r.split_objects(keys), r.split_objects(keys)
+    assert a == b and len(a["test"]) == 3 and set(a["train"]) | set(a["test"]) == set(keys) and not set(a["train"]) & set(a["test"])
+
+
+def test_a_recipe_builds_resumes_and_summarises(tmp_path):
+    path = tmp_path / "tiny.yaml"
+    path.write_text(TINY)
+    man = build(path, tmp_path / "ds", progress=False)
+    assert man["recipe"]["name"] == "tiny" and man["split"]["test"] == ["box-6"] and man["split"]["train"] == ["box", "box-5"]
+    shards = man["hands"]["leap_2200"]["shards"]
+    assert set(shards) == {"box", "box-5", "box-6"} and all(s["n_candidates"] == 1 for s in shards.values())
+    assert man["core_hours"] > 0
+    before = {k: s["sha256"] for k, s in shards.items()}
+    again = build(path, tmp_path / "ds", resume=True, progress=False)
+    assert {k: s["sha256"] for k, s in again["hands"]["leap_2200"]["shards"].items()} == before
+    assert again["hands"]["leap_2200"]["shards"]["box"]["timing"] == shards["box"]["timing"]  # kept, not recomputed
+    s = summary(tmp_path / "ds")
+    assert s["total"]["pairs"] == 3 and s["split"] == {"train": 2, "test": 1}
+    assert "leap_2200" in format_summary(s)
+    assert len(GraspDataset(tmp_path / "ds", split="test").pairs) == 1
+    assert len(GraspDataset(tmp_path / "ds", split="train").pairs) == 2
+    proc = _data("info", str(tmp_path / "ds"))
+    assert proc.returncode == 0 and "leap_2200" in proc.stdout and "1 test" in proc.stdout, proc.stderr
+
+
+def test_data_commands_report_bad_input_in_one_line(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("hands: [leap_3333]\nobjects: [builtin]\ncolour: red\n")
+    for args, msg in [(["build", str(bad)], "unknown key(s) colour"), (["info", str(tmp_path)], "no manifest.json"),
+                      (["build", str(tmp_path / "none.yaml")], "recipe not found")]:
+        proc = _data(*args)
+        lines = [l for l in proc.stderr.splitlines() if l.strip() and "pybullet build time" not in l]
+        assert proc.returncode == 2 and len(lines) == 1 and msg in lines[0], proc.stderr
+
+
+def test_the_example_recipe_resolves(objects_dir):
+    from pathlib import Path
+
+    r = Recipe.load(Path(__file__).parents[1] / "recipes" / "leap_small.yaml")
+    assert len(r.resolve_hands()) == 5
+    assert len(r.resolve_objects()) == 21

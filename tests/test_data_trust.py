@@ -1,0 +1,161 @@
+"""Trust in the data engine: resume, manifests, object keys, bad objects, sizes, the no-filter text."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from ohra.data.dataset import GraspDataset, file_digest
+from ohra.errors import DatasetError, ObjectError
+from ohra.hands import get_hand
+from ohra.objects.model import ObjectModel
+from ohra.objects.resolve import resolve_objects, size_problem
+from ohra.synth.pipeline import SynthSettings, diagnose, synthesize
+
+HAND = [("leap_2200", get_hand("leap_2200"))]
+FAST = SynthSettings(grasps_per_object=1, filter=False)
+
+
+def _cli(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "ohra.synth", *args, "--quiet"], capture_output=True, text=True, timeout=timeout)
+
+
+def _error_lines(proc: subprocess.CompletedProcess) -> list[str]:
+    return [line for line in proc.stderr.splitlines() if line.strip() and "pybullet build time" not in line]
+
+
+def _box_file(path: Path, extents) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    trimesh.creation.box(extents=extents).export(str(path))
+    return path
+
+
+def test_resume_recomputes_a_truncated_shard(tmp_path):
+    synthesize(HAND, [ObjectModel.builtin("box")], tmp_path, FAST, progress=False)
+    man = json.loads((tmp_path / "manifest.json").read_text())
+    shard = tmp_path / man["hands"]["leap_2200"]["shards"]["box"]["file"]
+    good = shard.read_bytes()
+    shard.write_bytes(good[: len(good) // 2])  # an interrupted copy, say
+    synthesize(HAND, [ObjectModel.builtin("box")], tmp_path, FAST, resume=True, progress=False)
+    assert shard.read_bytes() == good  # recomputed, byte for byte
+    assert GraspDataset(tmp_path).grasps().shape[1] == 31
+
+
+def test_resume_with_other_settings_is_refused_and_overwrite_leaves_no_orphans(tmp_path):
+    objs = [ObjectModel.builtin("box"), ObjectModel.builtin("sphere")]
+    synthesize(HAND, objs, tmp_path, FAST, progress=False)
+    other = SynthSettings(grasps_per_object=1, filter=False, seed=5)
+    with pytest.raises(DatasetError, match=r"other settings \(seed: 0 -> 5"):
+        synthesize(HAND, objs, tmp_path, other, resume=True, progress=False)
+    with pytest.raises(DatasetError, match="other settings"):
+        synthesize(HAND, objs[:1], tmp_path, other, progress=False)
+    man = synthesize(HAND, objs[:1], tmp_path, other, overwrite=True, progress=False)
+    listed = {sh["file"] for e in man["hands"].values() for sh in e["shards"].values()}
+    on_disk = {str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*.npz")}
+    assert on_disk == listed and len(listed) == 1
+
+
+def test_a_corrupt_manifest_is_one_line_and_exit_2(tmp_path):
+    (tmp_path / "manifest.json").write_text('{"hands": {"leap_2200": ')
+    proc = _cli("--hand", "leap_2200", "--objects", "builtin:box", "--out", str(tmp_path), "--resume", "--no-filter",
+                "--grasps-per-object", "1")
+    lines = _error_lines(proc)
+    assert proc.returncode == 2 and len(lines) == 1 and "corrupt manifest" in lines[0], proc.stderr
+    with pytest.raises(DatasetError, match="corrupt manifest"):
+        GraspDataset(tmp_path)
+
+
+def test_objects_sharing_a_file_name_get_their_own_manifest_entries(tmp_path):
+    a = _box_file(tmp_path / "a" / "part.stl", (0.04, 0.05, 0.06))
+    b = _box_file(tmp_path / "b" / "part.stl", (0.05, 0.05, 0.07))
+    objs = resolve_objects([str(a), str(b)])
+    assert [o.name for o in objs] == ["part", "part"]
+    man = synthesize(HAND, objs, tmp_path / "out", FAST, progress=False)
+    shards = man["hands"]["leap_2200"]["shards"]
+    assert len(shards) == 2 and all(k.startswith("part-") for k in shards)
+    assert man["hands"]["leap_2200"]["counts"]["candidates"] == 2
+    ds = GraspDataset(tmp_path / "out")
+    with pytest.raises(DatasetError, match="names 2 shards"):
+        ds.load_shard("leap_2200", "part")
+    assert len({ds.load_shard("leap_2200", k)["raw"].tobytes() for k in shards}) == 2
+
+
+@pytest.mark.parametrize("faces, message", [([[0, 1, 2]], "span no volume"), ([[0, 1, 2], [0, 2, 3]], "is flat")])
+def test_flat_and_one_triangle_meshes_are_refused_at_once(tmp_path, faces, message):
+    m = trimesh.Trimesh(vertices=[[0, 0, 0], [0.1, 0, 0], [0.1, 0.1, 0], [0, 0.1, 0]], faces=faces, process=False)
+    path = tmp_path / "flat.obj"
+    m.export(str(path))
+    proc = _cli("--hand", "leap_2200", "--objects", str(path), "--out", str(tmp_path / "out"), timeout=60)
+    lines = _error_lines(proc)
+    assert proc.returncode == 2 and len(lines) == 1 and message in lines[0], proc.stderr
+
+
+def test_vhacd_is_silent_bounded_and_leaves_only_its_result(tmp_path, monkeypatch, capfd):
+    monkeypatch.setenv("OHRA_CACHE_DIR", str(tmp_path / "cache"))
+    from ohra.objects.decompose import vhacd_pieces
+
+    torus = trimesh.creation.torus(major_radius=0.04, minor_radius=0.012, major_sections=24, minor_sections=12)
+    pieces = vhacd_pieces(torus, "torus-test", resolution=10_000)
+    out, _ = capfd.readouterr()
+    assert out == ""  # V-HACD's usage text used to reach stdout
+    assert len(pieces) > 1
+    assert [p.name for p in (tmp_path / "cache" / "vhacd").iterdir()] == ["torus-test.obj"]
+    with pytest.raises(ObjectError, match="is flat"):
+        vhacd_pieces(trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], [[0, 1, 2], [1, 3, 2]]), "flat-test")
+    assert not (tmp_path / "cache" / "vhacd" / "flat-test.obj").exists()
+
+
+@pytest.mark.parametrize("extents, expect", [((60.0, 70.0, 80.0), "--scale 0.001"), ((0.001,) * 3, "outside the graspable range"),
+                                             ((1.0, 0.8, 0.6), "outside the graspable range")])
+def test_objects_of_implausible_size_are_refused_with_a_hint(tmp_path, extents, expect):
+    path = _box_file(tmp_path / "thing.stl", extents)
+    problem = size_problem(ObjectModel.load(path))
+    assert problem and expect in problem
+    proc = _cli("--hand", "leap_2200", "--objects", str(path), "--out", str(tmp_path / "out"), "--no-filter")
+    lines = _error_lines(proc)
+    assert proc.returncode == 2 and len(lines) == 1 and expect in lines[0], proc.stderr
+
+
+def test_scale_brings_a_millimetre_mesh_into_range(tmp_path):
+    path = _box_file(tmp_path / "thing.stl", (60.0, 70.0, 80.0))
+    (obj,) = resolve_objects([str(path)], scale=0.001)
+    assert size_problem(obj) is None
+    assert np.allclose(obj.extents, [0.06, 0.07, 0.08])
+
+
+def test_a_pair_where_nothing_converges_says_why():
+    from ohra.canonical.kinematics import HandModel
+
+    hand = HandModel.from_params(get_hand("leap_2200"))
+    big = ObjectModel(trimesh.creation.box(extents=(0.3, 0.3, 0.3)), "crate")
+    msg = diagnose(hand, big, [2, 2, 3])
+    assert "2 Maximum_Iterations_Exceeded, 1 Infeasible_Problem_Detected" in msg
+    assert "exceeds the hand's largest fingertip span" in msg
+
+
+def test_no_filter_output_does_not_claim_a_filter(tmp_path):
+    proc = _cli("--hand", "leap_2200", "--objects", "builtin:box", "--out", str(tmp_path), "--no-filter", "--grasps-per-object", "1")
+    assert proc.returncode == 0, proc.stderr
+    assert "kept without the filter" in proc.stdout and "passed the filter" not in proc.stdout
+
+
+def test_shards_are_byte_deterministic(tmp_path):
+    for d in ("a", "b"):
+        synthesize(HAND, [ObjectModel.builtin("box")], tmp_path / d, FAST, progress=False)
+    fa, fb = (next((tmp_path / d).rglob("*.npz")) for d in ("a", "b"))
+    assert fa.read_bytes() == fb.read_bytes()
+    assert file_digest(fa) == json.loads((tmp_path / "a" / "manifest.json").read_text())["hands"]["leap_2200"]["shards"]["box"]["sha256"]
+
+
+def test_two_pool_workers_write_the_same_shards_as_one(tmp_path):
+    objs = [ObjectModel.builtin("box"), ObjectModel.procedural("capsule", 2)]  # both must pickle into the workers
+    a = synthesize(HAND, objs, tmp_path / "one", FAST, progress=False)
+    b = synthesize(HAND, objs, tmp_path / "two", FAST, workers=2, progress=False)
+    sha = lambda m: {k: s["sha256"] for k, s in m["hands"]["leap_2200"]["shards"].items()}  # noqa: E731
+    assert sha(a) == sha(b) and len(sha(a)) == 2

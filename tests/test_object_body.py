@@ -1,0 +1,126 @@
+"""The body an object is grasped and simulated as: PyBullet's shape is the solver's, mass
+properties come from the same body, decompositions next to a mesh are found, repair keeps
+closed meshes closed."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pybullet as pb
+import pytest
+import trimesh
+
+from ohra.errors import ObjectWarning
+from ohra.objects.body import primitive_mass_properties
+from ohra.objects.model import ObjectModel, repair_mesh
+from ohra.sim import Protocol
+from ohra.sim.hands import SimHand
+from ohra.sim.world import World
+from sim_fixtures import pinch_hand
+
+
+def _pybullet_distance(obj: ObjectModel, points: np.ndarray, r: float = 0.002) -> np.ndarray:
+    """Distance [m] from each point to the object as PyBullet simulates it (a probe sphere of radius r)."""
+    w = World(SimHand.from_params(pinch_hand()), obj, Protocol())
+    body = w.new_object()
+    probe = pb.createCollisionShape(pb.GEOM_SPHERE, radius=r, physicsClientId=w.client)
+    out = []
+    for p in points:
+        s = pb.createMultiBody(0, probe, -1, p.tolist(), physicsClientId=w.client)
+        cps = pb.getClosestPoints(body, s, 1.0, physicsClientId=w.client)
+        out.append(min(c[8] for c in cps) + r)  # a compound answers per piece: take the nearest
+        pb.removeBody(s, physicsClientId=w.client)
+    w.close()
+    return np.array(out)
+
+
+def _near_surface(obj: ObjectModel, n: int = 40, seed: int = 0) -> np.ndarray:
+    pts, nrm = obj.sample_surface(n, seed=seed)
+    return pts + nrm * np.random.default_rng(seed).uniform(0.003, 0.015, size=(n, 1))
+
+
+def test_pybullet_simulates_a_convex_mesh_exactly_where_the_solver_sees_it():
+    """Hull bodies: no 1 mm collision margin on top (distances agree to 0.1 mm with the exact hull)."""
+    obj = ObjectModel.builtin("ellipsoid")
+    assert obj.body.kind == "hull"
+    pts = _near_surface(obj)
+    _, exact, _ = trimesh.proximity.closest_point(obj.body.pieces[0], pts)
+    assert np.abs(_pybullet_distance(obj, pts) - exact).max() < 1e-4
+    assert np.abs(obj.signed_distance(pts) - exact).max() < obj.sdf_sample_spacing
+
+
+def test_pybullet_simulates_a_decomposed_ycb_object_where_the_solver_sees_it(objects_dir):
+    obj = ObjectModel.load(objects_dir / "ycb" / "MustardBottle")
+    assert obj.body.kind == "provided:collision_vhacd.obj" and len(obj.convex_pieces()) > 1
+    pts = _near_surface(obj, 60)
+    d_sim = _pybullet_distance(obj, pts)
+    assert np.abs(d_sim - obj.signed_distance(pts)).max() < obj.sdf_sample_spacing + 1e-4
+    f = obj.describe()["body"]["fidelity"]
+    assert 0.9 < f["volume_ratio"] < 1.1 and f["mesh_to_body_mean_m"] < 0.003
+
+
+def test_a_textured_vhacd_file_next_to_the_mesh_is_used(tmp_path):
+    """An L-shaped mesh whose provided decomposition (two boxes) fits it far better than its hull."""
+    a = trimesh.creation.box(extents=(0.04, 0.10, 0.04))
+    a.apply_translation((0.0, 0.0, -0.02))
+    b = trimesh.creation.box(extents=(0.04, 0.04, 0.06))
+    b.apply_translation((0.0, 0.03, 0.03))
+    trimesh.util.concatenate([a, b]).export(str(tmp_path / "textured_simple.obj"))
+    lines = [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in np.vstack([a.vertices, b.vertices])]
+    lines += ["o p0"] + [f"f {i + 1} {j + 1} {k + 1}" for i, j, k in a.faces]
+    lines += ["o p1"] + [f"f {i + 9} {j + 9} {k + 9}" for i, j, k in b.faces]
+    (tmp_path / "textured_vhacd.obj").write_text("\n".join(lines) + "\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ObjectWarning)  # the concatenated boxes are not one closed surface
+        obj = ObjectModel.load(tmp_path)
+        assert obj.body.kind == "provided:textured_vhacd.obj"
+    assert obj.volume == pytest.approx(0.04 * 0.10 * 0.04 + 0.04 * 0.04 * 0.06, rel=0.02)
+
+
+def test_an_open_mesh_is_a_closed_body_and_says_so():
+    """An open tube (no caps): one body (the solid cylinder) gives volume, centre of mass and inertia."""
+    tube = trimesh.creation.cylinder(radius=0.03, height=0.1, sections=64)
+    tube = trimesh.Trimesh(tube.vertices, tube.faces[np.abs(tube.face_normals[:, 2]) < 0.5], process=False)
+    obj = ObjectModel(tube, "tube")
+    with pytest.warns(ObjectWarning, match="mesh is open"):
+        obj.body
+    solid = primitive_mass_properties([{"type": "cylinder", "size": (0.03, 0.1), "pos": (0.0, 0.0, 0.0)}])
+    assert obj.volume == pytest.approx(solid.volume, rel=0.01)
+    assert np.allclose(obj.center_mass, 0.0, atol=1e-6)
+    assert np.allclose(obj.inertia / obj.density, solid.inertia_per_density, rtol=0.02)
+    d = obj.describe()
+    assert d["mass_properties"]["method"].startswith("exact") and d["body"]["kind"] == "hull" and not d["watertight"]
+
+
+def test_several_pieces_give_estimated_mass_properties_of_their_union():
+    """Two overlapping boxes: the grid estimate counts the overlap once."""
+    from ohra.objects.body import Body
+
+    a = trimesh.creation.box(extents=(0.04, 0.04, 0.04))
+    b = trimesh.creation.box(extents=(0.04, 0.04, 0.04))
+    b.apply_translation((0.02, 0.0, 0.0))
+    mp = Body([a, b], "pieces").mass_properties
+    assert mp.estimated and mp.volume == pytest.approx(0.06 * 0.04 * 0.04, rel=0.01)
+    assert np.allclose(mp.center_mass, [0.01, 0.0, 0.0], atol=2e-4)
+    exact = primitive_mass_properties([{"type": "box", "size": (0.03, 0.02, 0.02), "pos": (0.01, 0.0, 0.0)}])
+    assert np.allclose(mp.inertia_per_density, exact.inertia_per_density, rtol=0.02)
+
+
+def test_primitive_mass_properties_match_a_fine_mesh():
+    for prim, mesh in [({"type": "capsule", "size": (0.02, 0.05), "pos": (0, 0, 0)}, trimesh.creation.capsule(height=0.05, radius=0.02, count=[64, 64])),
+                       ({"type": "cylinder", "size": (0.02, 0.05), "pos": (0, 0, 0)}, trimesh.creation.cylinder(radius=0.02, height=0.05, sections=256))]:
+        mp = primitive_mass_properties([prim])
+        assert mp.volume == pytest.approx(mesh.volume, rel=0.01)
+        assert np.allclose(mp.inertia_per_density, mesh.moment_inertia, rtol=0.02)
+
+
+def test_repair_keeps_a_closed_mesh_closed():
+    """A closed tetrahedron with a zero-area sliver face: dropping the sliver would open it."""
+    v = np.array([[0, 0, 0], [0.06, 0, 0], [0, 0.06, 0], [0, 0, 0.06], [0.03, 0, 0]], float)
+    faces = [[0, 2, 1], [0, 4, 3], [4, 1, 3], [0, 3, 2], [1, 2, 3], [0, 1, 4]]  # the last is the sliver
+    mesh = trimesh.Trimesh(v, faces, process=False)
+    assert mesh.is_watertight and not mesh.nondegenerate_faces()[-1]
+    fixed, report = repair_mesh(mesh)
+    assert report.watertight_before and report.watertight and fixed.is_watertight
+    assert fixed.volume == pytest.approx(0.06**3 / 6)
