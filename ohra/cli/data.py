@@ -60,15 +60,10 @@ def _info(args: argparse.Namespace) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m ohra.data``: the ``ohra data`` commands on their own."""
-    from ohra.cli.main import _Parser
-    from ohra.errors import OhraError
+    from ohra.cli.main import Parser, execute
 
-    parser = _Parser(prog="python -m ohra.data")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    parser = Parser(prog="python -m ohra.data")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
     register(sub)
     args = parser.parse_args(["data", *(sys.argv[1:] if argv is None else argv)])
-    try:
-        return int(args.func(args) or 0)
-    except OhraError as exc:
-        print(f"ohra data: error: {exc}", file=sys.stderr)
-        return 2
+    return execute(args)
