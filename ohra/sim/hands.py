@@ -51,6 +51,8 @@ class SimHand:
         joint_finger: finger index (0..4) of each driven joint.
         link_finger: URDF link name -> finger index, -1 for the palm and other non-finger links.
         mimic: joint name -> (driven joint name, multiplier, offset) for URDF mimic joints.
+        couplings: a canonical hand's joint couplings (:mod:`ohra.canonical.couplings`): the
+            controller projects its poses and targets onto them (:meth:`project_sim`).
     """
 
     name: str
@@ -67,6 +69,21 @@ class SimHand:
     joint_finger: np.ndarray
     link_finger: dict[str, int]
     mimic: dict[str, tuple[str, float, float]] = field(default_factory=dict)
+    couplings: tuple = ()
+
+    @property
+    def coupled(self) -> bool:
+        """A canonical hand with couplings (an original hand couples through its URDF mimic tags)."""
+        return self.action_map is None and bool(self.couplings)
+
+    def project_sim(self, qs: np.ndarray) -> np.ndarray:
+        """Simulator vector (..., len(joints)) with coupled joints set from their drivers, clipped into
+        the limits; unchanged for a hand without canonical couplings."""
+        if not self.coupled:
+            return np.asarray(qs, dtype=float)
+        from ohra.canonical.couplings import project
+
+        return np.clip(self.to_sim(project(self.couplings, self.to_canonical(qs))), self.lower, self.upper)
 
     @property
     def canonical(self) -> bool:
@@ -86,8 +103,10 @@ class SimHand:
 
     # -- constructors ---------------------------------------------------------------------------
     @classmethod
-    def from_params(cls, params: Params, name: str = "canonical_hand") -> "SimHand":
-        """A canonical hand: the driven joints are its movable canonical joints."""
+    def from_params(cls, params: Params, name: str = "canonical_hand", couplings: tuple = ()) -> "SimHand":
+        """A canonical hand: the driven joints are its movable canonical joints; ``couplings`` (the
+        hand's, e.g. ``ohra.get_couplings(name)``) make the controller drive coupled joints with
+        their drivers."""
         from ohra.canonical.urdfgen import render
 
         if not isinstance(params, (BaseParams, ExtendedParams)):
@@ -101,7 +120,7 @@ class SimHand:
         base = np.where(movable, 0.0, lo)
         link_finger = _link_fingers(urdf, {n: _finger_of_slot(JOINT_NAMES.index(n)) for n in JOINT_NAMES})
         return cls(name, urdf, joints, lo[idx], up[idx], lo, up, idx, base, None, np.eye(4),
-                   np.array([_finger_of_slot(k) for k in idx], dtype=int), link_finger, {})
+                   np.array([_finger_of_slot(k) for k in idx], dtype=int), link_finger, {}, tuple(couplings))
 
     @classmethod
     def from_original(cls, urdf: str | Path, action_map, name: str | None = None,

@@ -16,7 +16,7 @@ import json
 import multiprocessing as mp
 import os
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Union
 
@@ -30,6 +30,7 @@ from ohra.objects.model import ObjectModel
 from ohra.canonical.params import BaseParams, ExtendedParams
 from ohra.rotations import grasp_to_pose
 from ohra.sim import GraspEvaluator, Protocol
+from ohra.sim.hands import SimHand
 from ohra.synth.init import initial_poses
 from ohra.synth.nlp import GraspNLP, NLPSettings, SUCCESS_STATUSES
 from ohra.synth.quality import ferrari_canny
@@ -88,7 +89,7 @@ def synthesize_shard(name: str, params: Params, obj: ObjectModel, settings: Synt
     hand = HandModel.from_params(params)
     nlp = GraspNLP(hand, obj, settings.nlp)
     rng = np.random.default_rng(_shard_seed(settings.seed, name, obj.mesh_hash))
-    starts = initial_poses(hand, obj, settings.grasps_per_object, rng)
+    starts = initial_poses(hand, obj, settings.grasps_per_object, rng, settings.nlp.couplings)
     raw, status, viol, q1, iters, n_contacts = [], [], [], [], [], []
     t_solve = time.perf_counter()
     for st in starts:
@@ -112,7 +113,7 @@ def synthesize_shard(name: str, params: Params, obj: ObjectModel, settings: Synt
     pen = np.full(len(raw_a), np.nan)
     t_sim = time.perf_counter()
     if settings.filter and solved.any():
-        ev = GraspEvaluator(params, obj, settings.protocol)
+        ev = GraspEvaluator(SimHand.from_params(params, name, couplings=settings.nlp.couplings), obj, settings.protocol)
         rep = ev.evaluate(raw_a[solved], mode="filter")
         ev.close()
         idx = np.flatnonzero(solved)
@@ -163,15 +164,21 @@ def _job(args: tuple) -> tuple[str, dict]:
     }
 
 
-def synthesize(hands: list[tuple[str, Params]], objects: list[ObjectModel], out: str | Path, settings: SynthSettings,
+def synthesize(hands: list[tuple], objects: list[ObjectModel], out: str | Path, settings: SynthSettings,
                workers: int = 1, resume: bool = False, progress: bool = True) -> dict:
-    """Synthesise a dataset for every (hand, object) pair into ``out``; returns the manifest."""
+    """Synthesise a dataset for every (hand, object) pair into ``out``; returns the manifest.
+
+    ``hands`` holds ``(name, params)`` or ``(name, params, couplings)``; a hand's couplings replace
+    ``settings.nlp.couplings`` for its shards (the NLP's equality rows, projected starts, the
+    filter's coupled controller) and are recorded in its manifest entry.
+    """
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise OhraError(f"output path {out} exists and is not a directory")
     if int(workers) < 1:
         raise OhraError(f"--workers must be >= 1, got {workers}")
-    for name, params in hands:
+    hands = [(h[0], h[1], tuple(h[2]) if len(h) > 2 else settings.nlp.couplings) for h in hands]
+    for name, params, _ in hands:
         check_hand_for_synthesis(name, params)
     out.mkdir(parents=True, exist_ok=True)
     man_path = out / "manifest.json"
@@ -183,8 +190,10 @@ def synthesize(hands: list[tuple[str, Params]], objects: list[ObjectModel], out:
             manifest["hands"] = old.get("hands", {})
     elif man_path.is_file() and not resume:
         manifest["hands"] = {}
-    for name, params in hands:
+    for name, params, cs in hands:
+        hand_settings = replace(settings, nlp=replace(settings.nlp, couplings=cs))
         entry = manifest["hands"].setdefault(name, {"params": params.to_dict(), "params_hash": params_hash(params), "shards": {}})
+        entry["couplings"] = [c.to_dict() for c in cs]
         if entry.get("params_hash") != params_hash(params):
             entry.update({"params": params.to_dict(), "params_hash": params_hash(params), "shards": {}})
         todo = []
@@ -192,7 +201,7 @@ def synthesize(hands: list[tuple[str, Params]], objects: list[ObjectModel], out:
             sh = entry["shards"].get(obj.name)
             if resume and sh and sh["object"]["mesh_hash"] == obj.mesh_hash and (out / sh["file"]).is_file():
                 continue
-            todo.append((name, params, obj, settings, str(out)))
+            todo.append((name, params, obj, hand_settings, str(out)))
         bar = _bar(len(objects), name, progress)
         bar.update(len(objects) - len(todo))
         t0 = time.perf_counter()
