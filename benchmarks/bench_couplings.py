@@ -68,13 +68,13 @@ def run_object(ref, obj: ObjectModel, starts: int, seed: int) -> dict:
 
 
 def table(rows: list[dict], starts: int, seed: int) -> str:
-    lines = [f"Inspire right hand ({HAND}), {starts} starts per object, seed {seed}: converged, non-self-intersecting",
+    lines = [f"Inspire right hand ({HAND}), both forms, {starts} starts per object, seed {seed}: converged, non-self-intersecting",
              "canonical grasps evaluated (six directions, default protocol) on the coupled canonical hand and",
              "replayed on the original URDF (`ohra eval --original`). Change = original - canonical [points].", "",
-             "| object | grasps | max coupling residual [rad] | canonical pass | original pass | change [points] |",
-             "|---|---:|---:|---:|---:|---:|"]
+             "| form | object | grasps | max coupling residual [rad] | canonical pass | original pass | change [points] |",
+             "|---|---|---:|---:|---:|---:|---:|"]
     for r in rows:
-        lines.append(f"| {r['object']} | {r['grasps']} | {r['max_residual_rad']:.1e} | {r['canonical_pass']} ({100 * r['canonical_rate']:.0f} %) "
+        lines.append(f"| {r['form']} | {r['object']} | {r['grasps']} | {r['max_residual_rad']:.1e} | {r['canonical_pass']} ({100 * r['canonical_rate']:.0f} %) "
                      f"| {r['original_pass']} ({100 * r['original_rate']:.0f} %) | {r['change_points']:+.1f} |")
     return "\n".join(lines)
 
@@ -85,22 +85,29 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--objects", nargs="*", default=["box", "sphere", "cylinder", "capsule"])
     ap.add_argument("--ycb", nargs="*", default=[], help="YCB folders under <objects root>/ycb")
+    ap.add_argument("--forms", nargs="*", default=["base", "extended"])
     a = ap.parse_args()
-    ref = resolve_hand(HAND)
     objs = [ObjectModel.builtin(n) for n in a.objects] + [resolve_objects(str(objects_root() / "ycb" / n))[0] for n in a.ycb]
     rows = []
-    for obj in objs:
-        rows.append(run_object(ref, obj, a.starts, a.seed))
-        print(rows[-1], flush=True)
+    for form in a.forms:
+        ref = resolve_hand(HAND, form)
+        part = []
+        for obj in objs:
+            part.append({"form": form, **run_object(ref, obj, a.starts, a.seed)})
+            print(part[-1], flush=True)
+        rows += part + [{"form": form, **overall(part)}]
+    write_results("couplings", {"hand": HAND, "couplings": [x.to_dict() for x in ref.couplings], "starts": a.starts,
+                                "seed": a.seed, "rows": rows}, table(rows, a.starts, a.seed))
+
+
+def overall(rows: list[dict]) -> dict:
+    """The "all" row: pass rates over every object's grasps together."""
     g = sum(r["grasps"] for r in rows)
     c, o = sum(r["canonical_pass"] for r in rows), sum(r["original_pass"] for r in rows)
-    overall = {"object": "all", "starts": sum(r["starts"] for r in rows), "grasps": g,
+    return {"object": "all", "starts": sum(r["starts"] for r in rows), "grasps": g,
                "max_residual_rad": max(r["max_residual_rad"] for r in rows), "canonical_pass": c, "original_pass": o,
                "canonical_rate": c / max(g, 1), "original_rate": o / max(g, 1), "change_points": 100.0 * (o - c) / max(g, 1),
                "seconds": sum(r["seconds"] for r in rows)}
-    rows.append(overall)
-    write_results("couplings", {"hand": HAND, "couplings": [x.to_dict() for x in ref.couplings], "starts": a.starts,
-                                "seed": a.seed, "rows": rows}, table(rows, a.starts, a.seed))
 
 
 if __name__ == "__main__":
