@@ -257,6 +257,8 @@ def prepare_urdf(text: str, locked: dict[str, float], capsules: bool = True, bas
         o.set("xyz", " ".join(repr(float(x)) for x in T[:3, 3]))
         o.set("rpy", " ".join(repr(float(x)) for x in matrix_to_rpy(T[:3, :3])))
         j.set("type", "fixed")
+    for link in root.iter("link"):
+        _give_inertial(link)
     if capsules:
         for link in root.iter("link"):
             _capsulise(link)
@@ -266,6 +268,25 @@ def prepare_urdf(text: str, locked: dict[str, float], capsules: bool = True, bas
         for m in root.iter("mesh"):
             m.set("filename", str(resolve_mesh_path(m.get("filename", ""), base_dir)))
     return ET.tostring(root, encoding="unicode")
+
+
+def _give_inertial(link: ET.Element) -> None:
+    """A small explicit inertial on a link that has none (every link but the root).
+
+    PyBullet gives a link without ``<inertial>`` a mass of 1 kg and unit inertia; on an original URDF's
+    fingertip frames (Inspire's ``*_tip`` links, fixed to the distal link) that made every distal link
+    weigh 1 kg with 1 kg m^2 of inertia, which the 1 N m finger motors cannot squeeze with. The
+    canonical template's dummy links carry the same values (:data:`ohra.canonical.urdfgen.DUMMY_MASS`).
+    """
+    from ohra.canonical.urdfgen import DUMMY_INERTIA, DUMMY_MASS
+
+    if link.find("inertial") is not None:
+        return
+    inertial = ET.Element("inertial")
+    ET.SubElement(inertial, "origin", xyz="0 0 0", rpy="0 0 0")
+    ET.SubElement(inertial, "mass", value=repr(DUMMY_MASS))
+    ET.SubElement(inertial, "inertia", ixx=repr(DUMMY_INERTIA), ixy="0", ixz="0", iyy=repr(DUMMY_INERTIA), iyz="0", izz=repr(DUMMY_INERTIA))
+    link.insert(0, inertial)
 
 
 def _capsulise(link: ET.Element) -> None:
