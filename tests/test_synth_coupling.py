@@ -110,3 +110,32 @@ def test_evaluator_drives_and_reports_a_coupled_canonical_hand_on_its_couplings(
     for t in driven:
         assert np.abs(residual(inspire.couplings, ev.hand.to_canonical(t))).max() < 1e-9
     assert np.abs(residual(inspire.couplings, rep.post_grasps[:, 9:])).max() < 1e-9
+
+
+def test_links_without_inertial_get_the_small_dummy_one_not_pybullets_1_kg():
+    from ohra.canonical.urdfgen import DUMMY_MASS
+    from ohra.sim.hands import prepare_urdf
+
+    text = ('<robot name="r"><link name="a"><inertial><mass value="0.2"/><inertia ixx="1e-4" ixy="0" ixz="0" iyy="1e-4" '
+            'iyz="0" izz="1e-4"/></inertial></link><link name="tip"/><joint name="j" type="fixed"><parent link="a"/>'
+            '<child link="tip"/></joint></robot>')
+    import xml.etree.ElementTree as ET
+
+    root = ET.fromstring(prepare_urdf(text, {}))
+    masses = {ln.get("name"): float(ln.find("inertial/mass").get("value")) for ln in root.iter("link")}
+    assert masses == {"a": 0.2, "tip": DUMMY_MASS}
+
+
+def test_original_inspire_links_are_light_and_swing_across_their_axes(inspire):
+    """Inspire's links turn about their frame's z: the squeeze direction must come from the link's extent."""
+    import pybullet as pb
+
+    from ohra.sim import GraspEvaluator
+
+    ev = GraspEvaluator.original("inspire_hand_right", ObjectModel.builtin("sphere"), form=inspire.form)
+    w = ev.world
+    masses = [pb.getDynamicsInfo(w.body, j, physicsClientId=w.client)[0] for j, _ in w.links if j >= 0]
+    axis, direction, _ = w.joint_frames()
+    ev.close()
+    assert max(masses) < 0.05  # kg; a fingertip frame without <inertial> used to add 1 kg
+    assert np.abs((axis * direction).sum(axis=1)).max() < 0.9
