@@ -70,7 +70,7 @@ def load_grasp_file(path: str | Path, key: str | None = None) -> np.ndarray:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ohra.hands import get_hand
+    from ohra.hands import get_couplings, get_hand
     from ohra.objects.model import resolve_objects
     from ohra.sim import GraspEvaluator, Protocol, SimHand
     from ohra.sim.protocol import ISAAC_STEP
@@ -89,7 +89,8 @@ def run(args: argparse.Namespace) -> int:
         protocol = replace(protocol, **ISAAC_STEP)
     if args.no_early_exit:
         protocol = replace(protocol, early_exit=False)
-    hand = SimHand.registered_original(args.hand) if args.original else SimHand.from_params(get_hand(args.hand), name=args.hand)
+    hand = SimHand.registered_original(args.hand) if args.original else SimHand.from_params(get_hand(args.hand), name=args.hand,
+                                                                                                  couplings=get_couplings(args.hand))
     ev = GraspEvaluator(hand, obj, protocol)
     g, out_of_limits = ev.check(grasps)  # validates before any simulation or output
     if out_of_limits.any():

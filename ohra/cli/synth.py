@@ -61,12 +61,13 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _hands(spec: str):
-    from ohra.hands import get_hand, variant_names
+    from ohra.hands import get_hand, resolve_hand, variant_names
 
     if spec == "all-leap":
         return [(n, get_hand(n)) for n in variant_names() if get_hand(n).num_fingers >= 2]
     name = Path(spec).stem if spec.endswith(".json") else spec
-    return [(name, get_hand(spec))]
+    ref = resolve_hand(spec)  # its couplings (if any) become equality rows of the NLP
+    return [(name, ref.params, ref.couplings)]
 
 
 def run(args: argparse.Namespace) -> int:

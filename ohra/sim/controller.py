@@ -7,9 +7,15 @@ origin. If ``motion . to_object >= 0`` a positive rotation closes: the joint is 
 the way toward its lower (opening) limit and driven ``inner`` of the way past the grasp toward its
 upper (closing) limit; otherwise the reverse. The fingers therefore start slightly open and
 squeeze.
+
+A hand with coupled joints (:mod:`ohra.canonical.couplings`) passes ``couple``: the reset and the
+target are projected so every coupled joint follows its driver, as the mechanism (or the original
+URDF's mimic joints) would, instead of being squeezed on its own toward its own limit.
 """
 
 from __future__ import annotations
+
+from typing import Callable
 
 import numpy as np
 
@@ -28,9 +34,16 @@ def closes_positive(axis_world: np.ndarray, link_z_world: np.ndarray, joint_pos_
 
 
 def squeeze_targets(q: np.ndarray, lower: np.ndarray, upper: np.ndarray, closes_pos: np.ndarray,
-                    outer: float = 0.1, inner: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
-    """(q_reset, q_target) of the reference controller for joint values ``q`` (radians)."""
+                    outer: float = 0.1, inner: float = 0.1,
+                    couple: Callable[[np.ndarray], np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(q_reset, q_target) of the reference controller for joint values ``q`` (radians).
+
+    ``couple`` maps a joint vector onto the hand's couplings (e.g. :meth:`ohra.sim.hands.SimHand.project_sim`);
+    both outputs pass through it.
+    """
     q, lo, up = (np.asarray(a, dtype=float) for a in (q, lower, upper))
     reset = np.where(closes_pos, q + outer * (lo - q), q + outer * (up - q))
     target = np.where(closes_pos, q + inner * (up - q), q + inner * (lo - q))
+    if couple is not None:
+        reset, target = couple(reset), couple(target)
     return reset, target

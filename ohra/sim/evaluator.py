@@ -123,7 +123,7 @@ def run_grasp(world: World, grasp: np.ndarray, mode: str = "eval") -> GraspResul
     T_palm, q = grasp_to_pose(grasp)
     qc = np.clip(q, hand.canon_lower, hand.canon_upper)
     clamped = bool(np.any(np.abs(qc - q) > 1e-9))
-    qs = np.clip(hand.to_sim(qc), hand.lower, hand.upper)
+    qs = hand.project_sim(np.clip(hand.to_sim(qc), hand.lower, hand.upper))  # a coupled hand takes only coupled poses
     T_root = T_palm @ hand.T_palm_root
     pb.setGravity(0, 0, 0, physicsClientId=c)
     world.reset_hand(T_root, qs)
@@ -132,7 +132,8 @@ def run_grasp(world: World, grasp: np.ndarray, mode: str = "eval") -> GraspResul
     for cp in pb.getClosestPoints(world.body, obj, 0.0, physicsClientId=c):
         pen = max(pen, -float(cp[8]))
     axis, link_z, origin = world.joint_frames()
-    q_reset, q_target = squeeze_targets(qs, hand.lower, hand.upper, closes_positive(axis, link_z, origin), prot.outer, prot.inner)
+    q_reset, q_target = squeeze_targets(qs, hand.lower, hand.upper, closes_positive(axis, link_z, origin), prot.outer, prot.inner,
+                                       couple=hand.project_sim if hand.coupled else None)
     world.set_joints(q_reset)
     world.drive_joints(q_target)
 
@@ -170,7 +171,7 @@ def run_grasp(world: World, grasp: np.ndarray, mode: str = "eval") -> GraspResul
     success = (not early) and final <= prot.success_displacement
     if mode == "filter":
         success = success and float(np.linalg.norm(p_end)) <= prot.filter_max_distance
-    q_end = hand.to_canonical(world.joint_values())
+    q_end = hand.to_canonical(hand.project_sim(world.joint_values()))  # a coupled hand's settled pose, on its couplings
     post = pose_to_grasp(np.linalg.inv(T_obj) @ T_root @ np.linalg.inv(hand.T_palm_root), q_end)
     return GraspResult(bool(success), disp, float(np.linalg.norm(p_end)), contacts, pen, post, clamped, early, steps)
 
@@ -238,7 +239,9 @@ class GraspEvaluator:
         if isinstance(hand, str):
             from ohra.hands import get_hand
 
-            hand = SimHand.from_params(get_hand(hand), name=hand)
+            from ohra.hands import get_couplings
+
+            hand = SimHand.from_params(get_hand(hand), name=hand, couplings=get_couplings(hand))
         elif isinstance(hand, (BaseParams, ExtendedParams)):
             hand = SimHand.from_params(hand)
         elif not isinstance(hand, SimHand):

@@ -51,6 +51,8 @@ class SimHand:
         joint_finger: finger index (0..4) of each driven joint.
         link_finger: URDF link name -> finger index, -1 for the palm and other non-finger links.
         mimic: joint name -> (driven joint name, multiplier, offset) for URDF mimic joints.
+        couplings: a canonical hand's joint couplings (:mod:`ohra.canonical.couplings`): the
+            controller projects its poses and targets onto them (:meth:`project_sim`).
     """
 
     name: str
@@ -67,6 +69,21 @@ class SimHand:
     joint_finger: np.ndarray
     link_finger: dict[str, int]
     mimic: dict[str, tuple[str, float, float]] = field(default_factory=dict)
+    couplings: tuple = ()
+
+    @property
+    def coupled(self) -> bool:
+        """A canonical hand with couplings (an original hand couples through its URDF mimic tags)."""
+        return self.action_map is None and bool(self.couplings)
+
+    def project_sim(self, qs: np.ndarray) -> np.ndarray:
+        """Simulator vector (..., len(joints)) with coupled joints set from their drivers, clipped into
+        the limits; unchanged for a hand without canonical couplings."""
+        if not self.coupled:
+            return np.asarray(qs, dtype=float)
+        from ohra.canonical.couplings import project
+
+        return np.clip(self.to_sim(project(self.couplings, self.to_canonical(qs))), self.lower, self.upper)
 
     @property
     def canonical(self) -> bool:
@@ -86,8 +103,10 @@ class SimHand:
 
     # -- constructors ---------------------------------------------------------------------------
     @classmethod
-    def from_params(cls, params: Params, name: str = "canonical_hand") -> "SimHand":
-        """A canonical hand: the driven joints are its movable canonical joints."""
+    def from_params(cls, params: Params, name: str = "canonical_hand", couplings: tuple = ()) -> "SimHand":
+        """A canonical hand: the driven joints are its movable canonical joints; ``couplings`` (the
+        hand's, e.g. ``ohra.get_couplings(name)``) make the controller drive coupled joints with
+        their drivers."""
         from ohra.canonical.urdfgen import render
 
         if not isinstance(params, (BaseParams, ExtendedParams)):
@@ -101,7 +120,7 @@ class SimHand:
         base = np.where(movable, 0.0, lo)
         link_finger = _link_fingers(urdf, {n: _finger_of_slot(JOINT_NAMES.index(n)) for n in JOINT_NAMES})
         return cls(name, urdf, joints, lo[idx], up[idx], lo, up, idx, base, None, np.eye(4),
-                   np.array([_finger_of_slot(k) for k in idx], dtype=int), link_finger, {})
+                   np.array([_finger_of_slot(k) for k in idx], dtype=int), link_finger, {}, tuple(couplings))
 
     @classmethod
     def from_original(cls, urdf: str | Path, action_map, name: str | None = None,
@@ -238,6 +257,8 @@ def prepare_urdf(text: str, locked: dict[str, float], capsules: bool = True, bas
         o.set("xyz", " ".join(repr(float(x)) for x in T[:3, 3]))
         o.set("rpy", " ".join(repr(float(x)) for x in matrix_to_rpy(T[:3, :3])))
         j.set("type", "fixed")
+    for link in root.iter("link"):
+        _give_inertial(link)
     if capsules:
         for link in root.iter("link"):
             _capsulise(link)
@@ -247,6 +268,25 @@ def prepare_urdf(text: str, locked: dict[str, float], capsules: bool = True, bas
         for m in root.iter("mesh"):
             m.set("filename", str(resolve_mesh_path(m.get("filename", ""), base_dir)))
     return ET.tostring(root, encoding="unicode")
+
+
+def _give_inertial(link: ET.Element) -> None:
+    """A small explicit inertial on a link that has none (every link but the root).
+
+    PyBullet gives a link without ``<inertial>`` a mass of 1 kg and unit inertia; on an original URDF's
+    fingertip frames (Inspire's ``*_tip`` links, fixed to the distal link) that made every distal link
+    weigh 1 kg with 1 kg m^2 of inertia, which the 1 N m finger motors cannot squeeze with. The
+    canonical template's dummy links carry the same values (:data:`ohra.canonical.urdfgen.DUMMY_MASS`).
+    """
+    from ohra.canonical.urdfgen import DUMMY_INERTIA, DUMMY_MASS
+
+    if link.find("inertial") is not None:
+        return
+    inertial = ET.Element("inertial")
+    ET.SubElement(inertial, "origin", xyz="0 0 0", rpy="0 0 0")
+    ET.SubElement(inertial, "mass", value=repr(DUMMY_MASS))
+    ET.SubElement(inertial, "inertia", ixx=repr(DUMMY_INERTIA), ixy="0", ixz="0", iyy=repr(DUMMY_INERTIA), iyz="0", izz=repr(DUMMY_INERTIA))
+    link.insert(0, inertial)
 
 
 def _capsulise(link: ET.Element) -> None:

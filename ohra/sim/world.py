@@ -178,11 +178,23 @@ class World:
         return np.array([s[0] for s in pb.getJointStates(self.body, self.jidx.tolist(), physicsClientId=self.client)])
 
     def joint_frames(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """World (axis, link +z, origin) of every driven joint's child link frame."""
+        """World (axis, link direction, origin) of every driven joint's child link frame.
+
+        The link direction is the frame's +z (the reference's assumption, true of canonical links),
+        except where +z lies along the joint axis (``|axis . z| > 0.9``, e.g. Inspire's links, which
+        extend along -y and turn about z): there +z says nothing about which way the link swings, so
+        the direction from the joint to the link's centre of mass is used instead.
+        """
         states = pb.getLinkStates(self.body, self.jidx.tolist(), computeForwardKinematics=1, physicsClientId=self.client)
         pos = np.array([s[4] for s in states])
+        com = np.array([s[0] for s in states])
         R = quat_to_matrix(np.array([s[5] for s in states]))
-        return np.einsum("kij,kj->ki", R, self.axes), R[:, :, 2], pos
+        axis, z = np.einsum("kij,kj->ki", R, self.axes), R[:, :, 2].copy()
+        to_com = com - pos
+        along = np.abs((axis * z).sum(axis=1)) > 0.9
+        along &= np.linalg.norm(to_com, axis=1) > 1e-6
+        z[along] = to_com[along] / np.linalg.norm(to_com[along], axis=1, keepdims=True)
+        return axis, z, pos
 
     # -- object ----------------------------------------------------------------------------------
     def _make_object_shape(self) -> None:

@@ -32,12 +32,14 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from ohra.canonical.couplings import Coupling, project, residual
 from ohra.canonical.kinematics import HandModel
 from ohra.objects.model import ObjectModel
 from ohra.rotations import matrix_to_rot6d
 from ohra.synth.constraints import ConstraintBlock, stack
 from ohra.synth.constraints.clearance import clearance
 from ohra.synth.constraints.contact import contact_band
+from ohra.synth.constraints.coupling import couplings as coupling_rows
 from ohra.synth.constraints.finger_pairs import finger_pairs, pair_reach, select_pairs
 from ohra.synth.constraints.friction import friction_cones
 from ohra.synth.constraints.objective import grasp_objective
@@ -72,6 +74,9 @@ class NLPSettings:
     # and converged more often on YCB objects.
     hessian: str = "limited-memory"
     mu_oracle: str = "probing"  # IPOPT's barrier update; converged on 24/24 YCB starts where "quality-function" did 21/24
+    # the hand's joint couplings (``ohra.get_couplings``); non-empty adds equality rows after every
+    # other family (so an uncoupled hand's rows, and its solutions, are unchanged)
+    couplings: tuple[Coupling, ...] = ()
 
 
 def constraint_blocks(hand: HandModel, v: GraspVariables, center: np.ndarray, s: NLPSettings) -> list[ConstraintBlock]:
@@ -86,7 +91,7 @@ def constraint_blocks(hand: HandModel, v: GraspVariables, center: np.ndarray, s:
         finger_pairs(v.pair_spheres, pairs, s.finger_gap),
         friction_cones(v.contacts, s.mu),
         wrench_balance(v.contacts, ca.SX(center), s.torque_length),
-    ]
+    ] + ([coupling_rows(v.q, v.movable, hand.neutral(), s.couplings)] if s.couplings else [])
 
 
 class GraspNLP:
@@ -139,6 +144,16 @@ class GraspNLP:
         x0[6 + self.nq :] = (d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)).ravel()
         return x0
 
+    def _couple(self, q: np.ndarray) -> tuple[np.ndarray, float]:
+        """(q projected onto the couplings, largest |residual| before) [rad]. The equality rows hold to
+        IPOPT's ``constr_viol_tol`` (1e-4) in the worst case; projecting moves a coupled joint by at
+        most that, and makes the grasp exactly coupled for the simulator and the original hand."""
+        cs = self.s.couplings
+        if not cs:
+            return q, 0.0
+        res = residual(cs, q)
+        return project(cs, q), float(np.abs(res).max()) if res.size else 0.0
+
     def solve(self, R0: np.ndarray, t0: np.ndarray, q0: np.ndarray, q_pref: np.ndarray) -> dict:
         """Solve from one start.
 
@@ -151,7 +166,9 @@ class GraspNLP:
             dict with ``grasp`` (31,) (translation, rot6d, 22 joints clipped into the limits),
             IPOPT ``status``, ``success`` (converged and no row violated by more than 1e-3),
             ``violation`` (largest row violation), ``violations`` (per constraint family),
-            ``iterations``, and per contact ``contacts`` (K,3) points [m], ``normals`` (K,3) and
+            ``iterations``, ``coupling_residual`` (largest |residual| of the hand's couplings at the
+            solver's joints before projection, rad; the returned joints are projected onto the
+            couplings, so their residual is rounding), and per contact ``contacts`` (K,3) points [m], ``normals`` (K,3) and
             ``forces`` (K,3) (object frame).
         """
         p = np.concatenate([np.asarray(R0, dtype=float).reshape(-1, order="F"), q_pref[self.movable]])
@@ -165,11 +182,12 @@ class GraspNLP:
         q = self.hand.neutral()
         # IPOPT may relax bounds by ~1e-8; clip so the grasp is exactly within the limits
         q[self.movable] = np.clip(x[6 : 6 + self.nq], self.hand.lower[self.movable], self.hand.upper[self.movable])
+        q, coupling_res = self._couple(q)
         return {
             "grasp": np.concatenate([x[:3], matrix_to_rot6d(R), q]), "status": stats.get("return_status", "unknown"),
             "success": bool(stats.get("success", False)) and viol <= MAX_VIOLATION, "violation": viol,
             "violations": {name: float(over[sl].max()) if sl.stop > sl.start else 0.0 for name, sl in self.rows.items()},
-            "iterations": int(stats.get("iter_count", -1)), "contacts": contacts, "normals": normals,
+            "iterations": int(stats.get("iter_count", -1)), "coupling_residual": coupling_res, "contacts": contacts, "normals": normals,
             "forces": x[6 + self.nq :].reshape(-1, 3),
         }
 

@@ -24,7 +24,7 @@ import json
 import os
 import time
 from collections import Counter
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Union
 
@@ -41,6 +41,7 @@ from ohra.objects.model import ObjectModel
 from ohra.objects.resolve import GRASPABLE_EXTENT_M, size_problem
 from ohra.rotations import grasp_to_pose
 from ohra.sim import GraspEvaluator, Protocol
+from ohra.sim.hands import SimHand
 from ohra.synth.init import initial_poses
 from ohra.synth.nlp import GraspNLP, NLPSettings, SUCCESS_STATUSES
 from ohra.synth.quality import ferrari_canny
@@ -142,8 +143,9 @@ def diagnose(hand: HandModel, obj: ObjectModel, status: list[int]) -> str:
 class _Verifier:
     """The nominal six-direction test plus the robustness trials, on one reused evaluator."""
 
-    def __init__(self, params: Params, obj: ObjectModel, settings: SynthSettings, hand: HandModel, seed: int):
-        self.ev = GraspEvaluator(params, obj, settings.protocol)
+    def __init__(self, name: str, params: Params, obj: ObjectModel, settings: SynthSettings, hand: HandModel, seed: int):
+        # the hand's couplings drive the filter's controller too (coupled joints follow their drivers)
+        self.ev = GraspEvaluator(SimHand.from_params(params, name, couplings=settings.nlp.couplings), obj, settings.protocol)
         self.rob, self.hand, self.seed = settings.robustness, hand, seed
 
     def __call__(self, k: int, g: np.ndarray) -> tuple[object, int, bool]:
@@ -169,8 +171,8 @@ def synthesize_shard(name: str, params: Params, obj: ObjectModel, settings: Synt
     hand = HandModel.from_params(params)
     nlp = GraspNLP(hand, obj, settings.nlp)
     seed = _shard_seed(settings.seed, name, obj.mesh_hash)
-    starts = initial_poses(hand, obj, settings.grasps_per_object, np.random.default_rng(seed))
-    verify = _Verifier(params, obj, settings, hand, seed) if settings.filter else None
+    starts = initial_poses(hand, obj, settings.grasps_per_object, np.random.default_rng(seed), settings.nlp.couplings)
+    verify = _Verifier(name, params, obj, settings, hand, seed) if settings.filter else None
     rows: list[dict] = []
     kept = 0
     t_solve = t_sim = 0.0
@@ -257,12 +259,15 @@ def _check_objects(objects: list[ObjectModel], settings: SynthSettings) -> None:
             raise ObjectError(problem)
 
 
-def synthesize(hands: list[tuple[str, Params]], objects: list[ObjectModel], out: str | Path, settings: SynthSettings,
+def synthesize(hands: list[tuple], objects: list[ObjectModel], out: str | Path, settings: SynthSettings,
                workers: int = 1, resume: bool = False, progress: bool = True, overwrite: bool = False,
                backend: str = "process", address: str | None = None, header: dict | None = None) -> dict:
     """Synthesise every (hand, object) pair into ``out`` and return the manifest.
 
     Args:
+        hands: ``(name, params)`` or ``(name, params, couplings)``; a hand's couplings replace
+            ``settings.nlp.couplings`` for its shards (the NLP's equality rows, projected starts, the
+            filter's coupled controller) and are recorded in its manifest entry.
         resume: keep pairs whose shards are complete (see :mod:`ohra.data.manifest`).
         overwrite: replace a dataset made with other settings (its shards are deleted).
         backend: ``"process"`` (a local pool of ``workers`` processes) or ``"ray"`` (``address``:
@@ -278,7 +283,8 @@ def synthesize(hands: list[tuple[str, Params]], objects: list[ObjectModel], out:
         raise OhraError(f"output path {out} exists and is not a directory")
     if int(workers) < 1:
         raise OhraError(f"--workers must be >= 1, got {workers}")
-    for name, params in hands:
+    hands = [(h[0], h[1], tuple(h[2]) if len(h) > 2 else settings.nlp.couplings) for h in hands]
+    for name, params, _ in hands:
         check_hand_for_synthesis(name, params)
     _check_objects(objects, settings)
     keys = object_keys(objects)
@@ -287,11 +293,13 @@ def synthesize(hands: list[tuple[str, Params]], objects: list[ObjectModel], out:
     manifest = open_manifest(out, settings.to_dict(), settings.digest(), overwrite, {"ohra_version": __version__})
     manifest.update(header or {})
     tasks = []
-    for name, params in hands:
+    for name, params, cs in hands:
+        hand_settings = replace(settings, nlp=replace(settings.nlp, couplings=cs))
         entry = hand_entry(out, manifest, name, params.to_dict(), params_hash(params), overwrite)
+        entry["couplings"] = [c.to_dict() for c in cs]
         for obj, key, desc in zip(objects, keys, descs):
             if not (resume and shard_complete(out, entry["shards"].get(key), desc)):
-                tasks.append((name, params, obj, key, settings))
+                tasks.append((name, params, obj, key, hand_settings))
     _run(out, manifest, tasks, len(hands) * len(objects), workers, backend, address, progress)
     _finish(out, manifest)
     return manifest

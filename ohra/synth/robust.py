@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ohra.rotations import grasp_to_pose, matrix_to_rot6d
+from ohra.transforms import axis_angle_to_matrix
 
 
 @dataclass(frozen=True)
@@ -56,15 +57,6 @@ def as_stored(grasps: np.ndarray, lower: np.ndarray | None = None, upper: np.nda
     return g.astype(np.float64)
 
 
-def _rotvec_matrix(w: np.ndarray) -> np.ndarray:
-    th = float(np.linalg.norm(w))
-    if th < 1e-15:
-        return np.eye(3)
-    k = w / th
-    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return np.eye(3) + np.sin(th) * K + (1 - np.cos(th)) * K @ K
-
-
 def perturb(grasp: np.ndarray, settings: RobustnessSettings, rng: np.random.Generator, lower: np.ndarray,
             upper: np.ndarray, movable: np.ndarray) -> np.ndarray:
     """(trials, 31) perturbed copies of one (31,) grasp, rounded as stored (see :func:`as_stored`).
@@ -80,6 +72,6 @@ def perturb(grasp: np.ndarray, settings: RobustnessSettings, rng: np.random.Gene
         a = rng.normal(size=3)
         dq = rng.uniform(-1.0, 1.0, size=22) * settings.joints_rad * movable
         t = T[:3, 3] + settings.translation_m * d / np.linalg.norm(d)
-        R = _rotvec_matrix(settings.rotation_rad * a / np.linalg.norm(a)) @ T[:3, :3]
+        R = axis_angle_to_matrix(a / np.linalg.norm(a), settings.rotation_rad) @ T[:3, :3]
         out[k] = np.concatenate([t, matrix_to_rot6d(R), np.clip(q + dq, lower, upper)])
     return as_stored(out, lower, upper)
