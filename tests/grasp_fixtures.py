@@ -37,7 +37,7 @@ def write_dataset(root: Path, hands=HANDS, objects=OBJECTS, per_pair=6, seed: in
     """A dataset directory like ``python -m ohra.synth`` writes. ``renamed``: extra shards of an
     object under another name (same mesh); ``counts``: grasps per pair for some hands."""
     rng = np.random.default_rng(seed)
-    manifest = {"format": "ohra-grasps/1", "hands": {}}
+    manifest = {"format": "ohra-grasps/2", "hands": {}}
     items = [(o, o) for o in objects] + list((renamed or {}).items())
     for h in hands:
         params = get_hand(h)
@@ -46,7 +46,7 @@ def write_dataset(root: Path, hands=HANDS, objects=OBJECTS, per_pair=6, seed: in
             obj = ObjectModel.builtin(builtin)
             g = random_grasps(params, obj, (counts or {}).get(h, per_pair), rng)
             path = root / h / shard_name(name, obj.mesh_hash)
-            atomic_write_npz(path, {"grasps": g})
+            atomic_write_npz(path, {"grasps": g, "grasps_post": g})
             info = obj.describe() | {"name": name}
             entry["shards"][name] = {"file": str(path.relative_to(root)), "object": info, "n_grasps": len(g),
                                      "sha256": hashlib.sha256(path.read_bytes()).hexdigest()[:16]}

@@ -100,7 +100,9 @@ def test_a_cage_open_on_one_side_loses_the_cube_in_that_direction_only(k):
     with GraspEvaluator.from_urdf(urdf, am, cube(), Protocol(friction=0.0)) as ev:
         r = ev.evaluate(palm_at()).results[0]
     assert not r.success
-    assert np.all(r.displacement[1:k + 1] < 0.002), r.displacement
+    # held = within the cage's play: 1 mm clearance per side lets pushes move the cube up to 2 mm per
+    # axis (3.5 mm diagonally, the object has no collision margin); lost = carried > 20 cm
+    assert np.all(r.displacement[1:k + 1] < 0.004), r.displacement
     assert r.displacement[k + 1] > 0.2, r.displacement
 
 
@@ -108,4 +110,4 @@ def test_the_closed_cage_holds_the_cube_against_all_six_pushes():
     urdf, am = cage_hand(None)
     with GraspEvaluator.from_urdf(urdf, am, cube(), Protocol(friction=0.0)) as ev:
         r = ev.evaluate(palm_at()).results[0]
-    assert r.success and np.all(r.displacement[1:] < 0.002), r.displacement
+    assert r.success and np.all(r.displacement[1:] < 0.004), r.displacement
