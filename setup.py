@@ -38,6 +38,8 @@ setup(
     extras_require={
         # torch: on the CPU-only build machines install the provided CPU wheel first (see .ci/run).
         "learn": ["torch>=2.1"],
+        # in-hand rotation: the Gymnasium env (gymnasium) and PPO training (stable-baselines3, needs torch)
+        "rl": ["gymnasium>=1.0", "stable-baselines3>=2.3"],
         "dev": ["pytest>=7", "hypothesis>=6", "nbclient>=0.8", "nbformat>=5", "ipykernel>=6"],
     },
     entry_points={"console_scripts": ["ohra=ohra.cli:main"]},
