@@ -78,3 +78,10 @@ def test_train_resume_evaluate_and_plot_a_tiny_run(tiny):
     assert Policy(run).model.action_space.shape == (22,)
     png = reward_curves({"a": [run], "b": [run, run]}, run / "curve.png")
     assert png.stat().st_size > 0
+
+    from ohra.learn.rl.evaluate import export_policy
+
+    small = export_policy(run, run.parent / "export")
+    assert not list(small.glob("*.pkl")) and (small / "grasps.npz").is_file()
+    shipped = evaluate_run(small, episodes=2, seed=10, write=False)
+    assert shipped.cumulative_rotation == res.cumulative_rotation  # same weights, stats and starting states

@@ -15,7 +15,8 @@ from ohra.learn.rl.config import PPOSettings, RLConfigError
 _LAZY = {
     "train_rotation": "train", "load_run": "train", "with_budget": "train", "ppo_class": "train",
     "evaluate_run": "evaluate", "evaluate_policy": "evaluate", "record_episode": "evaluate",
-    "replay_html": "evaluate", "Policy": "evaluate", "EvalResult": "evaluate",
+    "replay_html": "evaluate", "Policy": "evaluate", "EvalResult": "evaluate", "export_policy": "evaluate",
+    "shipped": "evaluate",
     "reward_curves": "plots", "mean_std_curve": "plots", "read_progress": "plots", "table3": "plots",
 }
 

@@ -44,13 +44,43 @@ class EvalResult:
         return {**asdict(self), "summary": self.summary()}
 
 
+def shipped(name: str) -> Path:
+    """Folder of a policy shipped with the package (``ohra/learn/models/<name>``, an :func:`export_policy`)."""
+    from importlib import resources
+
+    path = Path(str(resources.files("ohra.learn").joinpath("models", name)))
+    if not (path / "policy.pth").is_file():
+        known = sorted(p.parent.name for p in path.parent.glob("rotate_*/policy.pth"))
+        raise CheckpointError(f"no shipped rotation policy {name!r}; shipped: {', '.join(known) or 'none'}")
+    return path
+
+
 class Policy:
-    """A trained run's policy as a function of raw observations (observation statistics applied)."""
+    """A trained policy as a function of raw observations (observation statistics applied).
+
+    ``run_dir`` is a training run (``model.zip`` + ``vecnormalize.pkl``, or with ``which="last"`` the
+    last checkpoint) or an exported policy (:func:`export_policy`: ``policy.pth`` + ``obs_stats.npz``,
+    no optimizer state, no pickles). ``grasps`` holds the starting states shipped with an export.
+    """
 
     def __init__(self, run_dir: str | Path, which: str = "model"):
-        from ohra.learn.rl.train import load_run, ppo_class
+        from ohra.learn.rl.train import load_run
 
         run = Path(run_dir)
+        self.env_cfg, self.ppo = load_run(run)
+        self.grasps = None
+        self._mean = self._var = None
+        if (run / "policy.pth").is_file():
+            from stable_baselines3.common.policies import ActorCriticPolicy
+
+            from ohra.sim.rotation.grasps import GraspSet
+
+            self._policy = ActorCriticPolicy.load(str(run / "policy.pth"), device="cpu")
+            st = np.load(run / "obs_stats.npz")
+            self._mean, self._var, self._clip, self._eps = st["mean"], st["var"], float(st["clip"]), float(st["eps"])
+            if (run / "grasps.npz").is_file():
+                self.grasps = GraspSet.load(run / "grasps.npz")
+            return
         paths = {"model": (run / "model.zip", run / "vecnormalize.pkl"),
                  "last": (run / "checkpoints" / "last.zip", run / "checkpoints" / "last_vecnormalize.pkl")}
         if which not in paths:
@@ -58,9 +88,9 @@ class Policy:
         zip_path, stats = paths[which]
         if not zip_path.is_file():
             raise CheckpointError(f"no trained policy at {zip_path}")
-        self.env_cfg, self.ppo = load_run(run)
-        self.model = ppo_class().load(zip_path, device="cpu")
-        self._mean = self._var = None
+        from ohra.learn.rl.train import ppo_class
+
+        self._policy = ppo_class().load(zip_path, device="cpu").policy
         if stats.is_file():
             import pickle
 
@@ -69,20 +99,52 @@ class Policy:
             if vn.norm_obs:
                 self._mean, self._var, self._clip, self._eps = vn.obs_rms.mean, vn.obs_rms.var, vn.clip_obs, vn.epsilon
 
+    def normalize(self, obs: np.ndarray) -> np.ndarray:
+        if self._mean is None:
+            return obs
+        return np.clip((obs - self._mean) / np.sqrt(self._var + self._eps), -self._clip, self._clip)
+
     def __call__(self, obs: np.ndarray, deterministic: bool = True) -> np.ndarray:
-        if self._mean is not None:
-            obs = np.clip((obs - self._mean) / np.sqrt(self._var + self._eps), -self._clip, self._clip)
-        action, _ = self.model.predict(obs.astype(np.float32), deterministic=deterministic)
+        action, _ = self._policy.predict(self.normalize(obs).astype(np.float32), deterministic=deterministic)
         return action
 
+    def make_env(self, render_mode: str | None = None):
+        """The environment the policy was trained in (with the shipped starting states, if any)."""
+        from ohra.sim.rotation.env import InHandRotateEnv
 
-def run_episode(env, policy, seed: int, frames_every: int = 0) -> dict:
-    """One episode; returns steps, rotation, termination, and (if asked) frames and the trajectory."""
+        return InHandRotateEnv(self.env_cfg, render_mode=render_mode, grasps=self.grasps)
+
+
+def export_policy(run_dir: str | Path, out_dir: str | Path, which: str = "model") -> Path:
+    """A small, pickle-free copy of a run for committing: ``config.json``, ``policy.pth`` (actor and
+    critic weights, no optimizer), ``obs_stats.npz``, the starting states ``grasps.npz``, and the run's
+    ``progress.csv`` / ``eval.json`` when present."""
+    import shutil
+
+    from ohra.sim.rotation.grasps import load_or_generate
+    from ohra.sim.rotation.task import resolve
+
+    run, out = Path(run_dir), Path(out_dir)
+    pol = Policy(run, which)
+    out.mkdir(parents=True, exist_ok=True)
+    pol._policy.save(str(out / "policy.pth"))
+    np.savez(out / "obs_stats.npz", mean=pol._mean, var=pol._var, clip=pol._clip, eps=pol._eps)
+    load_or_generate(resolve(pol.env_cfg)).save(out / "grasps.npz")
+    for name in ("config.json", "progress.csv", "eval.json"):
+        if (run / name).is_file():
+            shutil.copy(run / name, out / name)
+    return out
+
+
+def run_episode(env, policy, seed: int, frames_every: int = 0, render=None) -> dict:
+    """One episode; returns steps, rotation, termination, the trajectory and, every ``frames_every``
+    steps, a frame from ``render()`` (default ``env.render()``)."""
+    render = render or env.render
     obs, info = env.reset(seed=seed)
     frames, traj = [], {"q": [env.scene.read().q], "obj_pos": [env.scene.read().obj_pos],
                         "obj_quat": [env.scene.read().obj_quat]}
     if frames_every:
-        frames.append(env.render())
+        frames.append(render())
     while True:
         obs, _, term, trunc, info = env.step(policy(obs))
         s = env.scene.read()
@@ -90,18 +152,19 @@ def run_episode(env, policy, seed: int, frames_every: int = 0) -> dict:
         traj["obj_pos"].append(s.obj_pos)
         traj["obj_quat"].append(s.obj_quat)
         if frames_every and info["steps"] % frames_every == 0:
-            frames.append(env.render())
+            frames.append(render())
         if term or trunc:
             break
     return {"steps": int(info["steps"]), "rotation": float(info["cumulative_rotation"]),
             "termination": info["termination"], "frames": frames, "trajectory": {k: np.array(v) for k, v in traj.items()}}
 
 
-def evaluate_policy(policy, env_cfg: RotationConfig, episodes: int = 20, seed: int = 0, run: str = "") -> EvalResult:
+def evaluate_policy(policy, env_cfg: RotationConfig, episodes: int = 20, seed: int = 0, run: str = "",
+                    grasps=None) -> EvalResult:
     """Steps-to-Fall and Cumulative Rotation of ``policy`` (obs -> action) over seeded episodes."""
     from ohra.sim.rotation.env import InHandRotateEnv
 
-    env = InHandRotateEnv(env_cfg)
+    env = InHandRotateEnv(env_cfg, grasps=grasps)
     try:
         eps = [run_episode(env, policy, seed + i) for i in range(episodes)]
     finally:
@@ -114,7 +177,7 @@ def evaluate_run(run_dir: str | Path, episodes: int = 20, seed: int = 1000, whic
                  write: bool = True) -> EvalResult:
     """Evaluate a trained run (seeds from 1000 by default: training used 0..n_envs); writes ``RUN/eval.json``."""
     pol = Policy(run_dir, which)
-    res = evaluate_policy(pol, pol.env_cfg, episodes, seed, str(run_dir))
+    res = evaluate_policy(pol, pol.env_cfg, episodes, seed, str(run_dir), grasps=pol.grasps)
     if write:
         path = Path(run_dir) / "eval.json"
         tmp = path.with_suffix(".tmp")
@@ -128,13 +191,12 @@ def record_episode(run_dir: str | Path, out_dir: str | Path, seed: int = 1000, e
     """Render one episode of a run: ``rollout.gif`` (every ``every``-th step), ``strip.png`` (evenly spaced
     frames), ``trajectory.npz`` (joints and object poses per step, for :func:`replay_html`)."""
     from ohra.sim.render import write_png
-    from ohra.sim.rotation.env import InHandRotateEnv
-    from ohra.sim.rotation.render import strip, write_gif
+    from ohra.sim.rotation.render import render, strip, write_gif
 
     pol = Policy(run_dir, which)
-    env = InHandRotateEnv(pol.env_cfg, render_mode="rgb_array")
+    env = pol.make_env(render_mode="rgb_array")
     try:
-        ep = run_episode(env, pol, seed, frames_every=every)
+        ep = run_episode(env, pol, seed, frames_every=every, render=lambda: render(env.scene, size))
     finally:
         env.close()
     out = Path(out_dir)

@@ -248,7 +248,12 @@ def _write_config(run_dir: Path, env_cfg: RotationConfig, ppo: PPOSettings) -> N
 
 def load_run(run_dir: str | Path) -> tuple[RotationConfig, PPOSettings]:
     """The env config and PPO settings a run was trained with."""
-    d = json.loads((Path(run_dir) / "config.json").read_text())
+    from ohra.errors import CheckpointError
+
+    path = Path(run_dir) / "config.json"
+    if not path.is_file():
+        raise CheckpointError(f"{run_dir} is not a rotation run or exported policy: {path} does not exist")
+    d = json.loads(path.read_text())
     return RotationConfig.from_dict(d["env"], f"{run_dir}/config.json"), PPOSettings.from_dict(d["ppo"])
 
 

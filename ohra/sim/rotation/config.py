@@ -1,18 +1,19 @@
 """Settings of the in-hand rotation task: one frozen dataclass with units, read from plain dicts.
 
-Values follow the paper's setup where it states one and HORA (Qi et al., "In-Hand Object Rotation
-via Rapid Motor Adaptation", the task the paper's rotation experiment uses) otherwise: 20 Hz
-control with relative joint targets (1/24 rad per unit action), 400-step episodes (20 s), a
-rotation reward clipped to +-0.5 rad/s, penalty weights linvel 0.3, pose 0.3, torque 0.1, work 2.0.
-The drift weight, the termination distances and the object size are ours (stated below).
+The task terms come from the paper (issue 15: 20 Hz PD targets, the observation list, a clipped
++z angular-velocity reward minus drift, pose, torque, work and linear-velocity penalties); the
+values it does not give come from HORA (Qi et al., "In-Hand Object Rotation via Rapid Motor
+Adaptation"), the palm-up rotation task with these terms: relative targets of 1/24 rad per unit
+action, 400-step episodes (20 s), rotation clipped to +-0.5 rad/s, penalty weights linvel 0.3,
+pose 0.3, torque 0.1, work 2.0. The drift weight, the termination distances, the phase period and
+the object size are ours (stated below).
 
 Physics (chosen for speed, measured in ``benchmarks/bench_rotation.py``): PyBullet steps 1/120 s
-(HORA's Isaac step) with 6 sub-steps per 20 Hz control step issued as ONE ``stepSimulation`` call
-(``numSubSteps``), 20 solver iterations (PyBullet's default 50 costs ~1.6x for no visible change in
-a resting grasp), fixed links merged, finger-finger collisions on and finger-palm off (the
-evaluator's filters). The joints are PyBullet's implicit position motors (a PD servo solved inside
-the constraint solver, stable at this step where an explicit PD on ~30 g capsule links is not),
-capped at ``motor_force`` N m like the canonical URDF's effort.
+(HORA's Isaac step), 6 sub-steps per 20 Hz control step, 20 solver iterations (PyBullet's default
+50 costs 1.5x), fixed links merged, finger-finger collisions on and finger-palm off (the
+evaluator's filters). The joints are PyBullet's implicit position motors capped at ``motor_force``
+N m (the canonical URDF's effort); see :mod:`ohra.sim.rotation.scene` for why not PyBullet's
+``numSubSteps`` and not an explicit PD.
 """
 
 from __future__ import annotations
