@@ -105,12 +105,12 @@ def test_help_lists_every_command_group():
     proc = _run("-m", "ohra.cli", "--help")
     assert proc.returncode == 0, proc.stderr
     listed = re.findall(r"^    (\w+)\s", proc.stdout, flags=re.M)
-    assert listed == ["hand", "eval", "synth", "data", "train", "vae", "grasp"], proc.stdout
+    assert listed == ["hand", "eval", "synth", "data", "train", "vae", "grasp", "rotate"], proc.stdout
 
 
 def test_every_command_module_is_registered():
     sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
-    assert list(sub.choices) == ["hand", "eval", "synth", "data", "train", "vae", "grasp"]
+    assert list(sub.choices) == ["hand", "eval", "synth", "data", "train", "vae", "grasp", "rotate"]
     hand = next(a for a in sub.choices["hand"]._actions if isinstance(a, argparse._SubParsersAction))
     assert list(hand.choices) == ["list", "render", "info", "check", "parse", "compare", "show"]
 

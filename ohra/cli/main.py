@@ -27,7 +27,7 @@ from typing import Sequence
 
 from ohra.errors import OhraError
 
-COMMANDS = ("hand", "eval", "synth", "data", "learn", "grasp")
+COMMANDS = ("hand", "eval", "synth", "data", "learn", "grasp", "rotate")
 """Command modules under ``ohra.cli``, registered in this order (``learn`` adds ``train`` and ``vae``;
 ``grasp`` adds ``grasp`` and ``train grasp``)."""
 

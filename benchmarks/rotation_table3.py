@@ -1,0 +1,71 @@
+"""Table 3 analogue: rotation policies trained on the canonical vs the original URDF, same budget and seed.
+
+Evaluates each policy (Steps-to-Fall, Cumulative Rotation) over the same seeded episodes and draws
+their training curves. Default: the policies shipped in ``ohra/learn/models/rotate_*`` (each an
+export of a run trained with ``ohra rotate train``; the budget is read from its progress.csv).
+
+    python benchmarks/rotation_table3.py [--episodes 20] [--runs LABEL=DIR ...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import RESULTS, write_results  # noqa: E402
+
+PAPER = {"leap_hand_right": {"canonical": (326.98, 6.31), "original": (397.62, 5.63)},
+         "shadow_hand_right": {"canonical": (390.62, 10.92), "original": (369.66, 9.09)}}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--episodes", type=int, default=20)
+    ap.add_argument("--seed", type=int, default=1000)
+    ap.add_argument("--runs", nargs="*", metavar="LABEL=DIR", help="default: the shipped rotate_* policies")
+    args = ap.parse_args(argv)
+    from ohra.learn.rl.evaluate import Policy, evaluate_policy
+    from ohra.learn.rl.plots import read_progress, reward_curves
+
+    runs = dict(r.split("=", 1) for r in args.runs) if args.runs else _shipped()
+    rows, data = [], {}
+    for label, d in runs.items():
+        pol = Policy(d)
+        res = evaluate_policy(pol, pol.env_cfg, args.episodes, args.seed, str(d), grasps=pol.grasps)
+        prog = read_progress(d)
+        budget = {"steps": int(prog["timesteps"][-1]), "minutes": float(prog["wall_s"][-1]) / 60.0,
+                  "envs": pol.ppo.n_envs, "seed": pol.ppo.seed}
+        s = res.summary()
+        cfg = pol.env_cfg
+        paper = PAPER.get(cfg.hand, {}).get(cfg.urdf)
+        data[label] = {"hand": cfg.hand, "urdf": cfg.urdf, "space": cfg.resolved_space, "summary": s, "budget": budget,
+                       "per_episode": res.to_dict(), "paper": paper}
+        rows.append(f"| {label} | {cfg.hand} | {cfg.urdf} | {s['steps_to_fall_mean']:.1f} +- {s['steps_to_fall_std']:.1f} | "
+                    f"{s['rotation_mean']:.2f} +- {s['rotation_std']:.2f} | {100 * s['survived']:.0f} % | "
+                    f"{budget['steps'] / 1e3:.0f}k steps, {budget['minutes']:.0f} min, seed {budget['seed']} | "
+                    f"{'%.1f / %.2f' % paper if paper else '-'} |")
+        print(rows[-1], file=sys.stderr)
+    curve = reward_curves({k: [v] for k, v in runs.items()}, RESULTS / "rotation_curves.png",
+                          title="PPO on in-hand rotation (cube, 20 Hz): canonical vs original URDF")
+    table = "\n".join([
+        f"Rotation policies, {args.episodes} episodes each (seeds {args.seed}..{args.seed + args.episodes - 1}, "
+        "deterministic actions, 400-step episodes). Steps-to-Fall: steps before the object falls or leaves "
+        "(400 if it never does); Cumulative Rotation: radians about world +z per episode. Budget: PPO env "
+        "steps and wall minutes on the shared 2-core machine (other jobs running).", "",
+        "| policy | hand | urdf | Steps-to-Fall | Cumulative Rotation [rad] | survived | budget | paper (steps / rad) |",
+        "|---|---|---|---|---|---|---|---|", *rows, "", f"Training curves: `{curve.relative_to(RESULTS.parent.parent)}`."])
+    write_results("rotation_table3", {"episodes": args.episodes, "seed": args.seed, "runs": data}, table)
+    return 0
+
+
+def _shipped() -> dict[str, Path]:
+    from importlib import resources
+
+    root = Path(str(resources.files("ohra.learn").joinpath("models")))
+    return {p.parent.name.replace("rotate_", ""): p.parent for p in sorted(root.glob("rotate_*/policy.pth"))}
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,168 @@
+"""``ohra rotate grasps|train|eval|plot``: in-hand rotation from the shell.
+
+Plugged into :mod:`ohra.cli.main` through ``register(subparsers)``; every parser sets
+``func(args) -> int``. Also runnable alone: ``python -m ohra.cli.rotate train ...``.
+gymnasium / stable-baselines3 / torch are imported only when a command runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any, Sequence
+
+from ohra.errors import OhraError
+
+
+def _env_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--hand", default="leap_hand_right", help="registered hand, leap_XXXX or params JSON (default LEAP)")
+    p.add_argument("--urdf", choices=("canonical", "original"), default="canonical")
+    p.add_argument("--form", choices=("base", "extended"), help="canonical form (default: extended when registered)")
+    p.add_argument("--space", choices=("canonical", "native"), help="joint space of actions (default: by --urdf)")
+    p.add_argument("--object", default="cube", help="cube, sphere, cylinder or builtin:NAME (default cube)")
+    p.add_argument("--grasps", type=int, default=1000, help="cached starting states (default 1000)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=JSON",
+                   help="any other RotationConfig field, e.g. --set sim_dt=0.0166 (repeatable)")
+
+
+def _env_config(args: argparse.Namespace):
+    from ohra.sim.rotation.config import RotationConfig, RotationConfigError
+
+    kw: dict[str, Any] = {"hand": args.hand, "urdf": args.urdf, "form": args.form, "space": args.space,
+                          "object": args.object, "grasp_count": args.grasps}
+    for item in args.set:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise RotationConfigError(f"--set expects KEY=VALUE, got {item!r}")
+        try:
+            kw[key] = json.loads(value)
+        except json.JSONDecodeError:
+            kw[key] = value
+    return RotationConfig.from_dict(kw, "command line")
+
+
+def register(sub: Any) -> None:
+    from ohra.learn.rl.config import PPOSettings
+
+    d = PPOSettings()
+    rot = sub.add_parser("rotate", help="in-hand rotation: starting grasps, PPO training, evaluation")
+    rs = rot.add_subparsers(dest="rotate_command", metavar="WHAT", parser_class=type(rot))
+    rs.required = True
+
+    p = rs.add_parser("grasps", help="generate (or load) the cached starting states and print where they are")
+    _env_args(p)
+    p.set_defaults(func=_cmd_grasps)
+
+    p = rs.add_parser("train", help="train a PPO rotation policy (resumable)")
+    _env_args(p)
+    p.add_argument("--steps", type=int, help=f"total env steps (default {d.total_steps}; on --resume: the run's)")
+    p.add_argument("--minutes", type=float, help="wall-clock budget over all sessions (stops and saves)")
+    p.add_argument("--seed", type=int, default=d.seed)
+    p.add_argument("--envs", type=int, default=d.n_envs, help=f"subprocess environments (default {d.n_envs})")
+    p.add_argument("--n-steps", type=int, default=d.n_steps, help=f"steps per env per rollout (default {d.n_steps})")
+    p.add_argument("--batch-size", type=int, default=d.batch_size)
+    p.add_argument("--checkpoint-every", type=int, default=d.checkpoint_every, help="steps between checkpoints")
+    p.add_argument("-o", "--output", required=True, help="run directory")
+    p.add_argument("--resume", action="store_true", help="continue OUTPUT from its last checkpoint")
+    p.set_defaults(func=_cmd_train)
+
+    p = rs.add_parser("eval", help="Steps-to-Fall and Cumulative Rotation of a trained run; renders an episode")
+    p.add_argument("run", help="run directory")
+    p.add_argument("--episodes", type=int, default=20)
+    p.add_argument("--seed", type=int, default=1000, help="first episode seed (default 1000)")
+    p.add_argument("--checkpoint", choices=("model", "last"), default="model", help="final model or last checkpoint")
+    p.add_argument("--render", action="store_true", help="also write RUN/episode/{rollout.gif,strip.png}")
+    p.add_argument("--replay", action="store_true", help="also write RUN/episode/replay.html (meshcat)")
+    p.set_defaults(func=_cmd_eval)
+
+    p = rs.add_parser("plot", help="reward curves, mean +- std over seeds: LABEL=RUN[,RUN...] per group")
+    p.add_argument("groups", nargs="+", metavar="LABEL=RUNS")
+    p.add_argument("-o", "--output", required=True, help="PNG path")
+    p.add_argument("--key", default="ep_reward_mean", help="progress.csv column (default ep_reward_mean)")
+    p.set_defaults(func=_cmd_plot)
+
+
+def _cmd_grasps(args: argparse.Namespace) -> int:
+    from ohra.sim.rotation.grasps import cache_path, load_or_generate
+    from ohra.sim.rotation.task import resolve
+
+    task = resolve(_env_config(args))
+    gs = load_or_generate(task, progress=sys.stderr.isatty())
+    print(f"{len(gs)} starting states ({gs.attempts} tried) for {task.hand.name} + {task.obj.name}: {cache_path(task)}")
+    return 0
+
+
+def _cmd_train(args: argparse.Namespace) -> int:
+    from ohra.learn.rl import require_rl
+    from ohra.learn.rl.config import PPOSettings
+
+    require_rl()
+    from ohra.learn.rl.train import load_run, train_rotation, with_budget
+
+    out = Path(args.output)
+    if args.resume:
+        env_cfg, ppo = load_run(out)
+        ppo = with_budget(ppo, args.steps, args.minutes)
+    else:
+        env_cfg = _env_config(args)
+        ppo = PPOSettings(total_steps=args.steps or PPOSettings().total_steps, max_minutes=args.minutes, seed=args.seed, n_envs=args.envs,
+                          n_steps=args.n_steps, batch_size=args.batch_size, checkpoint_every=args.checkpoint_every)
+    path = train_rotation(env_cfg, ppo, out, resume=args.resume, verbose=0)
+    print(f"wrote {path}")
+    return 0
+
+
+def _cmd_eval(args: argparse.Namespace) -> int:
+    from ohra.learn.rl import require_rl
+
+    require_rl()
+    from ohra.learn.rl.evaluate import evaluate_run, record_episode, replay_html
+
+    res = evaluate_run(args.run, args.episodes, args.seed, args.checkpoint)
+    s = res.summary()
+    print(f"Steps-to-Fall {s['steps_to_fall_mean']:.1f} +- {s['steps_to_fall_std']:.1f} (of {res.episode_steps}), "
+          f"Cumulative Rotation {s['rotation_mean']:.2f} +- {s['rotation_std']:.2f} rad, "
+          f"survived {100 * s['survived']:.0f} % over {res.episodes} episodes; wrote {Path(args.run) / 'eval.json'}")
+    if args.render or args.replay:
+        ep = record_episode(args.run, Path(args.run) / "episode", seed=args.seed, which=args.checkpoint)
+        print(f"episode (seed {args.seed}): {ep['steps']} steps, {ep['rotation']:.2f} rad; wrote {ep['gif']}, {ep['strip']}")
+        if args.replay:
+            from ohra.learn.rl.evaluate import Policy
+
+            html = replay_html(Policy(args.run, args.checkpoint).env_cfg, ep["trajectory"],
+                               Path(args.run) / "episode" / "replay.html")
+            print(f"wrote {html}")
+    return 0
+
+
+def _cmd_plot(args: argparse.Namespace) -> int:
+    from ohra.learn.rl.plots import reward_curves
+
+    groups = {}
+    for g in args.groups:
+        label, sep, runs = g.partition("=")
+        if not sep or not runs:
+            raise OhraError(f"expected LABEL=RUN[,RUN...], got {g!r}")
+        groups[label] = runs.split(",")
+    print(f"wrote {reward_curves(groups, args.output, key=args.key)}")
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Standalone entry (``python -m ohra.cli.rotate ...``): same commands as ``ohra rotate ...``."""
+    parser = argparse.ArgumentParser(prog="ohra")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    register(sub)
+    args = parser.parse_args(["rotate", *(argv if argv is not None else sys.argv[1:])])
+    try:
+        return int(args.func(args) or 0)
+    except OhraError as exc:
+        print(f"ohra: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,246 @@
+"""Evaluate rotation policies: Steps-to-Fall and Cumulative Rotation, rendered episodes, meshcat replays.
+
+Metrics (the paper's Table 3), over N episodes with seeds ``seed, seed+1, ...`` (each seed picks
+the starting state), deterministic actions:
+
+* Steps-to-Fall: control steps until the episode terminates (object fell, left the hand, or the
+  simulation diverged); an episode that survives counts ``episode_steps`` (400 = 20 s).
+* Cumulative Rotation: radians the object turned about world +z over the episode (signed sum of
+  the per-step turns; positive is the commanded direction).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ohra.errors import CheckpointError
+from ohra.sim.rotation.config import RotationConfig
+
+
+@dataclass
+class EvalResult:
+    """Per-episode metrics and their summary (control steps; radians about +z)."""
+
+    run: str
+    episodes: int
+    seed: int
+    steps_to_fall: list[int]
+    cumulative_rotation: list[float]
+    termination: list[str | None]
+    episode_steps: int
+
+    def summary(self) -> dict[str, float]:
+        s, r = np.asarray(self.steps_to_fall, float), np.asarray(self.cumulative_rotation, float)
+        return {"steps_to_fall_mean": float(s.mean()), "steps_to_fall_std": float(s.std()),
+                "rotation_mean": float(r.mean()), "rotation_std": float(r.std()),
+                "survived": float(np.mean([t is None for t in self.termination]))}
+
+    def to_dict(self) -> dict:
+        return {**asdict(self), "summary": self.summary()}
+
+
+def shipped(name: str) -> Path:
+    """Folder of a policy shipped with the package (``ohra/learn/models/<name>``, an :func:`export_policy`)."""
+    from importlib import resources
+
+    path = Path(str(resources.files("ohra.learn").joinpath("models", name)))
+    if not (path / "policy.pth").is_file():
+        known = sorted(p.parent.name for p in path.parent.glob("rotate_*/policy.pth"))
+        raise CheckpointError(f"no shipped rotation policy {name!r}; shipped: {', '.join(known) or 'none'}")
+    return path
+
+
+class Policy:
+    """A trained policy as a function of raw observations (observation statistics applied).
+
+    ``run_dir`` is a training run (``model.zip`` + ``vecnormalize.pkl``, or with ``which="last"`` the
+    last checkpoint) or an exported policy (:func:`export_policy`: ``policy.pth`` + ``obs_stats.npz``,
+    no optimizer state, no pickles). ``grasps`` holds the starting states shipped with an export.
+    """
+
+    def __init__(self, run_dir: str | Path, which: str = "model"):
+        from ohra.learn.rl.train import load_run
+
+        run = Path(run_dir)
+        self.env_cfg, self.ppo = load_run(run)
+        self.grasps = None
+        self._mean = self._var = None
+        if (run / "policy.pth").is_file():
+            from stable_baselines3.common.policies import ActorCriticPolicy
+
+            from ohra.sim.rotation.grasps import GraspSet
+
+            self._policy = ActorCriticPolicy.load(str(run / "policy.pth"), device="cpu")
+            st = np.load(run / "obs_stats.npz")
+            self._mean, self._var, self._clip, self._eps = st["mean"], st["var"], float(st["clip"]), float(st["eps"])
+            if (run / "grasps.npz").is_file():
+                self.grasps = GraspSet.load(run / "grasps.npz")
+            return
+        paths = {"model": (run / "model.zip", run / "vecnormalize.pkl"),
+                 "last": (run / "checkpoints" / "last.zip", run / "checkpoints" / "last_vecnormalize.pkl")}
+        if which not in paths:
+            raise CheckpointError(f"which must be 'model' or 'last', got {which!r}")
+        zip_path, stats = paths[which]
+        if not zip_path.is_file():
+            raise CheckpointError(f"no trained policy at {zip_path}")
+        from ohra.learn.rl.train import ppo_class
+
+        self._policy = ppo_class().load(zip_path, device="cpu").policy
+        if stats.is_file():
+            import pickle
+
+            with open(stats, "rb") as fh:
+                vn = pickle.load(fh)
+            if vn.norm_obs:
+                self._mean, self._var, self._clip, self._eps = vn.obs_rms.mean, vn.obs_rms.var, vn.clip_obs, vn.epsilon
+
+    def normalize(self, obs: np.ndarray) -> np.ndarray:
+        if self._mean is None:
+            return obs
+        return np.clip((obs - self._mean) / np.sqrt(self._var + self._eps), -self._clip, self._clip)
+
+    def __call__(self, obs: np.ndarray, deterministic: bool = True) -> np.ndarray:
+        action, _ = self._policy.predict(self.normalize(obs).astype(np.float32), deterministic=deterministic)
+        return action
+
+    def make_env(self, render_mode: str | None = None):
+        """The environment the policy was trained in (with the shipped starting states, if any)."""
+        from ohra.sim.rotation.env import InHandRotateEnv
+
+        return InHandRotateEnv(self.env_cfg, render_mode=render_mode, grasps=self.grasps)
+
+
+def export_policy(run_dir: str | Path, out_dir: str | Path, which: str = "model") -> Path:
+    """A small, pickle-free copy of a run for committing: ``config.json``, ``policy.pth`` (actor and
+    critic weights, no optimizer), ``obs_stats.npz``, the starting states ``grasps.npz``, and the run's
+    ``progress.csv`` / ``eval.json`` when present."""
+    import shutil
+
+    from ohra.sim.rotation.grasps import load_or_generate
+    from ohra.sim.rotation.task import resolve
+
+    run, out = Path(run_dir), Path(out_dir)
+    pol = Policy(run, which)
+    out.mkdir(parents=True, exist_ok=True)
+    pol._policy.save(str(out / "policy.pth"))
+    np.savez(out / "obs_stats.npz", mean=pol._mean, var=pol._var, clip=pol._clip, eps=pol._eps)
+    load_or_generate(resolve(pol.env_cfg)).save(out / "grasps.npz")
+    for name in ("config.json", "progress.csv", "eval.json"):
+        if (run / name).is_file():
+            shutil.copy(run / name, out / name)
+    return out
+
+
+def run_episode(env, policy, seed: int, frames_every: int = 0, render=None) -> dict:
+    """One episode; returns steps, rotation, termination, the trajectory and, every ``frames_every``
+    steps, a frame from ``render()`` (default ``env.render()``)."""
+    render = render or env.render
+    obs, info = env.reset(seed=seed)
+    frames, traj = [], {"q": [env.scene.read().q], "obj_pos": [env.scene.read().obj_pos],
+                        "obj_quat": [env.scene.read().obj_quat]}
+    if frames_every:
+        frames.append(render())
+    while True:
+        obs, _, term, trunc, info = env.step(policy(obs))
+        s = env.scene.read()
+        traj["q"].append(s.q)
+        traj["obj_pos"].append(s.obj_pos)
+        traj["obj_quat"].append(s.obj_quat)
+        if frames_every and info["steps"] % frames_every == 0:
+            frames.append(render())
+        if term or trunc:
+            break
+    return {"steps": int(info["steps"]), "rotation": float(info["cumulative_rotation"]),
+            "termination": info["termination"], "frames": frames, "trajectory": {k: np.array(v) for k, v in traj.items()}}
+
+
+def evaluate_policy(policy, env_cfg: RotationConfig, episodes: int = 20, seed: int = 0, run: str = "",
+                    grasps=None) -> EvalResult:
+    """Steps-to-Fall and Cumulative Rotation of ``policy`` (obs -> action) over seeded episodes."""
+    from ohra.sim.rotation.env import InHandRotateEnv
+
+    env = InHandRotateEnv(env_cfg, grasps=grasps)
+    try:
+        eps = [run_episode(env, policy, seed + i) for i in range(episodes)]
+    finally:
+        env.close()
+    return EvalResult(run, episodes, seed, [e["steps"] for e in eps], [e["rotation"] for e in eps],
+                      [e["termination"] for e in eps], env_cfg.episode_steps)
+
+
+def evaluate_run(run_dir: str | Path, episodes: int = 20, seed: int = 1000, which: str = "model",
+                 write: bool = True) -> EvalResult:
+    """Evaluate a trained run (seeds from 1000 by default: training used 0..n_envs); writes ``RUN/eval.json``."""
+    pol = Policy(run_dir, which)
+    res = evaluate_policy(pol, pol.env_cfg, episodes, seed, str(run_dir), grasps=pol.grasps)
+    if write:
+        path = Path(run_dir) / "eval.json"
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(res.to_dict(), indent=2) + "\n")
+        os.replace(tmp, path)
+    return res
+
+
+def record_episode(run_dir: str | Path, out_dir: str | Path, seed: int = 1000, every: int = 2, strip_frames: int = 8,
+                   which: str = "model", size: int = 240) -> dict:
+    """Render one episode of a run: ``rollout.gif`` (every ``every``-th step), ``strip.png`` (evenly spaced
+    frames), ``trajectory.npz`` (joints and object poses per step, for :func:`replay_html`)."""
+    from ohra.sim.render import write_png
+    from ohra.sim.rotation.render import render, strip, write_gif
+
+    pol = Policy(run_dir, which)
+    env = pol.make_env(render_mode="rgb_array")
+    try:
+        ep = run_episode(env, pol, seed, frames_every=every, render=lambda: render(env.scene, size))
+    finally:
+        env.close()
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    frames = ep["frames"]
+    write_gif(frames, out / "rollout.gif", fps=pol.env_cfg.control_hz / every)
+    pick = np.linspace(0, len(frames) - 1, min(strip_frames, len(frames))).round().astype(int)
+    write_png(strip([frames[i] for i in pick]), out / "strip.png")
+    np.savez_compressed(out / "trajectory.npz", **ep["trajectory"])
+    return {"steps": ep["steps"], "rotation": ep["rotation"], "termination": ep["termination"],
+            "gif": str(out / "rollout.gif"), "strip": str(out / "strip.png"), "trajectory": str(out / "trajectory.npz")}
+
+
+def replay_html(env_cfg: RotationConfig, trajectory: dict | str | Path, path: str | Path, vis=None) -> Path:
+    """A meshcat animation of a recorded episode (hand links and object), saved as a static HTML page."""
+    import meshcat.animation
+
+    from ohra.original.urdf import load_urdf
+    from ohra.rotations import quat_to_matrix
+    from ohra.sim.rotation.scene import T_WORLD_PALM, fill_inertials
+    from ohra.sim.rotation.task import resolve
+    from ohra.viz import add_mesh, new_visualizer, save_html
+
+    traj = dict(np.load(trajectory)) if isinstance(trajectory, (str, Path)) else trajectory
+    task = resolve(env_cfg)
+    model = load_urdf(fill_inertials(task.hand.urdf))
+    index = {n: i for i, n in enumerate(task.hand.joints)}
+    order = [index[n] for n in model.movable_joints]  # hand.joints order -> the URDF's own order
+    vis = vis if vis is not None else new_visualizer()
+    T0 = T_WORLD_PALM @ task.hand.T_palm_root
+    links = [n for n in model.links if model.link_geometry(n, prefer="collision") is not None]
+    for n in links:
+        m = model.link_geometry(n, prefer="collision")
+        add_mesh(vis, m.vertices, m.faces, path=f"replay/hand/{n}", color=0x66BFFF, opacity=0.9)
+    add_mesh(vis, task.obj.mesh.vertices, task.obj.mesh.faces, path="replay/object")
+    poses = model.link_poses(np.asarray(traj["q"])[:, order], links)  # (T, L, 4, 4) in the root frame
+    anim = meshcat.animation.Animation(default_framerate=int(env_cfg.control_hz))
+    for t in range(len(poses)):
+        with anim.at_frame(vis, t) as frame:
+            for k, n in enumerate(links):
+                frame[f"replay/hand/{n}"].set_transform(T0 @ poses[t, k])
+            To = np.eye(4)
+            To[:3, :3] = quat_to_matrix(traj["obj_quat"][t])
+            To[:3, 3] = traj["obj_pos"][t]
+            frame["replay/object"].set_transform(To)
+    vis.set_animation(anim, play=False)
+    return save_html(vis, path)

@@ -1,0 +1,85 @@
+"""Training curves (mean +- std over seeds) and the Table-3-style comparison of rotation runs."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+
+
+def read_progress(run_dir: str | Path) -> dict[str, np.ndarray]:
+    """Columns of ``RUN/progress.csv`` as float arrays (empty cells -> NaN)."""
+    path = Path(run_dir) / "progress.csv"
+    with open(path, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    if not rows:
+        return {}
+    return {k: np.array([float(r[k]) if r[k] not in ("", "nan") else np.nan for r in rows]) for k in rows[0]}
+
+
+def smooth(y: np.ndarray, window: int) -> np.ndarray:
+    """Trailing moving average ignoring NaNs (window in rows)."""
+    if window <= 1:
+        return y
+    out = np.full_like(y, np.nan)
+    for i in range(len(y)):
+        seg = y[max(0, i - window + 1):i + 1]
+        if np.isfinite(seg).any():
+            out[i] = np.nanmean(seg)
+    return out
+
+
+def mean_std_curve(runs: list[str | Path], key: str = "ep_reward_mean", x: str = "timesteps", points: int = 100,
+                   window: int = 5) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(grid, mean, std) of ``key`` over runs, each run interpolated onto a common ``x`` grid up to the
+    shortest run's end."""
+    curves = []
+    for r in runs:
+        p = read_progress(r)
+        ok = np.isfinite(p[key])
+        curves.append((p[x][ok], smooth(p[key], window)[ok]))
+    end = min(c[0][-1] for c in curves)
+    grid = np.linspace(0.0, end, points)
+    Y = np.array([np.interp(grid, cx, cy) for cx, cy in curves])
+    return grid, Y.mean(axis=0), Y.std(axis=0)
+
+
+def reward_curves(groups: dict[str, list[str | Path]], path: str | Path, key: str = "ep_reward_mean",
+                  x: str = "timesteps", title: str = "") -> Path:
+    """PNG of one curve per group (label -> run dirs): mean line, +-std band over its runs."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.0, 3.6), dpi=120)
+    for label, runs in groups.items():
+        g, m, s = mean_std_curve(runs, key, x)
+        ax.plot(g, m, label=f"{label} ({len(runs)} seed{'s' if len(runs) > 1 else ''})")
+        ax.fill_between(g, m - s, m + s, alpha=0.25)
+    ax.set_xlabel({"timesteps": "environment steps", "wall_s": "wall-clock seconds"}.get(x, x))
+    ax.set_ylabel({"ep_reward_mean": "episode return", "rotation_mean": "rotation per episode [rad]",
+                   "ep_length_mean": "episode length [steps]"}.get(key, key))
+    if title:
+        ax.set_title(title, fontsize=10)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.stem}.tmp.png")
+    fig.savefig(tmp)
+    plt.close(fig)
+    tmp.replace(path)
+    return path
+
+
+def table3(rows: dict[str, dict], budget: str) -> str:
+    """Markdown table: label -> ``EvalResult.summary()``-like dict, with the training budget stated."""
+    lines = [f"| policy | Steps-to-Fall (of 400) | Cumulative Rotation [rad] | survived | budget |",
+             "|---|---|---|---|---|"]
+    for label, s in rows.items():
+        lines.append(f"| {label} | {s['steps_to_fall_mean']:.1f} +- {s['steps_to_fall_std']:.1f} | "
+                     f"{s['rotation_mean']:.2f} +- {s['rotation_std']:.2f} | {100 * s['survived']:.0f} % | {budget} |")
+    return "\n".join(lines)

@@ -1,0 +1,267 @@
+"""Train a rotation policy with Stable-Baselines3 PPO: seeded, vectorised, checkpointed, resumable.
+
+Run directory::
+
+    RUN/config.json                 env (RotationConfig) + PPO settings + library versions
+    RUN/progress.csv                one row per rollout, appended (survives --resume)
+    RUN/checkpoints/last.zip        model, rewritten atomically every ``checkpoint_every`` steps
+    RUN/checkpoints/last_vecnormalize.pkl, last.json (steps, wall seconds so far)
+    RUN/model.zip, RUN/vecnormalize.pkl   the final policy and its observation statistics
+
+``resume=True`` continues from ``checkpoints/last.zip`` up to ``total_steps`` (or until the
+``max_minutes`` budget, counted over all sessions, is spent); the env config must be the same.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import time
+from dataclasses import replace
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ohra.learn.rl.config import PPOSettings, RLConfigError
+from ohra.sim.rotation.config import RotationConfig
+
+CSV_FIELDS = ("timesteps", "wall_s", "episodes", "ep_reward_mean", "ep_length_mean", "rotation_mean",
+              "learning_rate", "approx_kl", "explained_variance", "value_loss")
+RESUMABLE_CHANGES = ("total_steps", "max_minutes", "checkpoint_every")
+
+
+def _make_env(env_cfg: dict, rank: int):
+    """Factory for one subprocess environment (top level: it is pickled to the workers)."""
+    from stable_baselines3.common.monitor import Monitor
+
+    from ohra.sim.rotation.env import InHandRotateEnv
+
+    return Monitor(InHandRotateEnv(RotationConfig.from_dict(env_cfg)), info_keywords=("cumulative_rotation",))
+
+
+def adapt_learning_rate(lr: float, kl: float, target: float, bounds: tuple[float, float]) -> float:
+    """rl_games' adaptive rule: lr / 1.5 when the update's KL exceeded 2 x ``target``, lr x 1.5 when it
+    stayed under half of it, else unchanged; kept within ``bounds``."""
+    if kl > 2.0 * target:
+        return max(lr / 1.5, bounds[0])
+    if kl < 0.5 * target:
+        return min(lr * 1.5, bounds[1])
+    return lr
+
+
+class _AdaptiveLR:
+    """Picklable learning-rate 'schedule' whose value :class:`AdaptiveKLPPO` moves between updates."""
+
+    def __init__(self, lr: float):
+        self.lr = float(lr)
+
+    def __call__(self, progress_remaining: float) -> float:
+        return self.lr
+
+
+def ppo_class():
+    """PPO with rl_games' adaptive learning rate (a factory, so that importing this module needs no SB3)."""
+    from stable_baselines3 import PPO
+
+    class AdaptiveKLPPO(PPO):
+        """After every update: lr / 1.5 if the mean KL exceeded 2 x ``kl_target``, x 1.5 below half of it."""
+
+        def __init__(self, *args, kl_target: float | None = 0.02, lr_bounds=(1e-6, 1e-2), **kwargs):
+            self.kl_target, self.lr_bounds = kl_target, tuple(lr_bounds)
+            super().__init__(*args, **kwargs)
+
+        def _setup_model(self) -> None:
+            loaded = self.__dict__.get("lr_schedule")  # set by load() before it calls this: keep its value
+            super()._setup_model()
+            self.lr_schedule = loaded if isinstance(loaded, _AdaptiveLR) else _AdaptiveLR(float(self.learning_rate))
+
+        def train(self) -> None:
+            super().train()
+            kl = self.logger.name_to_value.get("train/approx_kl")
+            if self.kl_target is not None and kl is not None:
+                self.lr_schedule.lr = adapt_learning_rate(self.lr_schedule.lr, float(kl), self.kl_target, self.lr_bounds)
+
+    return AdaptiveKLPPO
+
+
+def _callback(run_dir: Path, ppo: PPOSettings, wall_before: float):
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class RunCallback(BaseCallback):
+        """Per-rollout CSV row, atomic checkpoints, and the wall-clock budget."""
+
+        def _on_training_start(self) -> None:
+            self.t0 = time.perf_counter()
+            self.ep_r, self.ep_l, self.ep_rot = [], [], []
+            self.next_ckpt = (self.num_timesteps // ppo.checkpoint_every + 1) * ppo.checkpoint_every
+
+        def wall(self) -> float:
+            return wall_before + time.perf_counter() - self.t0
+
+        def _on_step(self) -> bool:
+            for info in self.locals["infos"]:
+                ep = info.get("episode")
+                if ep is not None:
+                    self.ep_r.append(ep["r"])
+                    self.ep_l.append(ep["l"])
+                    self.ep_rot.append(ep.get("cumulative_rotation", np.nan))
+            if self.num_timesteps >= self.next_ckpt:
+                save_checkpoint(self.model, run_dir, self.wall())
+                self.next_ckpt += ppo.checkpoint_every
+            return ppo.max_minutes is None or self.wall() < 60.0 * ppo.max_minutes
+
+        def _on_rollout_end(self) -> None:
+            log = self.model.logger.name_to_value  # the previous update's values (dumped after this rollout)
+            row = {"timesteps": self.num_timesteps, "wall_s": round(self.wall(), 2), "episodes": len(self.ep_r),
+                   "ep_reward_mean": _mean(self.ep_r), "ep_length_mean": _mean(self.ep_l),
+                   "rotation_mean": _mean(self.ep_rot), "learning_rate": self.model.lr_schedule(1.0),
+                   "approx_kl": log.get("train/approx_kl", np.nan),
+                   "explained_variance": log.get("train/explained_variance", np.nan),
+                   "value_loss": log.get("train/value_loss", np.nan)}
+            _append_csv(run_dir / "progress.csv", row)
+            self.ep_r, self.ep_l, self.ep_rot = [], [], []
+
+    return RunCallback()
+
+
+def _mean(x: list) -> float:
+    return float(np.nanmean(x)) if len(x) else float("nan")
+
+
+def _append_csv(path: Path, row: dict[str, Any]) -> None:
+    new = not path.is_file()
+    with open(path, "a", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=CSV_FIELDS)
+        if new:
+            w.writeheader()
+        w.writerow(row)
+
+
+def save_checkpoint(model, run_dir: Path, wall_s: float) -> None:
+    """Write ``checkpoints/last.*`` atomically (model, observation statistics, progress)."""
+    d = run_dir / "checkpoints"
+    d.mkdir(parents=True, exist_ok=True)
+    model.save(d / ".last.tmp.zip")
+    os.replace(d / ".last.tmp.zip", d / "last.zip")
+    venv = model.get_vec_normalize_env()
+    if venv is not None:
+        venv.save(d / ".last_vecnormalize.tmp.pkl")
+        os.replace(d / ".last_vecnormalize.tmp.pkl", d / "last_vecnormalize.pkl")
+    tmp = d / ".last.tmp.json"
+    tmp.write_text(json.dumps({"timesteps": int(model.num_timesteps), "wall_s": wall_s}))
+    os.replace(tmp, d / "last.json")
+
+
+def _vec_env(env_cfg: RotationConfig, ppo: PPOSettings):
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+    fns = [partial(_make_env, env_cfg.to_dict(), i) for i in range(ppo.n_envs)]
+    return SubprocVecEnv(fns, start_method="forkserver") if ppo.n_envs > 1 else DummyVecEnv(fns)
+
+
+def _check_resume(run_dir: Path, env_cfg: RotationConfig, ppo: PPOSettings) -> None:
+    saved = json.loads((run_dir / "config.json").read_text())
+    if saved["env"] != json.loads(json.dumps(env_cfg.to_dict())):
+        raise RLConfigError(f"{run_dir}: the environment config differs from the run being resumed")
+    theirs, mine = saved["ppo"], json.loads(json.dumps(ppo.to_dict()))
+    diff = sorted(k for k in mine if k not in RESUMABLE_CHANGES and mine[k] != theirs.get(k))
+    if diff:
+        raise RLConfigError(f"{run_dir}: PPO settings {diff} differ from the run being resumed "
+                            f"(only {RESUMABLE_CHANGES} may change)")
+
+
+def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Path, resume: bool = False,
+                   verbose: int = 0) -> Path:
+    """Train (or resume) a PPO rotation policy into ``run_dir``; returns the final model path."""
+    import torch
+    from stable_baselines3.common.utils import set_random_seed
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from ohra.sim.rotation.grasps import load_or_generate
+    from ohra.sim.rotation.task import resolve
+
+    run_dir = Path(run_dir)
+    last = run_dir / "checkpoints" / "last.zip"
+    if resume and not last.is_file():
+        raise RLConfigError(f"nothing to resume: {last} does not exist")
+    if not resume and (run_dir / "config.json").is_file():
+        raise RLConfigError(f"{run_dir} already holds a run; pass resume=True (--resume) or choose another folder")
+    torch.set_num_threads(ppo.threads)
+    load_or_generate(resolve(env_cfg), progress=verbose > 0)  # once here, not in every worker
+    run_dir.mkdir(parents=True, exist_ok=True)
+    if resume:
+        _check_resume(run_dir, env_cfg, ppo)
+    else:
+        _write_config(run_dir, env_cfg, ppo)
+    set_random_seed(ppo.seed)
+    venv = _vec_env(env_cfg, ppo)
+    cls = ppo_class()
+    wall_before = 0.0
+    if resume:
+        venv = VecNormalize.load(str(run_dir / "checkpoints" / "last_vecnormalize.pkl"), venv)
+        model = cls.load(last, env=venv, device="cpu")
+        wall_before = json.loads((run_dir / "checkpoints" / "last.json").read_text())["wall_s"]
+    else:
+        venv = VecNormalize(venv, norm_obs=ppo.normalize_obs, norm_reward=ppo.normalize_reward, gamma=ppo.gamma)
+        model = _new_model(cls, venv, ppo, verbose)
+    try:
+        cb = _callback(run_dir, ppo, wall_before)
+        remaining = max(0, ppo.total_steps - model.num_timesteps)
+        model.learn(total_timesteps=remaining, callback=cb, reset_num_timesteps=False)
+        save_checkpoint(model, run_dir, cb.wall())
+        model.save(run_dir / "model.zip")
+        model.get_vec_normalize_env().save(str(run_dir / "vecnormalize.pkl"))
+    finally:
+        venv.close()
+    return run_dir / "model.zip"
+
+
+def _new_model(cls, venv, ppo: PPOSettings, verbose: int):
+    import torch.nn as nn
+
+    act = {"elu": nn.ELU, "relu": nn.ReLU, "tanh": nn.Tanh}[ppo.activation]
+    arch = list(ppo.net_arch)
+    return cls("MlpPolicy", venv, learning_rate=ppo.learning_rate, n_steps=ppo.n_steps, batch_size=ppo.batch_size,
+               n_epochs=ppo.n_epochs, gamma=ppo.gamma, gae_lambda=ppo.gae_lambda, clip_range=ppo.clip_range,
+               ent_coef=ppo.ent_coef, vf_coef=ppo.vf_coef, max_grad_norm=ppo.max_grad_norm, target_kl=None,
+               kl_target=ppo.kl_target, lr_bounds=ppo.lr_bounds, seed=ppo.seed, device="cpu", verbose=verbose,
+               policy_kwargs={"net_arch": {"pi": arch, "vf": arch}, "activation_fn": act,
+                              "log_std_init": ppo.log_std_init})
+
+
+def _write_config(run_dir: Path, env_cfg: RotationConfig, ppo: PPOSettings) -> None:
+    import gymnasium
+    import pybullet
+    import stable_baselines3
+    import torch
+
+    d = {"env": env_cfg.to_dict(), "ppo": ppo.to_dict(),
+         "versions": {"stable_baselines3": stable_baselines3.__version__, "gymnasium": gymnasium.__version__,
+                      "torch": torch.__version__, "pybullet_api": pybullet.getAPIVersion()}}
+    tmp = run_dir / ".config.tmp.json"
+    tmp.write_text(json.dumps(d, indent=2) + "\n")
+    os.replace(tmp, run_dir / "config.json")
+
+
+def load_run(run_dir: str | Path) -> tuple[RotationConfig, PPOSettings]:
+    """The env config and PPO settings a run was trained with."""
+    from ohra.errors import CheckpointError
+
+    path = Path(run_dir) / "config.json"
+    if not path.is_file():
+        raise CheckpointError(f"{run_dir} is not a rotation run or exported policy: {path} does not exist")
+    d = json.loads(path.read_text())
+    return RotationConfig.from_dict(d["env"], f"{run_dir}/config.json"), PPOSettings.from_dict(d["ppo"])
+
+
+def with_budget(ppo: PPOSettings, total_steps: int | None = None, max_minutes: float | None = None) -> PPOSettings:
+    """``ppo`` with a new step and/or time budget (the settings a resume may change)."""
+    kw = {}
+    if total_steps is not None:
+        kw["total_steps"] = int(total_steps)
+    if max_minutes is not None:
+        kw["max_minutes"] = float(max_minutes)
+    return replace(ppo, **kw)

@@ -1,0 +1,175 @@
+"""Settings of the in-hand rotation task: one frozen dataclass with units, read from plain dicts.
+
+The task terms come from the paper (issue 15: 20 Hz PD targets, the observation list, a clipped
++z angular-velocity reward minus drift, pose, torque, work and linear-velocity penalties); the
+values it does not give come from HORA (Qi et al., "In-Hand Object Rotation via Rapid Motor
+Adaptation"), the palm-up rotation task with these terms: relative targets of 1/24 rad per unit
+action, 400-step episodes (20 s), rotation clipped to +-0.5 rad/s, penalty weights linvel 0.3,
+pose 0.3, torque 0.1, work 2.0. The drift weight, the termination distances, the phase period and
+the object size are ours (stated below).
+
+Physics (chosen for speed, measured in ``benchmarks/bench_rotation.py``): PyBullet steps 1/120 s
+(HORA's Isaac step), 6 sub-steps per 20 Hz control step, 20 solver iterations (PyBullet's default
+50 costs 1.5x), fixed links merged, finger-finger collisions on and finger-palm off (the
+evaluator's filters). The joints are PyBullet's implicit position motors capped at ``motor_force``
+N m (the canonical URDF's effort); see :mod:`ohra.sim.rotation.scene` for why not PyBullet's
+``numSubSteps`` and not an explicit PD.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, fields, replace
+from typing import Any, Mapping
+
+from ohra.errors import OhraError
+
+
+class RotationConfigError(OhraError, ValueError):
+    """A rotation setting is unknown or out of range."""
+
+
+URDF_KINDS = ("canonical", "original")
+SPACES = ("canonical", "native")
+
+# Reference ranges of the per-joint noise around the holding pose for the initial grasps (issue 15,
+# from the paper's setup): LEAP +-0.25 rad, Shadow +-0.1 rad; other hands take Shadow's, the safer one.
+GRASP_NOISE = {"leap": 0.25, "shadow": 0.1}
+DEFAULT_GRASP_NOISE = 0.1
+
+
+@dataclass(frozen=True)
+class RewardWeights:
+    """Weights w_k of the total reward sum_k w_k * term_k (penalty terms are >= 0, so their weights are < 0)."""
+
+    rotation: float = 1.0  # clipped angular velocity about world +z [rad/s]
+    drift: float = -0.1  # object distance from its start position [m]  (ours)
+    pose: float = -0.3  # squared joint deviation from the start pose [rad^2]
+    torque: float = -0.1  # squared joint torques [N^2 m^2]
+    work: float = -2.0  # squared mechanical power (sum tau * dq)^2 [W^2]
+    linvel: float = -0.3  # object linear speed, L1 norm [m/s]
+
+    def as_dict(self) -> dict[str, float]:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class RotationConfig:
+    """Every constant of the rotation environment. Units: metres, radians, seconds, kg, N m."""
+
+    # -- hand and object -----------------------------------------------------------------------
+    hand: str = "leap_hand_right"
+    urdf: str = "canonical"  # "canonical": the canonical URDF; "original": the hand's own URDF
+    form: str | None = None  # canonical form; None: extended when registered (closest to the original), else base
+    space: str | None = None  # joint space of actions/observations: "canonical" (22) or "native" (the URDF's
+    #                           driven joints); None: canonical for the canonical URDF, native for the original
+    object: str = "cube"  # "cube", "sphere", "cylinder" (lying along the fingers) or "builtin:NAME"
+    object_size: float | None = None  # m: cube side / sphere and cylinder diameter; None: the palm radius
+    object_density: float = 500.0  # kg/m^3
+    friction: float = 1.0  # effective hand-object friction (each body gets its square root)
+
+    # -- simulation and control ----------------------------------------------------------------
+    control_hz: float = 20.0
+    sim_dt: float = 1.0 / 120.0  # s per physics sub-step
+    solver_iterations: int = 20
+    self_collision: bool = True  # finger-finger contacts (finger-palm never)
+    gravity: float = 9.81  # m/s^2 along world -z
+    action_scale: float = 1.0 / 24.0  # rad of target change per unit action per control step
+    motor_force: float = 1.0  # N m, torque cap of every joint motor
+    position_gain: float = 0.3  # PyBullet position-motor gains (per sub-step)
+    velocity_gain: float = 1.0
+
+    # -- episode, observation, reward, termination ---------------------------------------------
+    episode_steps: int = 400  # control steps (20 s) before truncation
+    phase_period: float = 1.0  # s, period of the 2-D phase clock (sin, cos) in the observation
+    angvel_clip: float = 0.5  # rad/s, the rotation term is clip(omega_z, -clip, clip)
+    weights: RewardWeights = field(default_factory=RewardWeights)
+    fall_height: float = 0.03  # m: terminated when the object is this far below its start height
+    max_distance: float = 0.08  # m: terminated when the object is this far from its start position
+
+    # -- initial grasps ------------------------------------------------------------------------
+    grasp_count: int = 1000  # cached starting states per (hand, urdf, object)
+    grasp_noise: float | None = None  # rad, uniform per-joint noise on the holding pose; None: GRASP_NOISE
+    grasp_seed: int = 0
+    settle_time: float = 1.5  # s of simulation a perturbed grasp must survive (still over the last 0.5 s)
+    min_contacts: int = 2  # distinct hand links touching the object at the end of the settle
+
+    def __post_init__(self) -> None:
+        if self.urdf not in URDF_KINDS:
+            raise RotationConfigError(f"urdf must be one of {URDF_KINDS}, got {self.urdf!r}")
+        if self.space is not None and self.space not in SPACES:
+            raise RotationConfigError(f"space must be one of {SPACES} or None, got {self.space!r}")
+        if self.form is not None and self.form not in ("base", "extended"):
+            raise RotationConfigError(f"form must be 'base', 'extended' or None, got {self.form!r}")
+        if self.urdf == "canonical" and self.space == "native":
+            raise RotationConfigError("the canonical URDF has only the canonical joint space (space='canonical')")
+        positive = ("control_hz", "sim_dt", "action_scale", "motor_force", "phase_period", "angvel_clip",
+                    "fall_height", "max_distance", "settle_time", "object_density")
+        for name in positive:
+            if not getattr(self, name) > 0:
+                raise RotationConfigError(f"RotationConfig.{name} must be > 0, got {getattr(self, name)}")
+        for name in ("solver_iterations", "episode_steps", "grasp_count"):
+            if int(getattr(self, name)) < 1:
+                raise RotationConfigError(f"RotationConfig.{name} must be >= 1, got {getattr(self, name)}")
+        if self.object_size is not None and not self.object_size > 0:
+            raise RotationConfigError(f"object_size must be > 0 or None, got {self.object_size}")
+        if self.grasp_noise is not None and self.grasp_noise < 0:
+            raise RotationConfigError(f"grasp_noise must be >= 0 or None, got {self.grasp_noise}")
+        if self.friction < 0 or self.min_contacts < 0:
+            raise RotationConfigError("friction and min_contacts must be >= 0")
+        if abs(self.substeps * self.sim_dt - self.control_dt) > 1e-9:
+            raise RotationConfigError(
+                f"1/control_hz = {self.control_dt:.6g} s must be a whole number of sim_dt = {self.sim_dt:.6g} s")
+        if isinstance(self.weights, Mapping):
+            object.__setattr__(self, "weights", _weights(self.weights, "weights"))
+
+    @property
+    def control_dt(self) -> float:
+        """Seconds per control step."""
+        return 1.0 / self.control_hz
+
+    @property
+    def substeps(self) -> int:
+        """Physics sub-steps per control step."""
+        return max(1, int(round(self.control_dt / self.sim_dt)))
+
+    @property
+    def resolved_space(self) -> str:
+        return self.space or ("canonical" if self.urdf == "canonical" else "native")
+
+    @property
+    def resolved_grasp_noise(self) -> float:
+        if self.grasp_noise is not None:
+            return float(self.grasp_noise)
+        for key, v in GRASP_NOISE.items():
+            if key in self.hand:
+                return v
+        return DEFAULT_GRASP_NOISE
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any], source: str = "config") -> "RotationConfig":
+        """Build from a plain mapping; an unknown key raises :class:`RotationConfigError` naming it."""
+        names = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - names)
+        if unknown:
+            raise RotationConfigError(f"{source}: unknown rotation setting(s) {unknown}; known: {sorted(names)}")
+        kw = dict(d)
+        if "weights" in kw:
+            kw["weights"] = _weights(kw["weights"], f"{source}: weights")
+        return cls(**kw)
+
+    def with_overrides(self, **kw: Any) -> "RotationConfig":
+        """A copy with some settings changed (unknown names raise)."""
+        return RotationConfig.from_dict({**self.to_dict(), **kw}, "overrides")
+
+
+def _weights(w: Any, source: str) -> RewardWeights:
+    if isinstance(w, RewardWeights):
+        return w
+    names = {f.name for f in fields(RewardWeights)}
+    unknown = sorted(set(w) - names)
+    if unknown:
+        raise RotationConfigError(f"{source}: unknown reward term(s) {unknown}; known: {sorted(names)}")
+    return replace(RewardWeights(), **{k: float(v) for k, v in w.items()})

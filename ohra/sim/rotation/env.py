@@ -1,0 +1,141 @@
+"""``InHandRotateEnv``: rotate the object in a palm-up hand about world +z (Gymnasium API).
+
+Action: ``Box(-1, 1, (n,), float32)``, relative joint targets: ``target += action_scale * a``,
+clipped into the joint limits, sent to the position motors, held for one control step (20 Hz).
+``n`` = 22 in the canonical joint space (immovable slots ignore their action) or the original
+URDF's driven joints (``space="native"``). Observation: see :mod:`ohra.sim.rotation.observations`
+(``observation_structure`` gives the layout). Reward: see :mod:`ohra.sim.rotation.rewards`; each
+term is in ``info["reward/<term>"]``. Termination: the object fell ``fall_height`` below or moved
+``max_distance`` from its start, or the simulation diverged; truncation after ``episode_steps``.
+``info`` also carries ``delta_yaw`` (rad turned about +z this step), ``cumulative_rotation`` (rad
+since reset), ``steps`` and ``termination`` (None, "fell", "left" or "broken").
+
+Randomness comes only from ``self.np_random`` (which starting state ``reset`` picks), so
+``reset(seed=s)`` followed by the same actions gives the same trajectory.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from ohra.sim.rotation import observations as obs_terms
+from ohra.sim.rotation import rewards, termination
+from ohra.sim.rotation.config import RotationConfig
+from ohra.sim.rotation.grasps import GraspSet, load_or_generate
+from ohra.sim.rotation.scene import RotationScene
+from ohra.sim.rotation.task import resolve
+
+
+class InHandRotateEnv(gym.Env):
+    """In-hand rotation about world +z for any canonical hand or a registered hand's original URDF.
+
+    Args:
+        config: a :class:`RotationConfig` or a plain dict of its fields (default: LEAP, canonical, cube).
+        render_mode: None or "rgb_array" (PyBullet TinyRenderer; keeps the URDF's visual shapes).
+        grasps: starting states to use instead of the cached ones for this config.
+        **overrides: config fields, e.g. ``hand="shadow_hand_right", urdf="original"``.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
+
+    def __init__(self, config: RotationConfig | dict | None = None, render_mode: str | None = None,
+                 grasps: GraspSet | None = None, **overrides: Any):
+        if isinstance(config, dict):
+            config = RotationConfig.from_dict(config)
+        cfg = (config or RotationConfig()).with_overrides(**overrides) if overrides else (config or RotationConfig())
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
+        self.cfg, self.render_mode = cfg, render_mode
+        self.metadata = {**self.metadata, "render_fps": cfg.control_hz}
+        self.task = resolve(cfg)
+        self.space = self.task.space
+        self.grasps = grasps if grasps is not None else load_or_generate(self.task)
+        self.scene = RotationScene(self.task.hand, self.task.obj, cfg, self.task.palm_radius,
+                                   visual=render_mode is not None)
+        n = self.space.dim
+        self.action_space = spaces.Box(-1.0, 1.0, (n,), np.float32)
+        self.observation_structure = obs_terms.sizes(n)
+        low, high = obs_terms.bounds(n)
+        self.observation_space = spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
+        self._lo, self._hi = self.space.lower, self.space.upper
+        self._observer = obs_terms.Observer(self._lo, self._hi, cfg.phase_period)
+        self._steps = 0
+
+    # -- Gymnasium API ----------------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
+        """Start from a cached starting state: ``options={"grasp": i}`` picks one, else ``np_random`` does."""
+        super().reset(seed=seed)
+        i = int(options["grasp"]) if options and "grasp" in options else int(self.np_random.integers(len(self.grasps)))
+        g = self.grasps
+        self.scene.set_hand(g.q[i])
+        self.scene.drive(g.target[i])  # the motors continue the settled state exactly
+        self.scene.new_object(g.obj_pos[i], g.obj_quat[i])
+        self._target = np.clip(self.space.from_sim(g.target[i]), self._lo, self._hi)
+        self._q_start = self.space.from_sim(g.q[i])
+        self._obj_start = np.asarray(g.obj_pos[i], dtype=float).copy()
+        self._quat = np.asarray(g.obj_quat[i], dtype=float).copy()
+        self._steps, self._rotation = 0, 0.0
+        self._snap = snap = self.scene.read()
+        return self._observe(snap), {"grasp": i, "cumulative_rotation": 0.0, "steps": 0}
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:
+        cfg = self.cfg
+        a = np.clip(np.asarray(action, dtype=float).reshape(self.action_space.shape), -1.0, 1.0)
+        self._target = np.clip(self._target + cfg.action_scale * a, self._lo, self._hi)
+        self.scene.drive(self.space.to_sim(self._target))
+        self.scene.step()
+        self._snap = snap = self.scene.read()
+        self._steps += 1
+        why = termination.reason(snap.obj_pos, self._obj_start, cfg.fall_height, cfg.max_distance, snap.obj_quat,
+                                 snap.q, snap.dq, snap.tau, snap.obj_linvel, snap.obj_angvel)
+        if why == "broken":
+            terms = {k: 0.0 for k in rewards.TERMS}
+            dyaw = 0.0
+        else:
+            dyaw = rewards.delta_yaw(self._quat, snap.obj_quat)
+            self._quat = snap.obj_quat
+            terms = self._terms(snap, dyaw)
+        self._rotation += dyaw
+        reward = rewards.total(terms, cfg.weights)
+        terminated = why is not None
+        truncated = not terminated and self._steps >= cfg.episode_steps
+        info = {f"reward/{k}": v for k, v in terms.items()}
+        info.update(delta_yaw=dyaw, cumulative_rotation=self._rotation, steps=self._steps, termination=why)
+        return self._observe(snap), reward, terminated, truncated, info
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode != "rgb_array":
+            return None
+        from ohra.sim.rotation.render import render
+
+        return render(self.scene)
+
+    def close(self) -> None:
+        if getattr(self, "scene", None) is not None:
+            self.scene.close()
+            self.scene = None
+
+    # -- pieces -----------------------------------------------------------------------------------
+    def _terms(self, snap, dyaw: float) -> dict[str, float]:
+        """Unweighted reward terms of this step (see :mod:`ohra.sim.rotation.rewards`)."""
+        cfg = self.cfg
+        q = self.space.from_sim(snap.q)
+        return {"rotation": rewards.rotation(dyaw, cfg.control_dt, cfg.angvel_clip),
+                "drift": rewards.drift(snap.obj_pos, self._obj_start),
+                "pose": rewards.pose(q, self._q_start),
+                "torque": rewards.torque(snap.tau),
+                "work": rewards.work(snap.tau, snap.dq),
+                "linvel": rewards.linvel(snap.obj_linvel)}
+
+    def _observe(self, snap) -> np.ndarray:
+        o = obs_terms.ObsInput(q=self.space.from_sim(snap.q), target=self._target,
+                               dq=self.space.velocity_from_sim(snap.dq), lower=self._lo, upper=self._hi,
+                               obj_pos=snap.obj_pos, obj_start=self._obj_start, obj_quat=snap.obj_quat,
+                               obj_linvel=snap.obj_linvel, obj_angvel=snap.obj_angvel,
+                               time=self._steps * self.cfg.control_dt, phase_period=self.cfg.phase_period)
+        out = self._observer(o)
+        return out if np.isfinite(out).all() else np.nan_to_num(out, nan=0.0, posinf=0.0, neginf=0.0)

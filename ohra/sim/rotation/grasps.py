@@ -1,0 +1,283 @@
+"""Initial grasps of the rotation task: a seeded generator of stable starting states, cached to a file.
+
+Procedure (HORA's grasp cache, made hand-agnostic):
+
+1. *Nominal object pose*: the object rests on the palm centre (its lowest point 1 mm above the
+   palm surface found by a ray cast), at yaw 0.
+2. *Holding pose*: with the object pinned there, every driven joint sweeps from 0 (clipped into
+   its limits) towards its closing limit: the one whose rotation swings the joint's subtree
+   (the links it moves) towards the object. Each finger stops when it touches the object (or
+   70 % of the way); the settled joint values are the holding pose.
+3. *Samples*: the holding pose plus uniform per-joint noise of +-``grasp_noise`` rad (reference
+   ranges: LEAP 0.25, Shadow 0.1), clipped into the limits; the object at the nominal position with
+   a uniform random yaw; the motors hold the noisy pose for ``settle_time`` s under gravity. A
+   sample is kept when the object is still within half the termination margins (height, distance),
+   has not moved over the last ``STILL_TIME`` s (a creeping object would start every episode with a
+   free drift) and is touched by at least ``min_contacts`` distinct hand links. The kept state after
+   the settle (joints, motor targets, object pose) is a starting state.
+
+The result depends only on the hand's URDF, the object, the physics settings and the seed; it is
+stored under ``ohra.paths.cache_dir()/rotation/`` keyed by a hash of all of them (atomic write).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import tempfile
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pybullet as pb
+
+from ohra.errors import OhraError
+from ohra.paths import cache_dir
+from ohra.sim.rotation.rewards import delta_yaw
+from ohra.sim.rotation.scene import R_WORLD_PALM, RotationScene, _quat_mul, yaw_quat
+from ohra.sim.rotation.task import Task
+
+VERSION = 5  # bump when the procedure changes: old cache files are then ignored
+CLEARANCE = 0.001  # m between the object's lowest point and the palm at the nominal pose
+CLOSE_TIME = 2.0  # s of closing onto the pinned object for the holding pose
+CLOSE_SPEED = 1.5  # rad/s of target sweep while closing
+CLOSE_FRACTION = 0.7  # of the way from 0 to the closing limit, at most
+STILL_TIME = 0.5  # s: the last part of the settle over which a kept object must have stopped
+STILL_MOVE = (0.002, 0.02)  # (m, rad): the most it may move and turn about +z in that time
+MAX_ATTEMPTS_PER_GRASP = 20
+
+
+class GraspGenerationError(OhraError, RuntimeError):
+    """No starting state survived the settle."""
+
+
+@dataclass
+class GraspSet:
+    """Starting states (world frame, simulator joint order).
+
+    Attributes:
+        q: (N, n) driven joint positions [rad].
+        target: (N, n) the motor targets holding them (the perturbed pose: a finger blocked by the
+            object keeps pressing; starting from ``target`` continues the settled state exactly).
+        obj_pos: (N, 3) object frame positions [m]; obj_quat: (N, 4) xyzw.
+        hold: (n,) the holding pose the samples perturb.
+        attempts: samples tried to keep N.
+        key: hash of everything the states depend on.
+    """
+
+    q: np.ndarray
+    target: np.ndarray
+    obj_pos: np.ndarray
+    obj_quat: np.ndarray
+    hold: np.ndarray
+    attempts: int
+    key: str
+
+    def __len__(self) -> int:
+        return len(self.q)
+
+    def save(self, path: Path) -> Path:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=str(path.parent), prefix=f".{path.name}.", suffix=".npz")
+        os.close(fd)
+        try:
+            np.savez_compressed(tmp, q=self.q, target=self.target, obj_pos=self.obj_pos, obj_quat=self.obj_quat, hold=self.hold,
+                                attempts=self.attempts, key=self.key)
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+        return path
+
+    @classmethod
+    def load(cls, path: Path) -> "GraspSet":
+        with np.load(path) as d:
+            return cls(d["q"], d["target"], d["obj_pos"], d["obj_quat"], d["hold"], int(d["attempts"]), str(d["key"]))
+
+
+def nominal_pose(scene: RotationScene) -> tuple[np.ndarray, np.ndarray]:
+    """(pos (3,), quat (4,) xyzw): the object resting on the palm centre at yaw 0 (world frame)."""
+    p = scene.palm_centre_world()
+    pos = np.array([p[0], p[1], scene.palm_top + scene.obj.half_height + CLEARANCE])
+    return pos, scene.obj.rest_quat.copy()
+
+
+def closing_directions(scene: RotationScene, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """How each driven joint closes onto a point ``target`` (world), from the hand's current pose.
+
+    Returns (sign (n,) +1/-1: the rotation that swings the joint's subtree (the links it moves,
+    mass-weighted) towards ``target``; spread (n,) bool: a finger joint (not the thumb) whose axis
+    lies within 45 deg of the palm normal, i.e. one that spreads the finger sideways instead of
+    curling it).
+    """
+    c, b = scene.client, scene.body
+    n_links = pb.getNumJoints(b, physicsClientId=c)
+    parent = [pb.getJointInfo(b, j, physicsClientId=c)[16] for j in range(n_links)]
+    states = pb.getLinkStates(b, list(range(n_links)), computeForwardKinematics=1, physicsClientId=c)
+    com = np.array([s[0] for s in states])
+    mass = np.array([max(pb.getDynamicsInfo(b, j, physicsClientId=c)[0], 1e-9) for j in range(n_links)])
+    normal = R_WORLD_PALM[:, 0]  # palm +x in the world
+    sign, spread = np.ones(len(scene.jidx)), np.zeros(len(scene.jidx), dtype=bool)
+    for k, j in enumerate(scene.jidx):
+        sub = [i for i in range(n_links) if _descends(i, j, parent)]
+        c_sub = (com[sub] * mass[sub, None]).sum(0) / mass[sub].sum()
+        R = np.reshape(pb.getMatrixFromQuaternion(states[j][5]), (3, 3))  # joint frame == child link frame
+        axis = R @ np.asarray(pb.getJointInfo(b, j, physicsClientId=c)[13], dtype=float)
+        axis /= max(np.linalg.norm(axis), 1e-12)
+        motion = np.cross(axis, c_sub - np.asarray(states[j][4]))
+        sign[k] = 1.0 if motion @ (target - c_sub) >= 0.0 else -1.0
+        spread[k] = scene.hand.joint_finger[k] != 0 and abs(axis @ normal) > np.sqrt(0.5)
+    return sign, spread
+
+
+def _descends(i: int, j: int, parent: list[int]) -> bool:
+    while i >= 0:
+        if i == j:
+            return True
+        i = parent[i]
+    return False
+
+
+def holding_pose(scene: RotationScene) -> np.ndarray:
+    """(n,) the joint values of the fingers closed onto the pinned object (see module doc).
+
+    The targets of every finger sweep from 0 towards its closing limits at ``CLOSE_SPEED`` and
+    stop, finger by finger, when one of its links touches the object (the finger then rests on
+    the object instead of crushing into it) or at ``CLOSE_FRACTION`` of the way (a finger that
+    misses does not curl into a fist against its neighbours). Sideways-spreading finger joints stay
+    at 0: closing them presses neighbouring fingers into each other.
+    """
+    hand, cfg, c = scene.hand, scene.cfg, scene.client
+    pos, quat = nominal_pose(scene)
+    q0 = np.clip(0.0, hand.lower, hand.upper)
+    scene.set_hand(q0)
+    scene.new_object(pos, quat, fixed=True)
+    sign, spread = closing_directions(scene, pos)
+    goal = np.where(spread, q0, q0 + CLOSE_FRACTION * (np.where(sign > 0, hand.upper, hand.lower) - q0))
+    target, step = q0.copy(), CLOSE_SPEED / cfg.control_hz
+    moving = np.ones(5, dtype=bool)  # per finger
+    finger_of_link = scene.link_finger
+    for _ in range(int(round(CLOSE_TIME * cfg.control_hz))):
+        for p in pb.getContactPoints(scene.body, scene.obj_body, physicsClientId=c):
+            f = finger_of_link.get(p[3], -1)
+            if f >= 0:
+                moving[f] = False
+        m = moving[hand.joint_finger]
+        target = np.where(m, target + np.clip(goal - target, -step, step), target)
+        scene.drive(np.where(m, target, scene.read().q))
+        scene.step()
+    return scene.read().q
+
+
+def cache_key(task: Task) -> str:
+    """Hash of everything the starting states depend on."""
+    cfg = task.cfg
+    fields = {k: getattr(cfg, k) for k in ("friction", "sim_dt", "control_hz", "solver_iterations", "self_collision",
+                                           "gravity", "motor_force", "position_gain", "velocity_gain", "grasp_count",
+                                           "grasp_seed", "settle_time", "min_contacts", "fall_height", "max_distance")}
+    fields.update(noise=cfg.resolved_grasp_noise, object=task.obj.name, mass=task.obj.mass,
+                  prims=[dict(p) for p in task.obj.prims], version=VERSION, palm_radius=task.palm_radius,
+                  pybullet=pb.getAPIVersion())
+    h = hashlib.sha256(task.hand.urdf.encode())
+    h.update(json.dumps(fields, sort_keys=True, default=float).encode())
+    return h.hexdigest()[:16]
+
+
+def cache_path(task: Task) -> Path:
+    safe = task.cfg.object.replace(":", "-")
+    return cache_dir() / "rotation" / f"{task.cfg.hand}_{task.cfg.urdf}_{safe}_{cache_key(task)}.npz"
+
+
+def _keep(scene: RotationScene, start: np.ndarray, before) -> bool:
+    """Keep a settled sample: in place (half the termination margins), still since ``before``
+    (the state ``STILL_TIME`` s earlier), and touched by ``min_contacts`` hand links."""
+    cfg, s = scene.cfg, scene.read()
+    if not (np.all(np.isfinite(s.obj_pos)) and np.all(np.isfinite(s.q))):
+        return False
+    if s.obj_pos[2] < start[2] - cfg.fall_height / 2:
+        return False
+    if np.linalg.norm(s.obj_pos - start) > cfg.max_distance / 2:
+        return False
+    if np.linalg.norm(s.obj_pos - before.obj_pos) > STILL_MOVE[0]:
+        return False
+    if abs(delta_yaw(before.obj_quat, s.obj_quat)) > STILL_MOVE[1]:
+        return False
+    return scene.hand_contacts() >= cfg.min_contacts
+
+
+def generate(task: Task, progress: bool = False) -> GraspSet:
+    """Generate ``task.cfg.grasp_count`` starting states (see module doc); seeded by ``grasp_seed``."""
+    cfg, hand = task.cfg, task.hand
+    scene = RotationScene(hand, task.obj, cfg, task.palm_radius)
+    try:
+        hold = holding_pose(scene)
+        pos, rest = nominal_pose(scene)
+        rng = np.random.default_rng(cfg.grasp_seed)
+        r = cfg.resolved_grasp_noise
+        steps = int(round(cfg.settle_time * cfg.control_hz))
+        check = steps - int(round(STILL_TIME * cfg.control_hz))
+        Q, T, P, O = [], [], [], []
+        attempts = 0
+        bar = _bar(cfg.grasp_count, f"grasps {hand.name}", progress)
+        while len(Q) < cfg.grasp_count and attempts < MAX_ATTEMPTS_PER_GRASP * cfg.grasp_count:
+            attempts += 1
+            q = np.clip(hold + rng.uniform(-r, r, size=hold.shape), hand.lower, hand.upper)
+            quat = _quat_mul(yaw_quat(float(rng.uniform(-math.pi, math.pi))), rest)
+            scene.set_hand(q)
+            scene.new_object(pos, quat)
+            before = None
+            for k in range(steps):
+                scene.step()
+                if k + 1 == check:
+                    before = scene.read()
+            if _keep(scene, pos, before):
+                s = scene.read()
+                Q.append(s.q)
+                T.append(q)
+                P.append(s.obj_pos)
+                O.append(s.obj_quat)
+                bar.update(1)
+        bar.close()
+    finally:
+        scene.close()
+    if not Q:
+        raise GraspGenerationError(f"{hand.name} with {task.obj.name}: none of {attempts} perturbed grasps survived "
+                                   f"{cfg.settle_time} s (noise +-{r} rad)")
+    if len(Q) < cfg.grasp_count:
+        warnings.warn(f"{hand.name}: only {len(Q)} of {cfg.grasp_count} starting states after {attempts} attempts",
+                      stacklevel=2)
+    return GraspSet(np.array(Q), np.array(T), np.array(P), np.array(O), hold, attempts, cache_key(task))
+
+
+def load_or_generate(task: Task, progress: bool = False) -> GraspSet:
+    """The cached starting states of ``task`` (generated and cached on first use)."""
+    path = cache_path(task)
+    if path.is_file():
+        try:
+            gs = GraspSet.load(path)
+            if gs.key == cache_key(task):
+                return gs
+        except (OSError, ValueError, KeyError):
+            pass  # unreadable or foreign file: regenerate
+    gs = generate(task, progress)
+    gs.save(path)
+    return gs
+
+
+class _NoBar:
+    def update(self, n: int) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def _bar(total: int, desc: str, show: bool):
+    if not show:
+        return _NoBar()
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, leave=False)

@@ -1,0 +1,56 @@
+"""Pictures of rotation episodes: PyBullet's CPU renderer (TinyRenderer), strips and GIFs.
+
+A scene built with ``visual=True`` keeps the URDF's visual shapes (and gives the object one). The
+camera looks at the palm centre from above and the side (world +z is up in the picture).
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pybullet as pb
+
+from ohra.sim.rotation.scene import RotationScene
+
+
+def render(scene: RotationScene, size: int = 240, distance: float | None = None, yaw: float = 90.0,
+           pitch: float = -50.0) -> np.ndarray:
+    """(size, size, 3) uint8 RGB image of ``scene`` now (no display, no GPU)."""
+    c = scene.client
+    target = scene.palm_centre_world() + np.array([0.0, 0.0, scene.palm_top + scene.obj.half_height])
+    dist = distance if distance is not None else 3.0 * scene.palm_radius + 0.08
+    view = pb.computeViewMatrixFromYawPitchRoll(target.tolist(), dist, yaw, pitch, 0.0, 2, physicsClientId=c)
+    proj = pb.computeProjectionMatrixFOV(45.0, 1.0, 0.01, 5.0, physicsClientId=c)
+    img = pb.getCameraImage(size, size, view, proj, renderer=pb.ER_TINY_RENDERER, physicsClientId=c)
+    return np.reshape(np.asarray(img[2], dtype=np.uint8), (size, size, 4))[..., :3]
+
+
+def strip(frames: list[np.ndarray] | np.ndarray, border: int = 2) -> np.ndarray:
+    """Frames (N, H, W, 3) side by side with white gaps: one (H, N*(W+border)-border, 3) image."""
+    frames = np.asarray(frames)
+    n, h, w, _ = frames.shape
+    out = np.full((h, n * (w + border) - border, 3), 255, dtype=np.uint8)
+    for i in range(n):
+        out[:, i * (w + border):i * (w + border) + w] = frames[i]
+    return out
+
+
+def write_gif(frames: list[np.ndarray] | np.ndarray, path: str | Path, fps: float = 20.0) -> Path:
+    """Write an animated GIF (Pillow) atomically."""
+    from PIL import Image
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    images = [Image.fromarray(np.asarray(f, dtype=np.uint8)) for f in frames]
+    fd, tmp = tempfile.mkstemp(dir=str(path.parent), prefix=f".{path.name}.", suffix=".gif")
+    os.close(fd)
+    try:
+        images[0].save(tmp, save_all=True, append_images=images[1:], duration=int(round(1000 / fps)), loop=0)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path

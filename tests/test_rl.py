@@ -1,0 +1,87 @@
+"""Rotation policy training (SB3 PPO): settings, the adaptive learning rate, train -> resume -> evaluate."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from ohra.learn.rl.config import PPOSettings, RLConfigError
+
+sb3 = pytest.importorskip("stable_baselines3", reason="rotation training needs the rl extra (stable-baselines3)")
+pytest.importorskip("gymnasium", reason="rotation training needs the rl extra (gymnasium)")
+
+from ohra.learn.rl.train import adapt_learning_rate, train_rotation, with_budget  # noqa: E402
+from ohra.sim.rotation.config import RotationConfig  # noqa: E402
+
+
+def test_ppo_settings_reject_unknown_keys_and_ragged_batches():
+    with pytest.raises(RLConfigError, match="gama"):
+        PPOSettings.from_dict({"gama": 0.9})
+    with pytest.raises(RLConfigError, match="multiple of batch_size"):
+        PPOSettings(n_envs=2, n_steps=100, batch_size=64)
+    s = PPOSettings()
+    assert PPOSettings.from_dict(json.loads(json.dumps(s.to_dict()))) == s
+    assert (s.gamma, s.gae_lambda, s.clip_range, s.n_epochs, s.kl_target, s.net_arch) == (0.99, 0.95, 0.2, 5, 0.02, (512, 256, 128))
+
+
+@pytest.mark.parametrize("kl, expected", [(0.041, 1e-3 / 1.5), (0.039, 1e-3), (0.011, 1e-3), (0.009, 1.5e-3)])
+def test_adaptive_learning_rate_on_both_sides_of_each_threshold(kl, expected):
+    assert adapt_learning_rate(1e-3, kl, 0.02, (1e-6, 1e-2)) == pytest.approx(expected)
+
+
+def test_adaptive_learning_rate_stays_within_bounds():
+    assert adapt_learning_rate(1e-6, 1.0, 0.02, (1e-6, 1e-2)) == 1e-6
+    assert adapt_learning_rate(1e-2, 0.0, 0.02, (1e-6, 1e-2)) == 1e-2
+
+
+@pytest.fixture
+def tiny(tmp_path, monkeypatch):
+    monkeypatch.setenv("OHRA_CACHE_DIR", str(tmp_path / "cache"))
+    env_cfg = RotationConfig(grasp_count=4, episode_steps=24)
+    ppo = PPOSettings(total_steps=48, n_envs=1, n_steps=24, batch_size=24, n_epochs=1, net_arch=(32, 32),
+                      checkpoint_every=24)
+    return env_cfg, ppo, tmp_path / "run"
+
+
+@pytest.mark.slow  # ~15-50 s: PPO start-up, 4 updates, 2 evaluations, a rendered episode
+def test_train_resume_evaluate_and_plot_a_tiny_run(tiny):
+    from ohra.learn.rl.evaluate import Policy, evaluate_run, record_episode
+    from ohra.learn.rl.plots import read_progress, reward_curves
+
+    env_cfg, ppo, run = tiny
+    train_rotation(env_cfg, ppo, run)
+    first = read_progress(run)["timesteps"]
+    assert first[-1] == 48 and (run / "checkpoints" / "last.zip").is_file()
+    with pytest.raises(RLConfigError, match="already holds a run"):
+        train_rotation(env_cfg, ppo, run)
+    with pytest.raises(RLConfigError, match="environment config differs"):
+        train_rotation(env_cfg.with_overrides(friction=2.0), with_budget(ppo, 96), run, resume=True)
+    train_rotation(env_cfg, with_budget(ppo, total_steps=96), run, resume=True)
+    prog = read_progress(run)
+    assert list(prog["timesteps"]) == [24, 48, 72, 96]  # appended, continuing the step count
+    assert json.loads((run / "checkpoints" / "last.json").read_text())["timesteps"] == 96
+
+    res = evaluate_run(run, episodes=2, seed=10)
+    assert len(res.steps_to_fall) == 2 and all(0 < s <= 24 for s in res.steps_to_fall)
+    assert json.loads((run / "eval.json").read_text())["summary"]["steps_to_fall_mean"] == pytest.approx(
+        np.mean(res.steps_to_fall))
+    again = evaluate_run(run, episodes=2, seed=10, write=False)
+    assert again.cumulative_rotation == res.cumulative_rotation  # seeded, deterministic actions
+
+    ep = record_episode(run, run / "episode", seed=10, every=6, size=64)
+    assert (run / "episode" / "rollout.gif").stat().st_size > 0 and (run / "episode" / "strip.png").is_file()
+    from ohra.sim.rotation.task import resolve
+
+    assert np.load(ep["trajectory"])["q"].shape == (ep["steps"] + 1, len(resolve(env_cfg).hand.joints))
+    assert Policy(run).model.action_space.shape == (22,)
+    png = reward_curves({"a": [run], "b": [run, run]}, run / "curve.png")
+    assert png.stat().st_size > 0
+
+    from ohra.learn.rl.evaluate import export_policy
+
+    small = export_policy(run, run.parent / "export")
+    assert not list(small.glob("*.pkl")) and (small / "grasps.npz").is_file()
+    shipped = evaluate_run(small, episodes=2, seed=10, write=False)
+    assert shipped.cumulative_rotation == res.cumulative_rotation  # same weights, stats and starting states
