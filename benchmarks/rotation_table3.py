@@ -16,6 +16,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import RESULTS, write_results  # noqa: E402
 
+import numpy as np  # noqa: E402
+
 PAPER = {"leap_hand_right": {"canonical": (326.98, 6.31), "original": (397.62, 5.63)},
          "shadow_hand_right": {"canonical": (390.62, 10.92), "original": (369.66, 9.09)}}
 
@@ -47,15 +49,26 @@ def main(argv: list[str] | None = None) -> int:
                     f"{budget['steps'] / 1e3:.0f}k steps, {budget['minutes']:.0f} min, seed {budget['seed']} | "
                     f"{'%.1f / %.2f' % paper if paper else '-'} |")
         print(rows[-1], file=sys.stderr)
-    curve = reward_curves({k: [v] for k, v in runs.items()}, RESULTS / "rotation_curves.png",
+        zero = evaluate_policy(lambda o, n=pol.space_dim: np.zeros(n), cfg, args.episodes, args.seed,
+                               grasps=pol.grasps).summary()
+        data[label]["zero_actions"] = zero
+        rows.append(f"| (zero actions) | {cfg.hand} | {cfg.urdf} | {zero['steps_to_fall_mean']:.1f} +- "
+                    f"{zero['steps_to_fall_std']:.1f} | {zero['rotation_mean']:.2f} +- {zero['rotation_std']:.2f} | "
+                    f"{100 * zero['survived']:.0f} % | no training | - |")
+    groups = {k: [v] for k, v in runs.items()}
+    curve = reward_curves(groups, RESULTS / "rotation_curves.png",
                           title="PPO on in-hand rotation (cube, 20 Hz): canonical vs original URDF")
+    reward_curves(groups, RESULTS / "rotation_curves_rotation.png", key="rotation_mean",
+                  title="Rotation about +z per training episode")
     table = "\n".join([
         f"Rotation policies, {args.episodes} episodes each (seeds {args.seed}..{args.seed + args.episodes - 1}, "
         "deterministic actions, 400-step episodes). Steps-to-Fall: steps before the object falls or leaves "
         "(400 if it never does); Cumulative Rotation: radians about world +z per episode. Budget: PPO env "
-        "steps and wall minutes on the shared 2-core machine (other jobs running).", "",
+        "steps and wall minutes on the shared 2-core machine (other jobs running). \"(zero actions)\": the same "
+        "episodes with the targets held, the baseline a policy must beat (the grasps hold; the object creeps a little).", "",
         "| policy | hand | urdf | Steps-to-Fall | Cumulative Rotation [rad] | survived | budget | paper (steps / rad) |",
-        "|---|---|---|---|---|---|---|---|", *rows, "", f"Training curves: `{curve.relative_to(RESULTS.parent.parent)}`."])
+        "|---|---|---|---|---|---|---|---|", *rows, "",
+        f"Training curves: `{curve.relative_to(RESULTS.parent.parent)}` (return), `rotation_curves_rotation.png` (rotation)."])
     write_results("rotation_table3", {"episodes": args.episodes, "seed": args.seed, "runs": data}, table)
     return 0
 

@@ -75,7 +75,7 @@ def test_train_resume_evaluate_and_plot_a_tiny_run(tiny):
     from ohra.sim.rotation.task import resolve
 
     assert np.load(ep["trajectory"])["q"].shape == (ep["steps"] + 1, len(resolve(env_cfg).hand.joints))
-    assert Policy(run).model.action_space.shape == (22,)
+    assert Policy(run)._policy.action_space.shape == (22,)
     png = reward_curves({"a": [run], "b": [run, run]}, run / "curve.png")
     assert png.stat().st_size > 0
 

@@ -99,6 +99,11 @@ class Policy:
             if vn.norm_obs:
                 self._mean, self._var, self._clip, self._eps = vn.obs_rms.mean, vn.obs_rms.var, vn.clip_obs, vn.epsilon
 
+    @property
+    def space_dim(self) -> int:
+        """Size of the policy's action vector."""
+        return int(self._policy.action_space.shape[0])
+
     def normalize(self, obs: np.ndarray) -> np.ndarray:
         if self._mean is None:
             return obs

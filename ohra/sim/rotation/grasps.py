@@ -84,8 +84,9 @@ class GraspSet:
         fd, tmp = tempfile.mkstemp(dir=str(path.parent), prefix=f".{path.name}.", suffix=".npz")
         os.close(fd)
         try:
-            np.savez_compressed(tmp, q=self.q, target=self.target, obj_pos=self.obj_pos, obj_quat=self.obj_quat, hold=self.hold,
-                                attempts=self.attempts, key=self.key)
+            np.savez_compressed(tmp, q=self.q, target=self.target, obj_pos=self.obj_pos, obj_quat=self.obj_quat,
+                                hold=self.hold, attempts=self.attempts, key=self.key)
+            os.chmod(tmp, 0o644)  # mkstemp makes it private; the file is shared data
             os.replace(tmp, path)
         except BaseException:
             Path(tmp).unlink(missing_ok=True)

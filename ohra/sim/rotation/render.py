@@ -49,6 +49,7 @@ def write_gif(frames: list[np.ndarray] | np.ndarray, path: str | Path, fps: floa
     os.close(fd)
     try:
         images[0].save(tmp, save_all=True, append_images=images[1:], duration=int(round(1000 / fps)), loop=0)
+        os.chmod(tmp, 0o644)  # mkstemp makes it private
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
