@@ -1,0 +1,271 @@
+"""The 69-D morphology encoding (``rot6d69``): the thumb mount as a continuous rotation, and
+plausible stand-in values for parts a hand does not have.
+
+Layout (canonical key order of :class:`ohra.canonical.params.BaseParams`, as the 66-D reference
+encoding in :mod:`ohra.learn.encoding`, except for the thumb rotation):
+
+=========  ====  ================================================================================
+slice      size  content
+=========  ====  ================================================================================
+[0:29]     29    palm_radius, finger_radius, finger_lengths (6), finger_xyz (15),
+                 little_extra_origin (6) -- metres / radians
+[29:35]    6     thumb mounting rotation as rot6d: the first two columns of ``R(thumb_rpy)``
+[35:41]    6     one-hot of thumb_axes[0] over (+x, -x, +y, -y, +z, -z); a zero axis encodes as +x
+[41:47]    6     one-hot of thumb_axes[1]
+[47:69]    22    flags, 1 where joint_lowers != joint_uppers (the VAE's "present" = movable)
+=========  ====  ================================================================================
+
+Why (numbers in the README's VAE section): Euler angles wrap at +-pi and are singular at pitch
++-pi/2, where most registered thumbs sit, so a regression on them cannot be accurate; rot6d is
+continuous (Zhou et al., CVPR 2019). And where the 66-D encoding writes zeros for parts a hand lacks,
+this one writes stand-ins (:func:`fill_absent`): an absent finger's knuckle between or beyond its
+neighbours, an absent segment's length the mean of the hand's other segments, an absent little
+metacarpal frame the middle of the sampler's range. They are functions of the rest of the hand (no
+information to carry), and when a latent interpolation turns a finger on, it appears where a finger
+belongs instead of at the palm's origin.
+
+Decoding yields valid params (:func:`ohra.learn.encoding.project_vectors`) that also obey the
+plausibility rules of :mod:`ohra.learn.geometry` (:func:`project_plausible`).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ohra.learn.encoding import (
+    AXIS_CATEGORIES, LatentError, _as_batch, _limits, _spread_knuckles, axis_categories, project_vectors,
+)
+from ohra.learn.geometry import (
+    FINGER_ROWS, KNUCKLE_MIN_Z, finger_cores, finger_reach, matrix_from_rot6d, palm_centre, rot6d_from_matrix,
+    rotation_about, segment_distance, thumb_inwardness,
+)
+from ohra.learn.sampler import (
+    BASIS_AXES, DEFAULT_CONFIG, EXTRA, FINGER_RADIUS, LENGTHS, LOWERS, PALM, THUMB_AXES, THUMB_RPY, UPPERS, XYZ,
+)
+from ohra.transforms import matrix_to_rpy, rpy_to_matrix
+
+ENCODING_DIM = 69
+CONT_DIM = 35
+CONT = slice(0, 35)
+ROT6D = slice(29, 35)
+AXIS1 = slice(35, 41)
+AXIS2 = slice(41, 47)
+FLAGS = slice(47, 69)
+CONT_NAMES: tuple[str, ...] = (
+    "palm_radius", "finger_radius",
+    *(f"finger_lengths[{r}][{c}]" for r in range(2) for c in range(3)),
+    *(f"finger_xyz[{r}][{c}]" for r in range(5) for c in range(3)),
+    *(f"little_extra_origin[{c}]" for c in range(6)),
+    *(f"thumb_rot6d[{c}]" for c in range(6)),
+)
+THUMB_OUTWARD_EPS = 1e-6  # cosine the projection leaves between the thumb and the palm-centre direction
+CLEARANCE_MARGIN = 1e-6  # m of free space the projection leaves between two fingers' q = 0 cores
+_PASSES = 8  # projection rounds (turn the thumb out, push it off the fingers) before giving up
+
+
+# -- stand-ins for absent parts ----------------------------------------------------------------------
+def _side(v: np.ndarray) -> np.ndarray:
+    """+1 for right hands (thumb at +y, or index left of little), -1 for left ones; (N,)."""
+    xyz = v[:, XYZ].reshape(-1, 5, 3)
+    s = np.sign(xyz[:, 0, 1])
+    s = np.where(s == 0, np.sign(xyz[:, 1, 1] - xyz[:, 4, 1]), s)
+    return np.where(s == 0, 1.0, s)
+
+
+def _virtual_knuckles(xyz: np.ndarray, fingers: np.ndarray, r: np.ndarray, side: np.ndarray) -> None:
+    """In place: knuckles (N, 5, 3) of absent non-thumb fingers, interpolated between the nearest
+    present neighbours (in slot order index..little), or continued past the end of the row by the
+    row's mean step per slot (2.5 r towards the little side when only one finger is present)."""
+    n = len(xyz)
+    k = xyz[:, 1:]
+    pres = fingers[:, 1:]
+    slots = np.arange(4)
+    big = 99
+    first = np.where(pres.any(1), np.argmax(pres, 1), 0)
+    last = np.where(pres.any(1), 3 - np.argmax(pres[:, ::-1], 1), 0)
+    span = np.maximum(last - first, 1)
+    step = (k[np.arange(n), last] - k[np.arange(n), first]) / span[:, None]  # (N, 3) per slot
+    single = (last == first)
+    step[single] = 0.0
+    step[single, 1] = -2.5 * r[single] * side[single]
+    for s in range(4):
+        todo = ~pres[:, s] & pres.any(1)
+        if not todo.any():
+            continue
+        lo = np.where(pres & (slots < s), slots, -big).max(1)
+        hi = np.where(pres & (slots > s), slots, big).min(1)
+        both = todo & (lo >= 0) & (hi < big)
+        if both.any():
+            i = np.flatnonzero(both)
+            t = ((s - lo[i]) / (hi[i] - lo[i]))[:, None]
+            k[i, s] = k[i, lo[i]] + t * (k[i, hi[i]] - k[i, lo[i]])
+        for mask, end in ((todo & (lo >= 0) & (hi >= big), lo), (todo & (lo < 0) & (hi < big), hi)):
+            i = np.flatnonzero(mask)
+            if i.size:
+                k[i, s] = k[i, end[i]]
+                k[i, s, 1] += step[i, 1] * (s - end[i])
+
+
+def fill_absent(v82: Any) -> np.ndarray:
+    """Base vectors (N, 82) with stand-in values for parts without geometry (see module doc).
+
+    Only the encoding uses these values; :func:`decode_vectors` zeroes them again.
+    """
+    v = np.array(np.atleast_2d(v82), dtype=float, copy=True)
+    n = len(v)
+    present = (v[:, LOWERS] != 0.0) | (v[:, UPPERS] != 0.0)
+    reach, fingers = finger_reach(v)
+    side = _side(v)
+    L = v[:, LENGTHS].reshape(n, 2, 3)
+    has = L > 0
+    count = has.sum(2)  # (N, 2): thumb, non-thumb
+    mean = (L * has).sum(2) / np.maximum(count, 1)
+    none = count == 0
+    mean[none[:, 0], 0] = mean[none[:, 0], 1]  # a group without segments borrows the other's mean
+    mean[none[:, 1], 1] = mean[none[:, 1], 0]
+    mean[none.all(1)] = np.mean(DEFAULT_CONFIG.finger_lengths)
+    L = np.where(has, L, mean[:, :, None])
+    v[:, LENGTHS] = L.reshape(n, 6)
+    xyz = v[:, XYZ].reshape(n, 5, 3)
+    _virtual_knuckles(xyz, fingers, v[:, FINGER_RADIUS], side)
+    v[:, XYZ] = xyz.reshape(n, 15)
+    c = DEFAULT_CONFIG
+    mid = np.array([np.mean(c.extra_x), -np.mean(c.extra_y), np.mean(c.extra_z), np.mean(c.extra_roll),
+                    np.mean(c.extra_pitch), np.mean(c.extra_yaw)])
+    mirror = np.array([1.0, -1.0, 1.0, -1.0, 1.0, -1.0])
+    stand_in = np.where(side[:, None] > 0, mid, mid * mirror)
+    v[~present[:, 17], EXTRA] = stand_in[~present[:, 17]]
+    return v
+
+
+# -- encoding ---------------------------------------------------------------------------------------
+def encode_vectors(v82: Any, warn: bool = True) -> np.ndarray:
+    """Base vectors (82,) or (N, 82) -> encodings (69,) or (N, 69) (raw units, see module doc)."""
+    v, single = _as_batch(v82, 82, "base vector")
+    n = len(v)
+    f = fill_absent(v)
+    out = np.zeros((n, ENCODING_DIM))
+    out[:, 0:29] = f[:, 0:29]
+    out[:, ROT6D] = rot6d_from_matrix(rpy_to_matrix(v[:, THUMB_RPY]))
+    axes = v[:, THUMB_AXES].reshape(n, 2, 3)
+    names = [f"thumb_axes[{k}] of hand {i}" if n > 1 else f"thumb_axes[{k}]" for i in range(n) for k in range(2)]
+    cat = axis_categories(axes, warn=warn, names=names)
+    rows = np.arange(n)
+    out[rows, AXIS1.start + cat[:, 0]] = 1.0
+    out[rows, AXIS2.start + cat[:, 1]] = 1.0
+    out[:, FLAGS] = (v[:, LOWERS] != v[:, UPPERS]).astype(float)
+    return out[0] if single else out
+
+
+# -- decoding ---------------------------------------------------------------------------------------
+def decode_vectors(x69: Any, limits: Any = None) -> np.ndarray:
+    """Encodings (69,) or (N, 69) -> valid, plausible base vectors (82,) or (N, 82).
+
+    Axis groups may hold one-hot vectors, probabilities or logits (argmax); flags are present when
+    > 0.5; the rot6d block may be any 6 numbers (Gram-Schmidt). ``limits`` as in
+    :func:`ohra.learn.encoding.decode_vectors`.
+    """
+    x, single = _as_batch(x69, ENCODING_DIM, "encoding")
+    if not np.all(np.isfinite(x)):
+        raise LatentError("encoding has non-finite values")
+    n = len(x)
+    lo, up = _limits(limits, x[:, FLAGS] > 0.5)
+    v = np.zeros((n, 82))
+    v[:, 0:29] = x[:, 0:29]
+    v[:, THUMB_RPY] = matrix_to_rpy(matrix_from_rot6d(x[:, ROT6D]))
+    cats = np.stack([np.argmax(x[:, AXIS1], axis=1), np.argmax(x[:, AXIS2], axis=1)], axis=1)
+    v[:, THUMB_AXES] = BASIS_AXES[cats].reshape(n, 6)
+    v[:, LOWERS] = lo
+    v[:, UPPERS] = up
+    v = project_plausible(project_vectors(v))
+    return v[0] if single else v
+
+
+def _turn_thumbs_out(v: np.ndarray) -> None:
+    """In place: rotate thumbs that point into the palm by the smallest rotation that leaves their
+    direction just outside the half-space facing the palm centre (direction cosine -eps)."""
+    cos = thumb_inwardness(v)
+    rows = np.flatnonzero(cos > -THUMB_OUTWARD_EPS)
+    rows = rows[finger_reach(v[rows])[1][:, 0]] if rows.size else rows
+    if rows.size == 0:
+        return
+    R = rpy_to_matrix(v[rows, THUMB_RPY])
+    d = R[:, :, 2]
+    w = palm_centre(v[rows]) - v[rows, XYZ.start : XYZ.start + 3]
+    w /= np.maximum(np.linalg.norm(w, axis=1, keepdims=True), 1e-12)
+    target = d - (np.sum(d * w, 1) + THUMB_OUTWARD_EPS)[:, None] * w
+    nt = np.linalg.norm(target, axis=1, keepdims=True)
+    perp = np.cross(w, np.where(np.abs(w[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]]))
+    target = np.where(nt > 1e-9, target / np.maximum(nt, 1e-12), perp / np.linalg.norm(perp, axis=1, keepdims=True))
+    axis = np.cross(d, target)
+    s = np.linalg.norm(axis, axis=1)
+    angle = np.arctan2(s, np.sum(d * target, 1))
+    axis = np.where(s[:, None] > 1e-12, axis / np.maximum(s, 1e-12)[:, None], w)
+    v[rows, THUMB_RPY] = matrix_to_rpy(rotation_about(axis, angle) @ R)
+
+
+def _push_thumbs_off(v: np.ndarray) -> bool:
+    """In place: translate each thumb away from the finger it overlaps most (q = 0 cores), by the
+    overlap plus a margin. Returns whether any thumb moved."""
+    s, e, present = finger_cores(v)
+    two_r = 2.0 * v[:, FINGER_RADIUS]
+    worst = np.full(len(v), np.inf)
+    push = np.zeros((len(v), 3))
+    for j in FINGER_ROWS:
+        dist, cp, cq = segment_distance(s[:, 0], e[:, 0], s[:, j], e[:, j])
+        gap = dist - two_r
+        hit = present[:, 0] & present[:, j] & (gap < CLEARANCE_MARGIN) & (gap < worst)
+        if not hit.any():
+            continue
+        u = cp[hit] - cq[hit]
+        nu = np.linalg.norm(u, axis=1, keepdims=True)
+        # cores crossing: push sideways, perpendicular to both, towards the thumb's side of the hand
+        side = np.cross(e[hit, 0] - s[hit, 0], e[hit, j] - s[hit, j])
+        side *= np.sign(np.sum(side * (s[hit, 0] - s[hit, j]), 1, keepdims=True) + 1e-300)
+        ns = np.linalg.norm(side, axis=1, keepdims=True)
+        side = np.where(ns > 1e-12, side / np.maximum(ns, 1e-12), [[0.0, 1.0, 0.0]])
+        u = np.where(nu > 1e-9, u / np.maximum(nu, 1e-12), side)
+        worst[hit] = gap[hit]
+        push[hit] = u * (CLEARANCE_MARGIN - gap[hit] + 1e-7)[:, None]
+    moved = np.isfinite(worst)
+    v[moved, XYZ.start : XYZ.start + 3] += push[moved]
+    return bool(moved.any())
+
+
+def project_plausible(v82: np.ndarray) -> np.ndarray:
+    """Valid base vectors (N, 82) -> the same hands obeying the rules of :mod:`ohra.learn.geometry`.
+
+    1. every present non-thumb knuckle at least as high as the sampler's lowest one (so never
+       inside the palm), and neighbouring knuckles more than one finger diameter apart;
+    2. a thumb pointing into the palm is turned out by the smallest rotation;
+    3. a thumb overlapping a finger at q = 0 is moved off it (repeated, with step 2, a few rounds).
+
+    Every step is continuous in the input, so a smooth latent path stays smooth, and it leaves a
+    hand that already obeys the rules with these margins unchanged (bit for bit).
+    """
+    v = np.array(v82, dtype=float, copy=True)
+    n = len(v)
+    _, fingers = finger_reach(v)
+    R = v[:, PALM]
+    floor = np.maximum(DEFAULT_CONFIG.knuckle_z_bounds(R)[0], KNUCKLE_MIN_Z * R)
+    xyz = v[:, XYZ].reshape(n, 5, 3)
+    low = fingers[:, 1:] & (xyz[:, 1:, 2] < floor[:, None])
+    if low.any():
+        k = xyz[:, 1:, 2]
+        k[low] = np.broadcast_to(floor[:, None], k.shape)[low]
+        xyz[:, 1:, 2] = k
+    _spread_knuckles(xyz, fingers, v[:, FINGER_RADIUS] + CLEARANCE_MARGIN / 2.0, 0.0)
+    v[:, XYZ] = xyz.reshape(n, 15)
+    for _ in range(_PASSES):
+        _turn_thumbs_out(v)
+        if not _push_thumbs_off(v):
+            break
+    return v
+
+
+__all__ = [
+    "ENCODING_DIM", "CONT_DIM", "CONT", "ROT6D", "AXIS1", "AXIS2", "FLAGS", "CONT_NAMES", "AXIS_CATEGORIES",
+    "fill_absent", "encode_vectors", "decode_vectors", "project_plausible",
+]
