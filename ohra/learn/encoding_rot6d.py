@@ -30,16 +30,18 @@ plausibility rules of :mod:`ohra.learn.geometry` (:func:`project_plausible`).
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
 
 from ohra.learn.encoding import (
-    AXIS_CATEGORIES, LatentError, _as_batch, _limits, _spread_knuckles, axis_categories, project_vectors,
+    AXIS_CATEGORIES, DECODE_LOWER, DECODE_UPPER, LatentError, _as_batch, _limits, _spread_knuckles, axis_categories,
+    project_vectors,
 )
 from ohra.learn.geometry import (
     FINGER_ROWS, KNUCKLE_MIN_Z, finger_cores, finger_reach, matrix_from_rot6d, palm_centre, rot6d_from_matrix,
-    rotation_about, segment_distance, thumb_inwardness,
+    rotation_about, segment_distance, thumb_clearance, thumb_inwardness,
 )
 from ohra.learn.sampler import (
     BASIS_AXES, DEFAULT_CONFIG, EXTRA, FINGER_RADIUS, LENGTHS, LOWERS, PALM, THUMB_AXES, THUMB_RPY, UPPERS, XYZ,
@@ -62,7 +64,7 @@ CONT_NAMES: tuple[str, ...] = (
 )
 THUMB_OUTWARD_EPS = 1e-6  # cosine the projection leaves between the thumb and the palm-centre direction
 CLEARANCE_MARGIN = 1e-6  # m of free space the projection leaves between two fingers' q = 0 cores
-_PASSES = 8  # projection rounds (turn the thumb out, push it off the fingers) before giving up
+_PASSES = 20  # projection rounds (turn the thumb out, push it off the fingers) before the fallback
 
 
 # -- stand-ins for absent parts ----------------------------------------------------------------------
@@ -187,7 +189,7 @@ def _turn_thumbs_out(v: np.ndarray) -> None:
     """In place: rotate thumbs that point into the palm by the smallest rotation that leaves their
     direction just outside the half-space facing the palm centre (direction cosine -eps)."""
     cos = thumb_inwardness(v)
-    rows = np.flatnonzero(cos > -THUMB_OUTWARD_EPS)
+    rows = np.flatnonzero(cos > -THUMB_OUTWARD_EPS / 2)  # half the target: a turned thumb is not turned again
     rows = rows[finger_reach(v[rows])[1][:, 0]] if rows.size else rows
     if rows.size == 0:
         return
@@ -195,10 +197,12 @@ def _turn_thumbs_out(v: np.ndarray) -> None:
     d = R[:, :, 2]
     w = palm_centre(v[rows]) - v[rows, XYZ.start : XYZ.start + 3]
     w /= np.maximum(np.linalg.norm(w, axis=1, keepdims=True), 1e-12)
-    target = d - (np.sum(d * w, 1) + THUMB_OUTWARD_EPS)[:, None] * w
-    nt = np.linalg.norm(target, axis=1, keepdims=True)
+    u = d - np.sum(d * w, 1, keepdims=True) * w  # d's part perpendicular to w
+    nu = np.linalg.norm(u, axis=1, keepdims=True)
     perp = np.cross(w, np.where(np.abs(w[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]]))
-    target = np.where(nt > 1e-9, target / np.maximum(nt, 1e-12), perp / np.linalg.norm(perp, axis=1, keepdims=True))
+    u = np.where(nu > 1e-9, u / np.maximum(nu, 1e-12), perp / np.linalg.norm(perp, axis=1, keepdims=True))
+    eps = THUMB_OUTWARD_EPS
+    target = math.sqrt(1.0 - eps * eps) * u - eps * w  # unit, at cosine exactly -eps to w
     axis = np.cross(d, target)
     s = np.linalg.norm(axis, axis=1)
     angle = np.arctan2(s, np.sum(d * target, 1))
@@ -216,7 +220,7 @@ def _push_thumbs_off(v: np.ndarray) -> bool:
     for j in FINGER_ROWS:
         dist, cp, cq = segment_distance(s[:, 0], e[:, 0], s[:, j], e[:, j])
         gap = dist - two_r
-        hit = present[:, 0] & present[:, j] & (gap < CLEARANCE_MARGIN) & (gap < worst)
+        hit = present[:, 0] & present[:, j] & (gap < CLEARANCE_MARGIN / 2) & (gap < worst)
         if not hit.any():
             continue
         u = cp[hit] - cq[hit]
@@ -230,7 +234,8 @@ def _push_thumbs_off(v: np.ndarray) -> bool:
         worst[hit] = gap[hit]
         push[hit] = u * (CLEARANCE_MARGIN - gap[hit] + 1e-7)[:, None]
     moved = np.isfinite(worst)
-    v[moved, XYZ.start : XYZ.start + 3] += push[moved]
+    b = slice(XYZ.start, XYZ.start + 3)
+    v[moved, b] = np.clip(v[moved, b] + push[moved], DECODE_LOWER[b], DECODE_UPPER[b])  # stay in the decoding box
     return bool(moved.any())
 
 
@@ -240,10 +245,12 @@ def project_plausible(v82: np.ndarray) -> np.ndarray:
     1. every present non-thumb knuckle at least as high as the sampler's lowest one (so never
        inside the palm), and neighbouring knuckles more than one finger diameter apart;
     2. a thumb pointing into the palm is turned out by the smallest rotation;
-    3. a thumb overlapping a finger at q = 0 is moved off it (repeated, with step 2, a few rounds).
+    3. a thumb overlapping a finger at q = 0 is moved off it (repeated, with step 2, some rounds);
+    4. a thumb still stuck (jammed between fingers) is tucked below the knuckles, pointing to the
+       wrist (:func:`_tuck_stuck_thumbs`; a jump, only for hands far outside the training data).
 
-    Every step is continuous in the input, so a smooth latent path stays smooth, and it leaves a
-    hand that already obeys the rules with these margins unchanged (bit for bit).
+    Steps 1-3 are continuous in the input, so a smooth latent path stays smooth, and a hand that
+    already obeys the rules with these margins comes back unchanged (bit for bit).
     """
     v = np.array(v82, dtype=float, copy=True)
     n = len(v)
@@ -262,7 +269,33 @@ def project_plausible(v82: np.ndarray) -> np.ndarray:
         _turn_thumbs_out(v)
         if not _push_thumbs_off(v):
             break
+    _turn_thumbs_out(v)  # the last push may have turned a thumb inwards
+    _tuck_stuck_thumbs(v, floor)
     return v
+
+
+def _tuck_stuck_thumbs(v: np.ndarray, floor: np.ndarray) -> None:
+    """In place, the fallback for thumbs the rounds above leave touching a finger or pointing in
+    (a thumb jammed between fingers): lower the thumb base below every knuckle and point the thumb
+    straight towards the wrist (-z) by the smallest rotation. Such a thumb cannot reach a finger
+    (fingers rise from their knuckles) and points away from the palm centre above it."""
+    _, fingers = finger_reach(v)
+    stuck = fingers[:, 0] & ((thumb_clearance(v) < CLEARANCE_MARGIN / 2) | (thumb_inwardness(v) > -THUMB_OUTWARD_EPS / 2))
+    rows = np.flatnonzero(stuck)
+    if rows.size == 0:
+        return
+    z_min = np.where(fingers[rows, 1:], v[rows, XYZ].reshape(-1, 5, 3)[:, 1:, 2], np.inf).min(axis=1)
+    z_min = np.minimum(z_min, floor[rows])
+    b = XYZ.start + 2
+    v[rows, b] = np.maximum(np.minimum(v[rows, b], z_min - v[rows, FINGER_RADIUS] - 2 * CLEARANCE_MARGIN), DECODE_LOWER[b])
+    R = rpy_to_matrix(v[rows, THUMB_RPY])
+    d = R[:, :, 2]
+    down = np.array([0.0, 0.0, -1.0])
+    axis = np.cross(d, down)
+    s = np.linalg.norm(axis, axis=1)
+    angle = np.arctan2(s, d @ down)
+    axis = np.where(s[:, None] > 1e-12, axis / np.maximum(s, 1e-12)[:, None], [[1.0, 0.0, 0.0]])
+    v[rows, THUMB_RPY] = matrix_to_rpy(rotation_about(axis, angle) @ R)
 
 
 __all__ = [

@@ -167,14 +167,16 @@ def segment_distance(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndar
     c = np.sum(d1 * r, -1)
     b = np.sum(d1 * d2, -1)
     eps = 1e-18
+    safe = lambda x: np.where(x > eps, x, 1.0)  # noqa: E731
     denom = a * e - b * b
-    s = np.where(denom > eps, np.clip((b * f - c * e) / np.where(denom > eps, denom, 1.0), 0.0, 1.0), 0.0)
-    s = np.where(a <= eps, 0.0, s)
-    t = np.where(e > eps, (b * s + f) / np.where(e > eps, e, 1.0), 0.0)
-    # t outside [0, 1]: clamp it and recompute s
+    # general case: closest points of the infinite lines, s clamped, then t from s
+    s = np.where(denom > eps, np.clip((b * f - c * e) / safe(denom), 0.0, 1.0), 0.0)
+    s = np.where(e <= eps, np.clip(-c / safe(a), 0.0, 1.0), s)  # q degenerate: closest point of p to q0
+    s = np.where(a <= eps, 0.0, s)  # p degenerate
+    t = np.where(e > eps, (b * s + f) / safe(e), 0.0)
+    # t outside [0, 1]: clamp it and recompute s for the clamped t
     t_c = np.clip(t, 0.0, 1.0)
-    s_new = np.where(a > eps, np.clip((b * t_c - c) / np.where(a > eps, a, 1.0), 0.0, 1.0), 0.0)
-    s = np.where((t < 0.0) | (t > 1.0), s_new, s)
+    s = np.where((t < 0.0) | (t > 1.0), np.where(a > eps, np.clip((b * t_c - c) / safe(a), 0.0, 1.0), 0.0), s)
     t = t_c
     cp = p0 + d1 * s[..., None]
     cq = q0 + d2 * t[..., None]

@@ -32,12 +32,18 @@ from ohra.learn.vae import MorphologyVAE, VAEConfig
 
 HandLike = Union[str, Path, BaseParams, ExtendedParams]
 DEFAULT_MODEL = "vae_default"
+REFERENCE_MODEL = "vae_reference66"  # the paper-setting model shipped before, kept for comparison
 _BIG = 1e6  # replaces infinities in decoder outputs before projection (then clipped to the bounds)
 
 
 def default_model_dir() -> Path:
     """Folder of the model shipped with the package."""
     return Path(str(resources.files("ohra.learn").joinpath("models", DEFAULT_MODEL)))
+
+
+def reference_model_dir() -> Path:
+    """Folder of the kept reference model (66-D encoding, paper settings)."""
+    return Path(str(resources.files("ohra.learn").joinpath("models", REFERENCE_MODEL)))
 
 
 def resolve_hand(hand: HandLike) -> BaseParams:
@@ -154,24 +160,32 @@ class VAEBundle:
         assert isinstance(params, list)
         names = [str(a) if isinstance(a, (str, Path)) else "hand_a", str(b) if isinstance(b, (str, Path)) else "hand_b"]
         return Interpolation(alphas, z, params, [render(p, robot_name=f"vae_interp_{i}") for i, p in enumerate(params)],
-                             tuple(Path(x).stem for x in names))
+                             tuple(Path(x).stem for x in names), (resolve_hand(a), resolve_hand(b)))
 
 
 @dataclass
 class Interpolation:
-    """A latent interpolation: ``alphas`` (n,), latents ``z`` (n, d), decoded ``params`` and their ``urdfs``."""
+    """A latent interpolation: ``alphas`` (n,), latents ``z`` (n, d), decoded ``params`` and their
+    ``urdfs``; ``originals`` are the two hands it was made from (base form), for pictures."""
 
     alphas: np.ndarray
     z: np.ndarray
     params: list[BaseParams]
     urdfs: list[str]
     endpoints: tuple[str, str] = ("hand_a", "hand_b")
+    originals: tuple[BaseParams, BaseParams] | None = None
 
     def __len__(self) -> int:
         return len(self.params)
 
     def labels(self) -> list[str]:
         return [f"{i}: a={a:.2f}" for i, a in enumerate(self.alphas)]
+
+    def labelled_originals(self) -> list[tuple[str, BaseParams]] | None:
+        """``[("original <a>", params_a), ("original <b>", params_b)]`` for :func:`ohra.learn.strip.strip_png`."""
+        if self.originals is None:
+            return None
+        return [(f"original {name}", p) for name, p in zip(self.endpoints, self.originals)]
 
     def write(self, out_dir: str | Path, stem: str = "interp") -> list[Path]:
         """Write ``<stem>_<i>.urdf`` and ``<stem>_<i>.json`` (params) for every step; returns the URDF paths."""
