@@ -1,4 +1,4 @@
-"""The 69-D rot6d encoding: layout, exact round trips, stand-ins for absent parts, plausible decoding."""
+"""The 70-D rot6d encoding: layout, exact round trips, stand-ins for absent parts, plausible decoding."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from ohra.learn import encoding_rot6d as E
 from ohra.learn import geometry as geo
 from ohra.learn.encoding import LatentError, project_vectors
 from ohra.learn.encodings import ENCODINGS, get_encoding
-from ohra.learn.sampler import EXTRA, LENGTHS, LOWERS, THUMB_RPY, UPPERS, XYZ, sample_vectors
+from ohra.learn.sampler import EXTRA, LENGTHS, LOWERS, THUMB_RPY, UPPERS, XYZ, mirror_vectors, sample_vectors
 from ohra.transforms import rpy_to_matrix
 
 
@@ -33,16 +33,29 @@ def _limits(v):
     return (v[:, LOWERS], v[:, UPPERS])
 
 
-def test_layout_of_a_sampled_hand():
-    v = sample_vectors(1, 3)[0]
+def test_layout_of_sampled_right_and_left_hands():
+    v, right = sample_vectors(40, 3, return_handedness=True)
     x = E.encode_vectors(v)
-    assert x.shape == (69,) and E.CONT_DIM + 12 + 22 == 69
-    assert np.allclose(x[E.ROT6D], rpy_to_matrix(v[THUMB_RPY])[:, :2].T.reshape(6))
-    assert x[E.AXIS1].sum() == 1 and x[E.AXIS2].sum() == 1
-    assert np.array_equal(x[E.FLAGS], (v[LOWERS] != v[UPPERS]).astype(float))
-    assert get_encoding("rot6d69").dim == 69 and set(ENCODINGS) == {"reference66", "rot6d69"}
-    with pytest.raises(OhraError, match="known: reference66, rot6d69"):
+    assert x.shape == (40, 70) and E.CONT_DIM + 12 + 22 + 1 == 70
+    assert np.array_equal(x[:, E.LEFT.start], (~right).astype(float))
+    assert np.array_equal(E.is_left(v), ~right)
+    i = int(np.flatnonzero(right)[0])
+    assert np.allclose(x[i, E.ROT6D], rpy_to_matrix(v[i, THUMB_RPY])[:, :2].T.reshape(6))
+    assert np.array_equal(x[i, 0:29][[8, 9, 10]], v[i, XYZ][:3])
+    # a left hand encodes as its mirror image, a right hand, plus the flag
+    j = int(np.flatnonzero(~right)[0])
+    assert np.array_equal(x[j, :69], E.encode_vectors(mirror_vectors(v[j : j + 1]))[0, :69])
+    assert np.all(x[:, E.AXIS1].sum(1) == 1) and np.all(x[:, E.AXIS2].sum(1) == 1)
+    assert np.array_equal(x[:, E.FLAGS], (v[:, LOWERS] != v[:, UPPERS]).astype(float))
+    assert get_encoding("rot6d70").dim == 70 and set(ENCODINGS) == {"reference66", "rot6d70"}
+    with pytest.raises(OhraError, match="known: reference66, rot6d70"):
         get_encoding("euler")
+
+
+def test_handedness_follows_base_params():
+    hands = _registered() + [BaseParams.from_vector(r) for r in sample_vectors(30, 12)]
+    v = np.stack([p.to_vector() for p in hands])
+    assert E.is_left(v).tolist() == [p.handedness == "left" for p in hands]
 
 
 def test_round_trip_is_exact_for_sampled_hands_with_their_limits():
@@ -83,7 +96,8 @@ def test_stand_ins_for_absent_parts_are_plausible_and_decoding_removes_them():
     assert np.all(np.diff(kf[right, 1:, 1], axis=1) < 0)
     assert np.all(f[:, LENGTHS] > 0) and np.all(f[~present[:, 17]][:, EXTRA][:, 3] != 0)
     x = E.encode_vectors(v)
-    assert np.array_equal(x[:, 0:29], f[:, 0:29])
+    r = ~E.is_left(v)
+    assert np.array_equal(x[r, 0:29], f[r, 0:29])
     assert np.abs(E.decode_vectors(x, limits=_limits(v)) - v).max() < 1e-12
 
 
@@ -91,7 +105,7 @@ def test_stand_ins_for_absent_parts_are_plausible_and_decoding_removes_them():
 def test_decoding_any_encoding_gives_valid_plausible_hands(scale):
     rng = np.random.default_rng(int(100 * scale))
     cont = rng.normal(0.0, scale, (300, 35)) + np.r_[0.05, 0.01, [0.04] * 6, [0, 0.02, 0.08] * 5, [0.0] * 12]
-    x = np.concatenate([cont, rng.normal(size=(300, 12)), rng.random((300, 22))], axis=1)
+    x = np.concatenate([cont, rng.normal(size=(300, 12)), rng.random((300, 23))], axis=1)
     v = E.decode_vectors(x)
     for row in v:
         BaseParams.from_vector(row)
@@ -100,13 +114,18 @@ def test_decoding_any_encoding_gives_valid_plausible_hands(scale):
     assert (geo.finger_clearance(v) >= 0).all()
     coal = [HandModel.from_params(BaseParams.from_vector(r)).self_collision(np.zeros(22)) for r in v[:80]]
     assert not any(coal)
-    assert np.array_equal(E.project_plausible(project_vectors(v)), v), "projection is idempotent"
+    left = x[:, E.LEFT.start] > 0.5
+    again = v.copy()
+    again[left] = mirror_vectors(v[left])
+    again = E.project_plausible(project_vectors(again))
+    again[left] = mirror_vectors(again[left])
+    assert np.array_equal(again, v), "projection is idempotent"
 
 
 def test_projection_is_continuous_along_a_path():
     """A fine straight path between two random encodings moves no fingertip by a jump."""
     rng = np.random.default_rng(9)
-    a, b = (np.concatenate([rng.normal(0, 0.03, 35) + 0.03, rng.normal(size=12), np.ones(22)]) for _ in range(2))
+    a, b = (np.concatenate([rng.normal(0, 0.03, 35) + 0.03, rng.normal(size=12), np.ones(22), [0.0]]) for _ in range(2))
     t = np.linspace(0, 1, 401)[:, None]
     v = E.decode_vectors((1 - t) * a + t * b)
     tips = geo.tips_q0(v)
@@ -136,13 +155,15 @@ def test_projection_turns_an_inward_thumb_out_by_the_smallest_rotation():
     assert np.abs(geo.thumb_inwardness(fixed) + E.THUMB_OUTWARD_EPS).max() < 2e-7  # rpy storage near pitch +-pi/2
     keep = np.ones(82, bool)
     keep[THUMB_RPY] = False
+    keep[XYZ.start : XYZ.start + 3] = False  # a turned thumb that then touches a finger is moved off it
     assert np.array_equal(fixed[:, keep], flipped[:, keep])
+    assert np.mean(np.all(fixed[:, XYZ.start : XYZ.start + 3] == flipped[:, XYZ.start : XYZ.start + 3], axis=1)) > 0.8
 
 
 def test_bad_inputs_raise_latent_errors():
-    with pytest.raises(LatentError, match=r"\(69,\)"):
+    with pytest.raises(LatentError, match=r"\(70,\)"):
         E.decode_vectors(np.zeros(66))
     with pytest.raises(LatentError, match="non-finite"):
-        E.decode_vectors(np.full(69, np.inf))
+        E.decode_vectors(np.full(70, np.inf))
     with pytest.raises(LatentError, match=r"\(82,\)"):
         E.encode_vectors(np.zeros((2, 80)))

@@ -32,7 +32,7 @@ class TrainConfig:
     checkpoint_every: int = 10  # epochs
     threads: int = 1  # torch CPU threads (results are reproducible for a fixed value; on 2 shared cores 1 is fastest)
     heldout: int = 8192  # held-out hands for the final metrics (0: none)
-    encoding: str = "rot6d69"  # see ohra.learn.encodings
+    encoding: str = "rot6d70"  # see ohra.learn.encodings
     cont_weight: float = 1.0  # weight of the continuous MSE (standardised units, mean over values)
     rot_weight: float = 0.0  # weight of the thumb-rotation term (GeometryLoss)
     tip_weight: float = 0.0  # weight of the q = 0 fingertip term (GeometryLoss, 1 cm units)

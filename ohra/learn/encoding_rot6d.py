@@ -1,11 +1,11 @@
-"""The 69-D morphology encoding (``rot6d69``): the thumb mount as a continuous rotation, and
-plausible stand-in values for parts a hand does not have.
+"""The 70-D morphology encoding (``rot6d70``): every hand as a right hand plus a handedness flag,
+the thumb mount as a continuous rotation, and plausible stand-in values for parts a hand lacks.
 
 Layout (canonical key order of :class:`ohra.canonical.params.BaseParams`, as the 66-D reference
-encoding in :mod:`ohra.learn.encoding`, except for the thumb rotation):
+encoding in :mod:`ohra.learn.encoding`, except for the thumb rotation and the last value):
 
 =========  ====  ================================================================================
-slice      size  content
+slice      size  content (of the hand mirrored to a right hand when it is a left one)
 =========  ====  ================================================================================
 [0:29]     29    palm_radius, finger_radius, finger_lengths (6), finger_xyz (15),
                  little_extra_origin (6) -- metres / radians
@@ -13,19 +13,26 @@ slice      size  content
 [35:41]    6     one-hot of thumb_axes[0] over (+x, -x, +y, -y, +z, -z); a zero axis encodes as +x
 [41:47]    6     one-hot of thumb_axes[1]
 [47:69]    22    flags, 1 where joint_lowers != joint_uppers (the VAE's "present" = movable)
+[69]       1     1 for a left hand (mirrored through the palm's x-z plane to encode it)
 =========  ====  ================================================================================
 
-Why (numbers in the README's VAE section): Euler angles wrap at +-pi and are singular at pitch
-+-pi/2, where most registered thumbs sit, so a regression on them cannot be accurate; rot6d is
-continuous (Zhou et al., CVPR 2019). And where the 66-D encoding writes zeros for parts a hand lacks,
-this one writes stand-ins (:func:`fill_absent`): an absent finger's knuckle between or beyond its
-neighbours, an absent segment's length the mean of the hand's other segments, an absent little
-metacarpal frame the middle of the sampler's range. They are functions of the rest of the hand (no
-information to carry), and when a latent interpolation turns a finger on, it appears where a finger
-belongs instead of at the palm's origin.
+Why (numbers in the README's VAE section):
+
+* Euler angles wrap at +-pi and are singular at pitch +-pi/2, where most registered thumbs sit, so
+  a regression on them cannot be accurate; rot6d is continuous (Zhou et al., CVPR 2019).
+* Left and right hands are mirror images; encoding both as right hands lets the VAE spend its
+  capacity on one family of shapes, and keeps a path between two left hands away from right-hand
+  shapes (where the thumb sits on the other side and would swing across the palm).
+* Where the 66-D encoding writes zeros for parts a hand lacks, this one writes stand-ins
+  (:func:`fill_absent`): an absent finger's knuckle between or beyond its neighbours, an absent
+  segment's length the mean of the hand's other segments, an absent little metacarpal frame the
+  middle of the sampler's range. They are functions of the rest of the hand (no information to
+  carry), and when a latent interpolation turns a finger on, it appears where a finger belongs
+  instead of at the palm's origin.
 
 Decoding yields valid params (:func:`ohra.learn.encoding.project_vectors`) that also obey the
-plausibility rules of :mod:`ohra.learn.geometry` (:func:`project_plausible`).
+plausibility rules of :mod:`ohra.learn.geometry` (:func:`project_plausible`; the rules are
+mirror-symmetric, so it runs on the right-hand form).
 """
 
 from __future__ import annotations
@@ -45,16 +52,18 @@ from ohra.learn.geometry import (
 )
 from ohra.learn.sampler import (
     BASIS_AXES, DEFAULT_CONFIG, EXTRA, FINGER_RADIUS, LENGTHS, LOWERS, PALM, THUMB_AXES, THUMB_RPY, UPPERS, XYZ,
+    mirror_vectors,
 )
 from ohra.transforms import matrix_to_rpy, rpy_to_matrix
 
-ENCODING_DIM = 69
+ENCODING_DIM = 70
 CONT_DIM = 35
 CONT = slice(0, 35)
 ROT6D = slice(29, 35)
 AXIS1 = slice(35, 41)
 AXIS2 = slice(41, 47)
 FLAGS = slice(47, 69)
+LEFT = slice(69, 70)
 CONT_NAMES: tuple[str, ...] = (
     "palm_radius", "finger_radius",
     *(f"finger_lengths[{r}][{c}]" for r in range(2) for c in range(3)),
@@ -143,10 +152,26 @@ def fill_absent(v82: Any) -> np.ndarray:
 
 
 # -- encoding ---------------------------------------------------------------------------------------
+def is_left(v82: Any) -> np.ndarray:
+    """(N,) True for left hands: by the thumb base's side (+y: right), else by the little finger's
+    (-y: right), else by the index's (+y: right), as :attr:`BaseParams.handedness`; right if none."""
+    v = np.atleast_2d(np.asarray(v82, dtype=float))
+    _, fingers = finger_reach(v)
+    y = v[:, XYZ].reshape(-1, 5, 3)[:, :, 1]
+    side = np.zeros(len(v))
+    for f, right_sign in ((1, 1.0), (4, -1.0), (0, 1.0)):  # lowest priority first, overwritten by higher ones
+        ok = fingers[:, f] & (y[:, f] != 0.0)
+        side[ok] = right_sign * np.sign(y[ok, f])
+    return side < 0
+
+
 def encode_vectors(v82: Any, warn: bool = True) -> np.ndarray:
-    """Base vectors (82,) or (N, 82) -> encodings (69,) or (N, 69) (raw units, see module doc)."""
+    """Base vectors (82,) or (N, 82) -> encodings (70,) or (N, 70) (raw units, see module doc)."""
     v, single = _as_batch(v82, 82, "base vector")
     n = len(v)
+    left = is_left(v)
+    v = v.copy()
+    v[left] = mirror_vectors(v[left])
     f = fill_absent(v)
     out = np.zeros((n, ENCODING_DIM))
     out[:, 0:29] = f[:, 0:29]
@@ -158,18 +183,19 @@ def encode_vectors(v82: Any, warn: bool = True) -> np.ndarray:
     out[rows, AXIS1.start + cat[:, 0]] = 1.0
     out[rows, AXIS2.start + cat[:, 1]] = 1.0
     out[:, FLAGS] = (v[:, LOWERS] != v[:, UPPERS]).astype(float)
+    out[:, LEFT.start] = left.astype(float)
     return out[0] if single else out
 
 
 # -- decoding ---------------------------------------------------------------------------------------
-def decode_vectors(x69: Any, limits: Any = None) -> np.ndarray:
-    """Encodings (69,) or (N, 69) -> valid, plausible base vectors (82,) or (N, 82).
+def decode_vectors(x70: Any, limits: Any = None) -> np.ndarray:
+    """Encodings (70,) or (N, 70) -> valid, plausible base vectors (82,) or (N, 82).
 
-    Axis groups may hold one-hot vectors, probabilities or logits (argmax); flags are present when
-    > 0.5; the rot6d block may be any 6 numbers (Gram-Schmidt). ``limits`` as in
+    Axis groups may hold one-hot vectors, probabilities or logits (argmax); flags and the left flag
+    are set when > 0.5; the rot6d block may be any 6 numbers (Gram-Schmidt). ``limits`` as in
     :func:`ohra.learn.encoding.decode_vectors`.
     """
-    x, single = _as_batch(x69, ENCODING_DIM, "encoding")
+    x, single = _as_batch(x70, ENCODING_DIM, "encoding")
     if not np.all(np.isfinite(x)):
         raise LatentError("encoding has non-finite values")
     n = len(x)
@@ -182,6 +208,8 @@ def decode_vectors(x69: Any, limits: Any = None) -> np.ndarray:
     v[:, LOWERS] = lo
     v[:, UPPERS] = up
     v = project_plausible(project_vectors(v))
+    left = x[:, LEFT.start] > 0.5
+    v[left] = mirror_vectors(v[left])
     return v[0] if single else v
 
 
@@ -299,6 +327,6 @@ def _tuck_stuck_thumbs(v: np.ndarray, floor: np.ndarray) -> None:
 
 
 __all__ = [
-    "ENCODING_DIM", "CONT_DIM", "CONT", "ROT6D", "AXIS1", "AXIS2", "FLAGS", "CONT_NAMES", "AXIS_CATEGORIES",
-    "fill_absent", "encode_vectors", "decode_vectors", "project_plausible",
+    "ENCODING_DIM", "CONT_DIM", "CONT", "ROT6D", "AXIS1", "AXIS2", "FLAGS", "LEFT", "CONT_NAMES", "AXIS_CATEGORIES",
+    "is_left", "fill_absent", "encode_vectors", "decode_vectors", "project_plausible",
 ]

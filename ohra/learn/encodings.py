@@ -2,8 +2,8 @@
 
 ``reference66``: the paper's 66-D layout (:mod:`ohra.learn.encoding`; thumb mount as Euler rpy,
 zeros for absent parts), kept so that models trained on it load and compare.
-``rot6d69``: the 69-D layout of :mod:`ohra.learn.encoding_rot6d` (thumb mount as rot6d, stand-ins
-for absent parts, plausible decoding), the default.
+``rot6d70``: the 70-D layout of :mod:`ohra.learn.encoding_rot6d` (right-hand form plus a left flag,
+thumb mount as rot6d, stand-ins for absent parts, plausible decoding), the default.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from ohra.learn import encoding_rot6d as r6
 from ohra.learn.geometry import matrix_from_rot6d
 from ohra.transforms import rpy_to_matrix
 
-DEFAULT_ENCODING = "rot6d69"
+DEFAULT_ENCODING = "rot6d70"
 
 
 @dataclass(frozen=True)
@@ -33,6 +33,7 @@ class Encoding:
     axis2: slice
     flags: slice
     rotation: slice  # the thumb mount's block inside the encoding (rpy or rot6d)
+    left: slice | None  # the left-hand flag (None: the encoding keeps left hands as they are)
     cont_names: tuple[str, ...]
     encode_vectors: Callable[..., np.ndarray]  # (v82 (N, 82), warn) -> (N, dim), raw units
     decode_vectors: Callable[..., np.ndarray]  # (x (N, dim), limits) -> valid (N, 82)
@@ -41,6 +42,11 @@ class Encoding:
     @property
     def cont_dim(self) -> int:
         return self.cont.stop - self.cont.start
+
+    @property
+    def binary(self) -> slice:
+        """The 0/1 block the presence head predicts: the 22 joint flags, then the left flag if any."""
+        return slice(self.flags.start, self.left.stop if self.left is not None else self.flags.stop)
 
     def groups(self) -> dict[str, tuple[slice, str]]:
         """Continuous parameter groups (slices into the continuous block) and units, for reports."""
@@ -51,9 +57,9 @@ class Encoding:
 
 
 ENCODINGS: dict[str, Encoding] = {
-    "reference66": Encoding("reference66", ref.ENCODING_DIM, ref.CONT, ref.AXIS1, ref.AXIS2, ref.FLAGS, slice(29, 32),
+    "reference66": Encoding("reference66", ref.ENCODING_DIM, ref.CONT, ref.AXIS1, ref.AXIS2, ref.FLAGS, slice(29, 32), None,
                             ref.CONT_NAMES, ref.encode_vectors, ref.decode_vectors, rpy_to_matrix),
-    "rot6d69": Encoding("rot6d69", r6.ENCODING_DIM, r6.CONT, r6.AXIS1, r6.AXIS2, r6.FLAGS, r6.ROT6D,
+    "rot6d70": Encoding("rot6d70", r6.ENCODING_DIM, r6.CONT, r6.AXIS1, r6.AXIS2, r6.FLAGS, r6.ROT6D, r6.LEFT,
                         r6.CONT_NAMES, r6.encode_vectors, r6.decode_vectors, matrix_from_rot6d),
 }
 

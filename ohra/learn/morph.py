@@ -71,7 +71,7 @@ class VAEBundle:
 
     @property
     def encoding(self) -> Encoding:
-        """The encoding this model was trained on (``reference66`` or ``rot6d69``)."""
+        """The encoding this model was trained on (``reference66`` or ``rot6d70``)."""
         return get_encoding(self.model.config.encoding)
 
     # -- encoding -----------------------------------------------------------------------------
@@ -122,7 +122,7 @@ class VAEBundle:
         y[:, enc.cont] = np.nan_to_num(self.standardizer.inverse(clean(out["cont"])), nan=0.0, posinf=_BIG, neginf=-_BIG)
         y[:, enc.axis1] = clean(out["axis1"])
         y[:, enc.axis2] = clean(out["axis2"])
-        y[:, enc.flags] = np.nan_to_num(torch.sigmoid(out["presence"]).double().numpy(), nan=0.0)
+        y[:, enc.binary] = np.nan_to_num(torch.sigmoid(out["presence"]).double().numpy(), nan=0.0)
         return y
 
     def decode_vectors(self, z: Any, limits: Any = None) -> np.ndarray:

@@ -35,7 +35,7 @@ def reconstruct(model, standardizer: Standardizer, x_raw: np.ndarray, batch: int
         rows = np.arange(len(xb))
         y[rows, enc.axis1.start + o["axis1"].argmax(dim=1).numpy()] = 1.0
         y[rows, enc.axis2.start + o["axis2"].argmax(dim=1).numpy()] = 1.0
-        y[:, enc.flags] = (o["presence"] > 0).double().numpy()
+        y[:, enc.binary] = (o["presence"] > 0).double().numpy()
         outs.append(y)
     model.train(was_training)
     return np.concatenate(outs) if outs else np.zeros((0, enc.dim))
@@ -61,7 +61,7 @@ def reconstruction_metrics(x_raw: np.ndarray, y: np.ndarray, encoding: Encoding 
         e = err[:, sl]
         mask = x_raw[:, enc.cont][:, sl] != 0.0  # zeros mark parts that are absent in this hand
         rmse[f"{name}_{unit}"] = float(np.sqrt(np.mean(e[mask] ** 2))) if mask.any() else 0.0
-    return {
+    out = {
         "n": int(len(x_raw)),
         "presence_accuracy": float(np.mean(flags_t == flags_y)),
         "presence_exact": float(np.mean(np.all(flags_t == flags_y, axis=1))),
@@ -69,6 +69,9 @@ def reconstruction_metrics(x_raw: np.ndarray, y: np.ndarray, encoding: Encoding 
         "axis_accuracy_all": float(np.mean(a_t == a_y)),
         "rmse": rmse,
     }
+    if enc.left is not None:
+        out["handedness_accuracy"] = float(np.mean((x_raw[:, enc.left] > 0.5) == (y[:, enc.left] > 0.5)))
+    return out
 
 
 def shape_errors(v_true: np.ndarray, v_hat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
