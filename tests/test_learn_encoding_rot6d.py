@@ -40,7 +40,8 @@ def test_layout_of_sampled_right_and_left_hands():
     assert np.array_equal(x[:, E.LEFT.start], (~right).astype(float))
     assert np.array_equal(E.is_left(v), ~right)
     i = int(np.flatnonzero(right)[0])
-    assert np.allclose(x[i, E.ROT6D], rpy_to_matrix(v[i, THUMB_RPY])[:, :2].T.reshape(6))
+    R = rpy_to_matrix(v[i, THUMB_RPY])
+    assert np.allclose(x[i, E.ROT6D], np.r_[R[:, 2], R[:, 0]])  # the thumb's direction first
     assert np.array_equal(x[i, 0:29][[8, 9, 10]], v[i, XYZ][:3])
     # a left hand encodes as its mirror image, a right hand, plus the flag
     j = int(np.flatnonzero(~right)[0])

@@ -31,17 +31,18 @@ def _random_rotations(n: int, seed: int) -> np.ndarray:
     return Rotation.random(n, random_state=seed).as_matrix()
 
 
-def test_rot6d_round_trip_and_any_six_numbers_give_a_rotation():
+@pytest.mark.parametrize("order, kept", [("xy", 0), ("zx", 2)])
+def test_rot6d_round_trip_and_any_six_numbers_give_a_rotation(order, kept):
     R = _random_rotations(500, 0)
-    assert np.abs(geo.matrix_from_rot6d(geo.rot6d_from_matrix(R)) - R).max() < 1e-12
+    assert np.abs(geo.matrix_from_rot6d(geo.rot6d_from_matrix(R, order), order) - R).max() < 1e-12
     x = np.random.default_rng(1).normal(size=(500, 6))
     x[0] = 0.0  # degenerate: zero columns
     x[1, 3:] = 2.0 * x[1, :3]  # degenerate: parallel columns
-    M = geo.matrix_from_rot6d(x)
+    M = geo.matrix_from_rot6d(x, order)
     assert np.abs(M @ np.swapaxes(M, 1, 2) - np.eye(3)).max() < 1e-12
     assert np.allclose(np.linalg.det(M), 1.0)
-    # Gram-Schmidt keeps the first column's direction
-    assert np.allclose(M[2:, :, 0], x[2:, :3] / np.linalg.norm(x[2:, :3], axis=1, keepdims=True))
+    # Gram-Schmidt keeps the first given column's direction: x for "xy", z (the thumb direction) for "zx"
+    assert np.allclose(M[2:, :, kept], x[2:, :3] / np.linalg.norm(x[2:, :3], axis=1, keepdims=True))
 
 
 def test_geodesic_is_the_rotation_angle():

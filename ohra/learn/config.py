@@ -9,8 +9,8 @@ from ohra.errors import ParamsError
 
 # What a configuration written before a key existed meant (the paper's reference setup).
 LEGACY_DEFAULTS: dict[str, Any] = {
-    "encoding": "reference66", "cont_weight": 1.0, "rot_weight": 0.0, "tip_weight": 0.0, "lr_schedule": "constant",
-    "lr_final_ratio": 1.0,
+    "encoding": "reference66", "cont_weight": 1.0, "presence_weight": 1.0, "rot_weight": 0.0, "tip_weight": 0.0,
+    "smooth_weight": 0.0, "lr_schedule": "constant", "lr_final_ratio": 1.0,
 }
 LR_SCHEDULES = ("constant", "cosine")
 
@@ -34,8 +34,10 @@ class TrainConfig:
     heldout: int = 8192  # held-out hands for the final metrics (0: none)
     encoding: str = "rot6d70"  # see ohra.learn.encodings
     cont_weight: float = 1.0  # weight of the continuous MSE (standardised units, mean over values)
+    presence_weight: float = 1.0  # weight of the presence BCE (mean over flags)
     rot_weight: float = 0.0  # weight of the thumb-rotation term (GeometryLoss)
     tip_weight: float = 0.0  # weight of the q = 0 fingertip term (GeometryLoss, 1 cm units)
+    smooth_weight: float = 0.0  # weight of the interpolation-step term (path_smoothness, 1 cm units)
     lr_schedule: str = "constant"  # or "cosine" (from lr to lr * lr_final_ratio over the run)
     lr_final_ratio: float = 1.0
 
@@ -76,5 +78,6 @@ class TrainConfig:
         from ohra.learn.vae import VAEConfig
 
         return VAEConfig(input_dim=get_encoding(self.encoding).dim, latent_dim=self.latent_dim, beta=self.beta,
-                         encoding=self.encoding, cont_weight=self.cont_weight, rot_weight=self.rot_weight,
+                         encoding=self.encoding, cont_weight=self.cont_weight, presence_weight=self.presence_weight,
+                         rot_weight=self.rot_weight, smooth_weight=self.smooth_weight,
                          tip_weight=self.tip_weight)

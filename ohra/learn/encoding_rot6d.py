@@ -9,7 +9,7 @@ slice      size  content (of the hand mirrored to a right hand when it is a left
 =========  ====  ================================================================================
 [0:29]     29    palm_radius, finger_radius, finger_lengths (6), finger_xyz (15),
                  little_extra_origin (6) -- metres / radians
-[29:35]    6     thumb mounting rotation as rot6d: the first two columns of ``R(thumb_rpy)``
+[29:35]    6     thumb mounting rotation as rot6d: the z then the x column of ``R(thumb_rpy)``
 [35:41]    6     one-hot of thumb_axes[0] over (+x, -x, +y, -y, +z, -z); a zero axis encodes as +x
 [41:47]    6     one-hot of thumb_axes[1]
 [47:69]    22    flags, 1 where joint_lowers != joint_uppers (the VAE's "present" = movable)
@@ -19,7 +19,11 @@ slice      size  content (of the hand mirrored to a right hand when it is a left
 Why (numbers in the README's VAE section):
 
 * Euler angles wrap at +-pi and are singular at pitch +-pi/2, where most registered thumbs sit, so
-  a regression on them cannot be accurate; rot6d is continuous (Zhou et al., CVPR 2019).
+  a regression on them cannot be accurate; rot6d is continuous (Zhou et al., CVPR 2019). The z column
+  (the thumb's direction) comes first: Gram-Schmidt keeps it exact, so the thumb's direction, which
+  alone places the thumb tip at q = 0, is three numbers; with the (x, y) columns a latent path
+  between two thumbs of similar direction but different roll passes near a zero first column and
+  the thumb swings round (measured: thumb tips moving 10-20 cm in one of 15 steps).
 * Left and right hands are mirror images; encoding both as right hands lets the VAE spend its
   capacity on one family of shapes, and keeps a path between two left hands away from right-hand
   shapes (where the thumb sits on the other side and would swing across the palm).
@@ -175,7 +179,7 @@ def encode_vectors(v82: Any, warn: bool = True) -> np.ndarray:
     f = fill_absent(v)
     out = np.zeros((n, ENCODING_DIM))
     out[:, 0:29] = f[:, 0:29]
-    out[:, ROT6D] = rot6d_from_matrix(rpy_to_matrix(v[:, THUMB_RPY]))
+    out[:, ROT6D] = rot6d_from_matrix(rpy_to_matrix(v[:, THUMB_RPY]), "zx")
     axes = v[:, THUMB_AXES].reshape(n, 2, 3)
     names = [f"thumb_axes[{k}] of hand {i}" if n > 1 else f"thumb_axes[{k}]" for i in range(n) for k in range(2)]
     cat = axis_categories(axes, warn=warn, names=names)
@@ -202,7 +206,7 @@ def decode_vectors(x70: Any, limits: Any = None) -> np.ndarray:
     lo, up = _limits(limits, x[:, FLAGS] > 0.5)
     v = np.zeros((n, 82))
     v[:, 0:29] = x[:, 0:29]
-    v[:, THUMB_RPY] = matrix_to_rpy(matrix_from_rot6d(x[:, ROT6D]))
+    v[:, THUMB_RPY] = matrix_to_rpy(matrix_from_rot6d(x[:, ROT6D], "zx"))
     cats = np.stack([np.argmax(x[:, AXIS1], axis=1), np.argmax(x[:, AXIS2], axis=1)], axis=1)
     v[:, THUMB_AXES] = BASIS_AXES[cats].reshape(n, 6)
     v[:, LOWERS] = lo

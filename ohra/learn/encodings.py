@@ -60,7 +60,7 @@ ENCODINGS: dict[str, Encoding] = {
     "reference66": Encoding("reference66", ref.ENCODING_DIM, ref.CONT, ref.AXIS1, ref.AXIS2, ref.FLAGS, slice(29, 32), None,
                             ref.CONT_NAMES, ref.encode_vectors, ref.decode_vectors, rpy_to_matrix),
     "rot6d70": Encoding("rot6d70", r6.ENCODING_DIM, r6.CONT, r6.AXIS1, r6.AXIS2, r6.FLAGS, r6.ROT6D, r6.LEFT,
-                        r6.CONT_NAMES, r6.encode_vectors, r6.decode_vectors, matrix_from_rot6d),
+                        r6.CONT_NAMES, r6.encode_vectors, r6.decode_vectors, lambda x: matrix_from_rot6d(x, "zx")),
 }
 
 

@@ -33,15 +33,26 @@ FINGER_ROWS = (1, 2, 3, 4)  # index, middle, ring, little in finger_xyz
 
 
 # -- rotations --------------------------------------------------------------------------------------
-def rot6d_from_matrix(R: np.ndarray) -> np.ndarray:
-    """(..., 3, 3) rotations -> (..., 6): the first two columns, column after column (DESIGN)."""
+def rot6d_from_matrix(R: np.ndarray, order: str = "xy") -> np.ndarray:
+    """(..., 3, 3) rotations -> (..., 6): two columns, one after the other.
+
+    ``order="xy"``: the first two columns (DESIGN's 6-D rotation, used for grasps). ``"zx"``: the
+    third, then the first column; Gram-Schmidt keeps the first column's direction exactly, so for
+    the thumb mount (whose z axis is the thumb's direction at q = 0) the thumb direction depends on
+    three numbers only, and a blend of two encodings blends the thumb directions.
+    """
     R = np.asarray(R, dtype=float)
-    return np.concatenate([R[..., :, 0], R[..., :, 1]], axis=-1)
+    i, j = _ORDERS[order]
+    return np.concatenate([R[..., :, i], R[..., :, j]], axis=-1)
 
 
-def matrix_from_rot6d(x: np.ndarray) -> np.ndarray:
-    """(..., 6) -> (..., 3, 3) by Gram-Schmidt (any 6 numbers with independent halves give a rotation;
-    a degenerate input falls back to the identity's columns so the result is always a rotation)."""
+_ORDERS = {"xy": (0, 1), "zx": (2, 0)}
+
+
+def matrix_from_rot6d(x: np.ndarray, order: str = "xy") -> np.ndarray:
+    """(..., 6) -> (..., 3, 3) by Gram-Schmidt, the inverse of :func:`rot6d_from_matrix` for the
+    same ``order`` (any 6 numbers with independent halves give a rotation; a degenerate input falls
+    back to a fixed perpendicular so the result is always a rotation)."""
     x = np.asarray(x, dtype=float)
     a, b = x[..., 0:3], x[..., 3:6]
     na = np.linalg.norm(a, axis=-1, keepdims=True)
@@ -53,7 +64,9 @@ def matrix_from_rot6d(x: np.ndarray) -> np.ndarray:
     alt /= np.linalg.norm(alt, axis=-1, keepdims=True)
     e2 = np.where(nb > 1e-12, b / np.where(nb > 1e-12, nb, 1.0), alt)
     e3 = np.cross(e1, e2)
-    return np.stack([e1, e2, e3], axis=-1)
+    if order == "xy":
+        return np.stack([e1, e2, e3], axis=-1)
+    return np.stack([e2, e3, e1], axis=-1)  # zx: e1 = z, e2 = x, y = z cross x
 
 
 def geodesic(Ra: np.ndarray, Rb: np.ndarray) -> np.ndarray:

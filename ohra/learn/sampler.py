@@ -26,7 +26,8 @@ thumbs into the palm. Here:
 * left hands are exact mirror images of right hands (:func:`mirror_vectors`).
 
 Kept from the reference on purpose: one joint pattern shared by all non-thumb fingers, limits
-``[0, pi/2]`` for present joints, signed basis axes for thumb joints 1 and 2.
+``[0, pi/2]`` for present joints, signed basis axes for thumb joints 1 and 2. The full thumb and
+finger patterns are drawn three times as often as each other pattern (:func:`_pattern_odds`).
 
 Units: metres and radians, canonical palm frame (+x palm normal, +y thumb side of a right hand,
 +z finger-forward). A right hand has its thumb at ``+y``.
@@ -71,6 +72,7 @@ class SamplerConfig:
 
     p_finger: float = 0.75  # each non-thumb finger present (at least 2 of 4 forced)
     p_little_joint0: float = 0.8  # extra little joint, only when >= 20 joints are present
+    full_pattern_weight: float = 3.0  # odds of the full thumb / finger pattern against each other one
     palm_radius: tuple[float, float] = (0.04, 0.06)
     finger_radius: tuple[float, float] = (0.007, 0.018)  # upper bound also <= max_radius_ratio * palm radius
     max_radius_ratio: float = 1.0 / 3.0
@@ -104,6 +106,15 @@ class SamplerConfig:
 DEFAULT_CONFIG = SamplerConfig()
 
 
+def _pattern_odds(patterns: np.ndarray, c: SamplerConfig) -> np.ndarray:
+    """Probabilities of the patterns (K, J): the full one (every joint) ``full_pattern_weight`` times
+    as likely as each other one. Most real hands have full fingers (6 of the 13 registered base
+    hands have a full thumb or full fingers), and the full 22-joint hand with a little metacarpal
+    joint would otherwise be 0.4 % of the samples."""
+    w = np.where(patterns.all(axis=1), c.full_pattern_weight, 1.0)
+    return w / w.sum()
+
+
 def _patterns(rng: np.random.Generator, n: int, c: SamplerConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Joint presence (n, 22), non-thumb fingers used (n, 4) and the shared finger pattern (n, 4)."""
     use = rng.random((n, 4)) < c.p_finger  # thumb always; >= 2 of the 4 non-thumb fingers
@@ -112,8 +123,8 @@ def _patterns(rng: np.random.Generator, n: int, c: SamplerConfig) -> tuple[np.nd
         if short.size == 0:
             break
         use[short, rng.integers(0, 4, short.size)] = True
-    thumb_pat = THUMB_PATTERNS[rng.integers(0, len(THUMB_PATTERNS), n)]
-    finger_pat = FINGER_PATTERNS[rng.integers(0, len(FINGER_PATTERNS), n)]
+    thumb_pat = THUMB_PATTERNS[rng.choice(len(THUMB_PATTERNS), n, p=_pattern_odds(THUMB_PATTERNS, c))]
+    finger_pat = FINGER_PATTERNS[rng.choice(len(FINGER_PATTERNS), n, p=_pattern_odds(FINGER_PATTERNS, c))]
     present = np.zeros((n, 22), dtype=bool)
     present[:, 0:5] = thumb_pat
     for fi, start in enumerate((5, 9, 13, 18)):  # index, middle, ring, little (joint1..4)

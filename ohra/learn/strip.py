@@ -156,8 +156,10 @@ def strip_png(params: Sequence[BaseParams | ExtendedParams], path: str | Path, l
 
 def sequence_html(params: Sequence[BaseParams | ExtendedParams], path: str | Path, spacing: float = 0.2,
                   originals: Sequence[BaseParams | ExtendedParams] | None = None) -> Path:
-    """A static meshcat HTML scene with the hands in a row along -y, ``spacing`` metres apart;
-    ``originals`` (two hands) stand in grey one row further along +z, above the first and last."""
+    """A static meshcat HTML scene: the hands in a row (first on the left, seen from the palm side),
+    ``spacing`` metres apart; ``originals`` (two hands) stand in grey one row higher, above the first
+    and the last. The camera is set to frame the row (meshcat's orbit target is the scene origin,
+    so the scene is centred there)."""
     import contextlib
     import io
 
@@ -166,14 +168,30 @@ def sequence_html(params: Sequence[BaseParams | ExtendedParams], path: str | Pat
     with contextlib.redirect_stdout(io.StringIO()):  # meshcat prints its server URL
         vis = viz.new_visualizer()
     vis.delete()
-    for i, p in enumerate(params):
+    n = len(params)
+    rows = 1 if originals is None else 2
+    z0 = -0.75 * spacing * (rows - 1) - 0.08  # palm frames sit at the wrist; hands rise ~0.16 m along +z
+
+    def place(i: int, row: int) -> np.ndarray:
         T = np.eye(4)
-        T[1, 3] = -spacing * i
-        viz.add_hand(vis, HandModel.from_params(p), np.zeros(22), T_world_palm=T, path=f"hands/step_{i:02d}")
+        T[1, 3], T[2, 3] = spacing * (i - (n - 1) / 2.0), z0 + 1.5 * spacing * row  # +y is right, seen from +x
+        return T
+
+    for i, p in enumerate(params):
+        viz.add_hand(vis, HandModel.from_params(p), np.zeros(22), T_world_palm=place(i, 0), path=f"hands/step_{i:02d}")
     if originals is not None:
-        for name, p, i in zip(("original_a", "original_b"), originals, (0, len(params) - 1)):
-            T = np.eye(4)
-            T[1, 3], T[2, 3] = -spacing * i, 1.5 * spacing
-            viz.add_hand(vis, HandModel.from_params(p), np.zeros(22), T_world_palm=T, path=f"hands/{name}",
+        for name, p, i in zip(("original_a", "original_b"), originals, (0, n - 1)):
+            viz.add_hand(vis, HandModel.from_params(p), np.zeros(22), T_world_palm=place(i, 1), path=f"hands/{name}",
                          color=viz.ORIGINAL_COLOR)
+    _frame_camera(vis, width=spacing * n, height=1.5 * spacing * rows)
     return viz.save_html(vis, path)
+
+
+def _frame_camera(vis, width: float, height: float) -> None:
+    """Put meshcat's camera on +x (palm side, a little above), looking at the origin from far enough
+    that a ``width`` x ``height`` metre area around it fills most of the view; hide the 1 m grid."""
+    span = max(width / 1.6, height)  # the default view is about 1.6 times wider than high
+    dist = 0.75 * span / np.tan(np.radians(75.0) / 2.0)  # meshcat's default vertical field of view is 75 deg
+    # the camera object lives in three.js axes under /rotated (y up): x = scene x, y = scene z
+    vis["/Cameras/default/rotated/<object>"].set_property("position", [dist, 0.2 * dist, 0.0])
+    vis["/Grid"].set_property("visible", False)

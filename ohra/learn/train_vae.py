@@ -36,8 +36,8 @@ from ohra.learn.config import TrainConfig
 from ohra.learn.encoding import Standardizer
 from ohra.learn.encodings import get_encoding
 from ohra.learn.geometry import tips_q0
-from ohra.learn.sampler import LOWERS, THUMB_RPY, UPPERS, sample_vectors
-from ohra.learn.vae import GeometryLoss, MorphologyVAE, make_optimizer, vae_loss
+from ohra.learn.sampler import LOWERS, THUMB_RPY, UPPERS, mirror_vectors, sample_vectors
+from ohra.learn.vae import GeometryLoss, MorphologyVAE, make_optimizer, path_smoothness, vae_loss
 from ohra.learn.vae_metrics import reconstruct, reconstruct_vectors, reconstruction_metrics, shape_metrics
 from ohra.transforms import rpy_to_matrix
 
@@ -45,7 +45,7 @@ CHECKPOINT_FORMAT = "ohra-vae-checkpoint"
 MODEL_FORMAT = "ohra-vae-model"
 FORMAT_VERSION = 1
 HELDOUT_SEED_OFFSET = 1_000_003  # held-out hands come from a different seed than the training set
-LOSS_TERMS = ("total", "mse", "ce_axis1", "ce_axis2", "bce", "kl", "rot", "tip")
+LOSS_TERMS = ("total", "mse", "ce_axis1", "ce_axis2", "bce", "kl", "rot", "tip", "smooth")
 
 
 @dataclass
@@ -60,7 +60,8 @@ class TrainResult:
 @dataclass
 class Dataset:
     """Training hands: standardised encodings (N, D) float32 and the geometry targets (thumb
-    rotation (N, 3, 3), joint presence (N, 22), q = 0 fingertips (N, 5, 3), NaN-free)."""
+    rotation (N, 3, 3), joint presence (N, 22), q = 0 fingertips (N, 5, 3), NaN-free), of the
+    form the encoding holds (right-hand form for an encoding with a left flag)."""
 
     x: torch.Tensor
     rotation: torch.Tensor
@@ -75,6 +76,9 @@ def make_dataset(samples: int, seed: int, standardizer: Standardizer | None = No
     enc = get_encoding(encoding)
     v = sample_vectors(samples, seed)
     x = enc.encode_vectors(v, warn=False)
+    if enc.left is not None:  # the geometry targets of the form the encoding holds: left hands mirrored
+        left = x[:, enc.left.start] > 0.5
+        v[left] = mirror_vectors(v[left])
     if standardizer is None:
         standardizer = Standardizer.fit(x[:, enc.cont])
     x[:, enc.cont] = standardizer.transform(x[:, enc.cont])
@@ -240,10 +244,13 @@ def _epoch(model, opt, data: Dataset, geom: GeometryLoss | None, cfg: TrainConfi
         idx = perm[b * cfg.batch_size : (b + 1) * cfg.batch_size]
         xb = data.x[idx]
         out, mu, logvar = model(xb, generator=gens[1])
-        terms = vae_loss(out, xb, mu, logvar, vc.beta, vc.encoding, vc.cont_weight)
+        terms = vae_loss(out, xb, mu, logvar, vc.beta, vc.encoding, vc.cont_weight, vc.presence_weight)
         if geom is not None:
             terms.update(geom(out["cont"], data.rotation[idx], data.present[idx], data.tips[idx]))
             terms["total"] = terms["total"] + vc.rot_weight * terms["rot"] + vc.tip_weight * terms["tip"]
+            if vc.smooth_weight:
+                terms["smooth"] = path_smoothness(model, geom, mu, data.present[idx], gens[1])
+                terms["total"] = terms["total"] + vc.smooth_weight * terms["smooth"]
         for group in opt.param_groups:
             group["lr"] = learning_rate(cfg, step, total_steps)
         opt.zero_grad(set_to_none=True)
@@ -288,7 +295,7 @@ def train(config: TrainConfig = TrainConfig(), run_dir: str | Path | None = None
         digest = _digest(data.x)
         torch.manual_seed(cfg.seed)
         model = MorphologyVAE(vc)
-        geom = GeometryLoss(vc, std.mean, std.std) if (vc.rot_weight or vc.tip_weight) else None
+        geom = GeometryLoss(vc, std.mean, std.std) if (vc.rot_weight or vc.tip_weight or vc.smooth_weight) else None
         opt = make_optimizer(model, cfg.lr, cfg.betas, cfg.weight_decay)
         gens = (torch.Generator().manual_seed(cfg.seed), torch.Generator().manual_seed(cfg.seed + 1))
         epoch, step, history = 0, 0, []
