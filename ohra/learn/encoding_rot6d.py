@@ -81,12 +81,17 @@ _PASSES = 20  # projection rounds (turn the thumb out, push it off the fingers) 
 
 
 # -- stand-ins for absent parts ----------------------------------------------------------------------
-def _side(v: np.ndarray) -> np.ndarray:
-    """+1 for right hands (thumb at +y, or index left of little), -1 for left ones; (N,)."""
-    xyz = v[:, XYZ].reshape(-1, 5, 3)
-    s = np.sign(xyz[:, 0, 1])
-    s = np.where(s == 0, np.sign(xyz[:, 1, 1] - xyz[:, 4, 1]), s)
-    return np.where(s == 0, 1.0, s)
+def is_left(v82: Any) -> np.ndarray:
+    """(N,) True for left hands: by the thumb base's side (+y: right), else by the little finger's
+    (-y: right), else by the index's (+y: right), as :attr:`BaseParams.handedness`; right if none."""
+    v = np.atleast_2d(np.asarray(v82, dtype=float))
+    _, fingers = finger_reach(v)
+    y = v[:, XYZ].reshape(-1, 5, 3)[:, :, 1]
+    side = np.zeros(len(v))
+    for f, right_sign in ((1, 1.0), (4, -1.0), (0, 1.0)):  # lowest priority first, overwritten by higher ones
+        ok = fingers[:, f] & (y[:, f] != 0.0)
+        side[ok] = right_sign * np.sign(y[ok, f])
+    return side < 0
 
 
 def _virtual_knuckles(xyz: np.ndarray, fingers: np.ndarray, r: np.ndarray, side: np.ndarray) -> None:
@@ -131,8 +136,8 @@ def fill_absent(v82: Any) -> np.ndarray:
     v = np.array(np.atleast_2d(v82), dtype=float, copy=True)
     n = len(v)
     present = (v[:, LOWERS] != 0.0) | (v[:, UPPERS] != 0.0)
-    reach, fingers = finger_reach(v)
-    side = _side(v)
+    _, fingers = finger_reach(v)
+    side = np.where(is_left(v), -1.0, 1.0)
     L = v[:, LENGTHS].reshape(n, 2, 3)
     has = L > 0
     count = has.sum(2)  # (N, 2): thumb, non-thumb
@@ -156,19 +161,6 @@ def fill_absent(v82: Any) -> np.ndarray:
 
 
 # -- encoding ---------------------------------------------------------------------------------------
-def is_left(v82: Any) -> np.ndarray:
-    """(N,) True for left hands: by the thumb base's side (+y: right), else by the little finger's
-    (-y: right), else by the index's (+y: right), as :attr:`BaseParams.handedness`; right if none."""
-    v = np.atleast_2d(np.asarray(v82, dtype=float))
-    _, fingers = finger_reach(v)
-    y = v[:, XYZ].reshape(-1, 5, 3)[:, :, 1]
-    side = np.zeros(len(v))
-    for f, right_sign in ((1, 1.0), (4, -1.0), (0, 1.0)):  # lowest priority first, overwritten by higher ones
-        ok = fingers[:, f] & (y[:, f] != 0.0)
-        side[ok] = right_sign * np.sign(y[ok, f])
-    return side < 0
-
-
 def encode_vectors(v82: Any, warn: bool = True) -> np.ndarray:
     """Base vectors (82,) or (N, 82) -> encodings (70,) or (N, 70) (raw units, see module doc)."""
     v, single = _as_batch(v82, 82, "base vector")

@@ -4,6 +4,10 @@ trained on it (``benchmarks/diagnose_vae.py``) and to compare old and new models
 Same joint patterns as :mod:`ohra.learn.sampler` minus Barrett's thumb; the ranges of the reference
 (``ohra_reference.md`` §7.1, quirks fixed as DESIGN decision 4); the thumb mounting rotation uniform in
 the Euler cube ``[-pi, pi]^3``. Units: metres and radians, canonical palm frame.
+
+:func:`sample_reference_vectors` is the previous ``sample_vectors`` unchanged (one long function, so
+that it stays line for line the code the reference model's training data came from; its draws are
+bit-identical, seed for seed).
 """
 
 from __future__ import annotations

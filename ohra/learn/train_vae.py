@@ -272,6 +272,19 @@ def heldout_metrics(model, std: Standardizer, n: int, seed: int) -> dict[str, An
     return out
 
 
+def _final_metrics(model, std: Standardizer, cfg: TrainConfig, step: int, history: list, seconds: float) -> dict[str, Any]:
+    """What metrics.json holds: losses per epoch, timing, memory, held-out reconstruction."""
+    metrics: dict[str, Any] = {
+        "epochs": cfg.epochs, "steps": step, "train_seconds_this_run": seconds,
+        "train_seconds_total": history[-1]["elapsed_s"] if history else 0.0, "history": history,
+        "final_losses": {k: history[-1][k] for k in LOSS_TERMS} if history else {},
+        "cpu_seconds": time.process_time(), "peak_rss_mib": _peak_rss_mib(),
+    }
+    if cfg.heldout > 0:
+        metrics["heldout"] = heldout_metrics(model, std, cfg.heldout, cfg.seed + HELDOUT_SEED_OFFSET)
+    return metrics
+
+
 def train(config: TrainConfig = TrainConfig(), run_dir: str | Path | None = None, resume: bool = False,
           progress: bool = True, on_epoch: Callable[[int, dict[str, float]], None] | None = None) -> TrainResult:
     """Train the VAE on ``config.samples`` synthetic hands; see the module docstring for outputs.
@@ -322,15 +335,8 @@ def train(config: TrainConfig = TrainConfig(), run_dir: str | Path | None = None
             if on_epoch is not None:
                 on_epoch(done, losses)
         bar.close()
-        metrics: dict[str, Any] = {
-            "epochs": cfg.epochs, "steps": step, "train_seconds_this_run": time.perf_counter() - t_run,
-            "train_seconds_total": history[-1]["elapsed_s"] if history else 0.0, "history": history,
-            "final_losses": {k: history[-1][k] for k in LOSS_TERMS} if history else {},
-        }
-        if cfg.heldout > 0:
-            metrics["heldout"] = heldout_metrics(model, std, cfg.heldout, cfg.seed + HELDOUT_SEED_OFFSET)
+        metrics = _final_metrics(model, std, cfg, step, history, time.perf_counter() - t_run)
         metrics["wall_seconds"] = time.perf_counter() - t_start
-        metrics["peak_rss_mib"] = _peak_rss_mib()
     if run is not None:
         atomic_save(model_payload(model, std), run / "model.pt")
         atomic_write_text(json.dumps(metrics, indent=2) + "\n", run / "metrics.json")
