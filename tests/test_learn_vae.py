@@ -113,11 +113,12 @@ def test_path_smoothness_is_zero_without_moves_and_counts_big_steps():
     torch.manual_seed(0)
     m = MorphologyVAE(cfg).eval()
     g = torch.Generator().manual_seed(0)
-    same = torch.zeros(64, cfg.latent_dim)
-    assert float(path_smoothness(m, geom, same, data.present, g)) == 0.0
-    spread = torch.randn(64, cfg.latent_dim, generator=g)
-    small = float(path_smoothness(m, geom, spread, data.present, g, limit=1.0))  # 1 m: nothing exceeds it
-    big = float(path_smoothness(m, geom, 1e3 * spread, data.present, g, limit=0.0))
+    with torch.no_grad():
+        same = torch.zeros(64, cfg.latent_dim)
+        assert float(path_smoothness(m, geom, same, data.present, g)) == 0.0
+        spread = torch.randn(64, cfg.latent_dim, generator=g)
+        small = float(path_smoothness(m, geom, spread, data.present, g, limit=1.0))  # 1 m: nothing exceeds it
+        big = float(path_smoothness(m, geom, 1e3 * spread, data.present, g, limit=0.0))
     assert small == 0.0 and big > 0.0
 
 
@@ -126,7 +127,7 @@ def test_cosine_learning_rate_schedule():
     assert learning_rate(cfg, 0, 101) == pytest.approx(1e-3)
     assert learning_rate(cfg, 50, 101) == pytest.approx(1e-3 * (0.01 + 0.99 * 0.5))
     assert learning_rate(cfg, 100, 101) == pytest.approx(1e-5)
-    assert learning_rate(TrainConfig(lr=1e-3), 70, 101) == 1e-3
+    assert learning_rate(TrainConfig(lr=1e-3, lr_schedule="constant"), 70, 101) == 1e-3
 
 
 # -- training ---------------------------------------------------------------------------------------
@@ -319,7 +320,11 @@ def test_cli_train_small_run_and_resume(tmp_path, capsys):
     assert cli_main(args) == 0
     assert "held-out (128 hands)" in capsys.readouterr().out
     assert cli_main(args) == 2 and "--resume" in capsys.readouterr().err
-    args[args.index("--epochs") + 1] = "2"
-    assert cli_main(args + ["--resume"]) == 0
-    assert json.loads((out / "metrics.json").read_text())["steps"] == 4
+    assert cli_main(args + ["--resume"]) == 0  # a finished run resumes to itself
+    assert json.loads((out / "metrics.json").read_text())["steps"] == 2
     assert load_vae(out).latent_dim == TrainConfig().latent_dim
+    # the default cosine learning rate depends on the run's length: it cannot be extended
+    args[args.index("--epochs") + 1] = "2"
+    assert cli_main(args + ["--resume"]) == 2
+    err = capsys.readouterr().err
+    assert "epochs=1" in err and err.count("\n") == 1
