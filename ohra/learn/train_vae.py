@@ -34,7 +34,7 @@ import torch
 from ohra.errors import CheckpointError
 from ohra.learn.config import TrainConfig
 from ohra.learn.encoding import Standardizer
-from ohra.learn.encodings import get_encoding
+from ohra.learn.encodings import DEFAULT_ENCODING, get_encoding
 from ohra.learn.geometry import tips_q0
 from ohra.learn.sampler import LOWERS, THUMB_RPY, UPPERS, mirror_vectors, sample_vectors
 from ohra.learn.vae import GeometryLoss, MorphologyVAE, make_optimizer, path_smoothness, vae_loss
@@ -71,7 +71,7 @@ class Dataset:
 
 
 def make_dataset(samples: int, seed: int, standardizer: Standardizer | None = None,
-                 encoding: str = "reference66") -> Dataset:
+                 encoding: str = DEFAULT_ENCODING) -> Dataset:
     """Encoded synthetic hands (continuous part standardised) with their geometry targets."""
     enc = get_encoding(encoding)
     v = sample_vectors(samples, seed)
