@@ -1,12 +1,23 @@
-"""Morphology VAE benchmark: held-out reconstruction, registered hands, interpolation smoothness,
-training cost (from the model's metrics.json), sampler and inference speed.
+"""Morphology VAE benchmark: the targets of issue 16, for the shipped model and the kept reference
+(66-D, paper settings) model side by side.
 
-Run: python benchmarks/bench_vae.py [--model DIR] [--heldout N]  -> benchmarks/results/vae.{json,md}
+* held-out hands of each model's own training sampler: presence / axis accuracy, thumb mounting
+  rotation error (geodesic), fingertip error at q = 0 (decoded with their own limits);
+* registered hands: fingertip error at q = 0 per hand, encoded and decoded with their own limits;
+* plausibility of decoded hands (random latents from the prior and every interpolation step):
+  finger base inside the palm, thumb pointing into the palm (:mod:`ohra.learn.geometry`), fingers
+  intersecting at q = 0 (Coal, ``HandModel.self_collision``);
+* interpolation between every pair of registered hands (16 steps): the largest fingertip move of a
+  step that keeps the same joints;
+* training cost (from the model's metrics.json), sampler and inference speed.
+
+Run: python benchmarks/bench_vae.py [--model DIR] [--latents N] [--heldout N]  -> benchmarks/results/vae.{json,md}
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import sys
 import time
 import warnings
@@ -19,168 +30,190 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 import ohra  # noqa: E402
-from ohra.errors import OhraError  # noqa: E402
 from ohra.canonical.kinematics import HandModel  # noqa: E402
 from ohra.canonical.params import BaseParams  # noqa: E402
-from ohra.learn import encode_vectors, sample_vectors  # noqa: E402
-from ohra.learn.encoding import FLAGS  # noqa: E402
-from ohra.learn.morph import load_vae  # noqa: E402
-from ohra.learn.sampler import in_support  # noqa: E402
-from ohra.learn.train_vae import reconstruct, reconstruction_metrics  # noqa: E402
+from ohra.errors import OhraError  # noqa: E402
+from ohra.learn import geometry as geo  # noqa: E402
+from ohra.learn.encoding_rot6d import is_left  # noqa: E402
+from ohra.learn.morph import load_vae, reference_model_dir  # noqa: E402
+from ohra.learn.sampler import LOWERS, UPPERS, sample_vectors, support_violations  # noqa: E402
+from ohra.learn.sampler_reference import sample_reference_vectors  # noqa: E402
+from ohra.learn.vae_metrics import reconstruct, reconstruct_vectors, reconstruction_metrics, shape_errors  # noqa: E402
 
 HELDOUT_SEED = 2_000_003  # neither the training seed (0) nor the training run's own held-out seed
-PAIRS = (("dex3_right", "shadow_hand_right"), ("barrett_hand", "allegro_hand_right"), ("leap_hand_right", "sharpa_wave_right"))
+LATENT_SEED = 5
+STEPS = 16
+MOVE_LIMIT_M = 0.02
 
 
-def base_hands() -> list[str]:
-    out = []
+def base_hands() -> dict[str, BaseParams]:
+    out = {}
     for n in ohra.list_hands():
         try:
-            ohra.get_hand(n, "base")
-            out.append(n)
+            out[n] = ohra.get_hand(n, "base")
         except OhraError:
             pass
     return out
 
 
-def tips(p) -> np.ndarray:
-    return HandModel.from_params(p).fingertips(np.zeros(22))
+def own_sampler(vae):
+    return sample_reference_vectors if vae.encoding.name == "reference66" else sample_vectors
 
 
-def registered(vae) -> list[dict]:
+def heldout(vae, n: int) -> dict:
+    v = own_sampler(vae)(n, HELDOUT_SEED)
+    x = vae.encoding.encode_vectors(v, warn=False)
+    out = reconstruction_metrics(x, reconstruct(vae.model, vae.standardizer, x), vae.encoding)
+    g, e = shape_errors(v, reconstruct_vectors(vae.model, vae.standardizer, v))
+    mm = 1e3 * e
+    out["shape"] = {"thumb_rotation_rmse_rad": float(np.sqrt(np.mean(g ** 2))), "thumb_tip_mean_mm": float(np.nanmean(mm[:, 0])),
+                    "finger_tip_mean_mm": float(np.nanmean(mm[:, 1:])), "tip_mean_mm": float(np.nanmean(mm))}
+    return out
+
+
+def registered(vae, hands: dict[str, BaseParams]) -> list[dict]:
+    V = np.stack([p.to_vector() for p in hands.values()])
+    rec = reconstruct_vectors(vae.model, vae.standardizer, V)
+    x = vae.encoding.encode_vectors(V, warn=False)
+    y = reconstruct(vae.model, vae.standardizer, x)
+    g, e = shape_errors(V, rec)
     rows = []
-    for n in base_hands():
-        p = ohra.get_hand(n, "base")
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            x = encode_vectors(p.to_vector())[None]
-        y = reconstruct(vae.model, vae.standardizer, x)[0]
-        rec = vae.decode(vae.encode_encodings(x)[0][0], limits=p)  # the hand's own limits
-        t0, t1 = tips(p), tips(rec)
-        both = ~np.isnan(t0[:, 0]) & ~np.isnan(t1[:, 0])
-        err = np.linalg.norm(t0[both] - t1[both], axis=1)
-        rows.append({"hand": n, "in_sampler_support": in_support(x[0, FLAGS] > 0.5), "presence_exact": bool(np.array_equal(x[0, FLAGS], y[FLAGS])),
-                     "presence_errors": int(np.sum(x[0, FLAGS] != y[FLAGS])),
-                     "fingertip_mean_mm": float(1e3 * err.mean()), "fingertip_max_mm": float(1e3 * err.max())})
+    for i, (n, p) in enumerate(hands.items()):
+        flags_ok = np.array_equal(x[i, vae.encoding.flags], y[i, vae.encoding.flags])
+        rows.append({"hand": n, "in_sampler_support": not support_violations(p), "presence_exact": bool(flags_ok),
+                     "tip_mean_mm": float(1e3 * np.nanmean(e[i])), "tip_max_mm": float(1e3 * np.nanmax(e[i])),
+                     "thumb_rotation_error_rad": float(g[i])})
     return rows
 
 
-def heldout_tips(vae, n: int = 400) -> dict:
-    """Fingertip error at q=0 of sampled held-out hands decoded with their own limits [mm]."""
-    v = sample_vectors(n, HELDOUT_SEED + 1)
-    x = encode_vectors(v, warn=False)
-    rec = vae.decode_vectors(vae.encode_encodings(x)[0], limits=np.concatenate([v[:, 38:60], v[:, 60:82]], axis=1))
-    thumb, other = [], []
-    for a, b in zip(v, rec):
-        t0, t1 = tips(BaseParams.from_vector(a)), tips(BaseParams.from_vector(b))
-        e = 1e3 * np.linalg.norm(t0 - t1, axis=1)
-        thumb.append(e[0])
-        other += [float(x) for x in e[1:] if not np.isnan(x)]
-    return {"n": n, "thumb_mean_mm": float(np.nanmean(thumb)), "thumb_median_mm": float(np.nanmedian(thumb)),
-            "fingers_mean_mm": float(np.mean(other)), "fingers_median_mm": float(np.median(other))}
+def plausibility(V: np.ndarray) -> dict:
+    """Counts of decoded hands (N, 82) breaking each rule; Coal on every hand."""
+    coal = sum(HandModel.from_params(BaseParams.from_vector(v)).self_collision(np.zeros(22)) for v in V)
+    return {"n": int(len(V)), "finger_base_inside_palm": int(geo.knuckles_inside_palm(V).any(axis=1).sum()),
+            "thumb_into_palm": int(geo.thumb_into_palm(V).sum()), "fingers_intersect_q0_coal": int(coal)}
 
 
-def smoothness(vae, steps: int = 16) -> list[dict]:
-    out = []
-    for a, b in PAIRS:
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                it = vae.interpolate(a, b, steps)
-        except OhraError:
-            continue
-        T = [tips(p) for p in it.params]
-        jumps, same, changes = [], [], 0
-        for t0, t1, p0, p1 in zip(T[:-1], T[1:], it.params[:-1], it.params[1:]):
-            both = ~np.isnan(t0[:, 0]) & ~np.isnan(t1[:, 0])
-            jumps.append(float(np.linalg.norm(t0[both] - t1[both], axis=1).max()) if both.any() else 0.0)
-            changes += int(np.sum(p0.present_fingers != p1.present_fingers))
-            if np.array_equal(p0.present_joints, p1.present_joints):  # no joint appears or vanishes
-                d = np.linalg.norm(t0 - t1, axis=1)
-                same.append((float(d[0]), float(np.nanmax(d[1:]))))
-        ends = float(np.linalg.norm(np.nan_to_num(T[0] - T[-1]), axis=1).max())
-        out.append({"pair": f"{a} -> {b}", "steps": steps, "max_jump_mm": 1e3 * max(jumps), "mean_jump_mm": 1e3 * float(np.mean(jumps)),
-                    "finger_appearances": changes,
-                    "max_jump_same_structure_thumb_mm": 1e3 * max(j[0] for j in same) if same else None,
-                    "max_jump_same_structure_fingers_mm": 1e3 * max(j[1] for j in same) if same else None,
-                    "steps_same_structure": len(same), "dof": [p.dof for p in it.params]})
-    return out
+def interpolations(vae, hands: dict[str, BaseParams]) -> tuple[list[dict], np.ndarray]:
+    """Every unordered pair of registered hands, STEPS steps: largest fingertip move of a step that
+    keeps the same joints (thumb, other fingers), and all decoded steps (for the plausibility check)."""
+    names = list(hands)
+    mu = {n: vae.encode_vectors(hands[n].to_vector())[0][0] for n in names}
+    alphas = np.linspace(0.0, 1.0, STEPS)
+    rows, all_steps = [], []
+    for a, b in itertools.combinations(names, 2):
+        z = (1.0 - alphas)[:, None] * mu[a] + alphas[:, None] * mu[b]
+        V = vae.decode_vectors(z)
+        all_steps.append(V)
+        T = geo.tips_q0(V)
+        present = (V[:, LOWERS] != 0) | (V[:, UPPERS] != 0)
+        left = is_left(V)
+        # a step keeps the structure when no joint appears or vanishes and the hand stays left or right
+        same = np.all(present[1:] == present[:-1], axis=1) & (left[1:] == left[:-1])
+        d = np.linalg.norm(T[1:] - T[:-1], axis=-1)  # (STEPS - 1, 5), NaN for absent fingers
+        moves = d[same]
+        bound = np.nanmax(np.linalg.norm(T[-1] - T[0], axis=-1)) / (STEPS - 1)  # even a straight, even path moves this much
+        rows.append({"pair": f"{a} -> {b}", "same_handedness": bool(hands[a].handedness == hands[b].handedness),
+                     "straight_path_bound_mm": float(1e3 * bound), "steps_same_joints": int(same.sum()),
+                     "max_move_thumb_mm": float(1e3 * np.nanmax(moves[:, 0])) if same.any() else None,
+                     "max_move_fingers_mm": float(1e3 * np.nanmax(moves[:, 1:])) if same.any() else None,
+                     "steps_over_limit": int(np.sum(np.nanmax(moves, axis=1) > MOVE_LIMIT_M)) if same.any() else 0})
+    return rows, np.concatenate(all_steps)
+
+
+def evaluate(vae, hands: dict[str, BaseParams], n_heldout: int, n_latents: int) -> dict:
+    torch.manual_seed(0)
+    z = np.random.default_rng(LATENT_SEED).standard_normal((n_latents, vae.latent_dim))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        interp, steps = interpolations(vae, hands)
+        data = {"model": str(vae.path), "encoding": vae.encoding.name, "config": vae.config,
+                "heldout": {"seed": HELDOUT_SEED, **heldout(vae, n_heldout)}, "registered_hands": registered(vae, hands),
+                "interpolation": interp, "plausibility_random_latents": plausibility(vae.decode_vectors(z)),
+                "plausibility_interpolation_steps": plausibility(steps)}
+    train = vae.metrics or {}
+    data["training"] = {"epochs": train.get("epochs"), "steps": train.get("steps"), "seconds": train.get("train_seconds_total"),
+                        "peak_rss_mib": train.get("peak_rss_mib"), "threads": vae.config.get("threads")}
+    x = vae.encoding.encode_vectors(own_sampler(vae)(1024, HELDOUT_SEED), warn=False)
+    zz = vae.encode_encodings(x)[0]
+    data["speed"] = {"encode_per_hand_us": 1e6 * best_of(lambda: vae.encode_encodings(x), 3) / 1024,
+                     "decode_to_valid_vector_per_hand_us": 1e6 * best_of(lambda: vae.decode_vectors(zz), 3) / 1024,
+                     "decode_one_params_ms": 1e3 * best_of(lambda: vae.decode(zz[0]), 5)}
+    return data
+
+
+def _rows(d: dict) -> dict[str, str]:
+    """Table cells of one model's results."""
+    h, s, reg = d["heldout"], d["heldout"]["shape"], d["registered_hands"]
+    per_hand = [r["tip_mean_mm"] for r in reg]
+    interp = [r for r in d["interpolation"] if r["steps_same_joints"]]
+    worst = max(max(r["max_move_thumb_mm"], r["max_move_fingers_mm"]) for r in interp) if interp else float("nan")
+    over = sum(r["steps_over_limit"] for r in d["interpolation"])
+    total = sum(r["steps_same_joints"] for r in d["interpolation"])
+    same = [r for r in interp if r["same_handedness"]]
+    worst_same = max(max(r["max_move_thumb_mm"], r["max_move_fingers_mm"]) for r in same) if same else float("nan")
+    over_same = sum(r["steps_over_limit"] for r in same)
+    total_same = sum(r["steps_same_joints"] for r in same)
+    pr, pi = d["plausibility_random_latents"], d["plausibility_interpolation_steps"]
+    tr, sp = d["training"], d["speed"]
+    fmt_p = lambda p: f"{p['finger_base_inside_palm']} / {p['thumb_into_palm']} / {p['fingers_intersect_q0_coal']} of {p['n']}"  # noqa: E731
+    return {
+        "presence": f"{100 * h['presence_accuracy']:.2f} %", "axes": f"{100 * h['axis_accuracy']:.2f} %",
+        "rot": f"{s['thumb_rotation_rmse_rad']:.3f} rad",
+        "tips": f"{s['tip_mean_mm']:.1f} mm ({s['thumb_tip_mean_mm']:.1f} / {s['finger_tip_mean_mm']:.1f})",
+        "reg": f"{np.mean(per_hand):.1f} / {max(per_hand):.1f} mm, {sum(t <= 10.0 for t in per_hand)} of {len(per_hand)} hands <= 10 mm",
+        "interp": f"{worst:.1f} mm; {over} of {total} steps > 20 mm",
+        "interp_same": f"{worst_same:.1f} mm; {over_same} of {total_same} steps > 20 mm",
+        "random": fmt_p(pr), "steps": fmt_p(pi),
+        "train": f"{tr['seconds'] / 60:.1f} min ({tr['epochs']} epochs, {tr['steps']} steps)" if tr["seconds"] else "-",
+        "speed": f"{sp['encode_per_hand_us']:.1f} / {sp['decode_to_valid_vector_per_hand_us']:.1f} us",
+    }
+
+
+LABELS = [
+    ("presence", "held-out hands (own sampler): presence accuracy (22 flags)", ">= 99 %"),
+    ("axes", "held-out hands: thumb axis accuracy (present thumb joints 1-2)", ">= 98 %"),
+    ("rot", "held-out hands: thumb mounting rotation error, RMSE (geodesic)", "<= 0.1 rad"),
+    ("tips", "held-out hands: fingertip error at q=0, mean (thumb / other fingers)", "<= 10 mm"),
+    ("reg", "registered hands: fingertip error at q=0, mean of hands / worst hand", "<= 10 mm per hand"),
+    ("interp", f"interpolation, all 78 pairs of registered hands ({STEPS} steps): largest fingertip move of a step keeping joints and handedness", "<= 20 mm"),
+    ("interp_same", "... pairs of the same handedness (a left-right pair moves the thumb across the palm: 12 pairs need > 20 mm per step even on a straight path)", "<= 20 mm"),
+    ("random", "random latents: finger base inside palm / thumb into palm / fingers intersecting at q=0 (Coal)", "0 / 0 / 0"),
+    ("steps", "interpolation steps: finger base inside palm / thumb into palm / fingers intersecting at q=0 (Coal)", "0 / 0 / 0"),
+    ("train", "training time (wall, shared 2-core machine)", "<= 30 min"),
+    ("speed", "encode / decode to a valid vector, batched, per hand", ""),
+]
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--model", help="model directory (default: the shipped model)")
     ap.add_argument("--heldout", type=int, default=16384)
+    ap.add_argument("--latents", type=int, default=10000, help="random latents for the plausibility check")
+    ap.add_argument("--no-reference", action="store_true", help="skip the reference model column")
     args = ap.parse_args()
     torch.set_num_threads(1)
-    vae = load_vae(args.model)
-
-    t_sample = best_of(lambda: sample_vectors(65536, 0), 3)
-    x = encode_vectors(sample_vectors(args.heldout, HELDOUT_SEED), warn=False)
-    held = reconstruction_metrics(x, reconstruct(vae.model, vae.standardizer, x))
-    z = vae.encode_encodings(x[:1024])[0]
-    t_enc = best_of(lambda: vae.encode_encodings(x[:1024]), 3) / 1024
-    t_dec = best_of(lambda: vae.decode_vectors(z), 3) / 1024
-    t_one = best_of(lambda: vae.decode(z[0]), 5)
-    reg = registered(vae)
-    held_tips = heldout_tips(vae)
-    smooth = smoothness(vae)
-    train = vae.metrics or {}
-    data = {
-        "model": str(vae.path), "config": vae.config, "heldout": {"seed": HELDOUT_SEED, **held},
-        "heldout_fingertips": held_tips, "registered_hands": reg, "interpolation": smooth,
-        "training": {"epochs": train.get("epochs"), "steps": train.get("steps"),
-                     "seconds": train.get("train_seconds_total"), "peak_rss_mib": train.get("peak_rss_mib"),
-                     "threads": vae.config.get("threads")},
-        "speed": {"sample_65536_s": t_sample, "encode_per_hand_us": 1e6 * t_enc, "decode_to_valid_vector_per_hand_us": 1e6 * t_dec,
-                  "decode_one_params_ms": 1e3 * t_one},
-        "bench_peak_rss_mib": peak_rss_mib(),
-    }
-
-    lines = ["| morphology VAE (shipped model) | value | target |", "|---|---|---|"]
-    lines.append(f"| held-out hands (seed {HELDOUT_SEED}) | {held['n']} | |")
-    lines.append(f"| presence accuracy (22 flags) | {100 * held['presence_accuracy']:.2f} % | >= 99 % |")
-    lines.append(f"| presence pattern exactly right (per hand) | {100 * held['presence_exact']:.2f} % | |")
-    lines.append(f"| thumb axis accuracy (present thumb joints 1-2) | {100 * held['axis_accuracy']:.2f} % | >= 98 % |")
-    lines.append(f"| thumb axis accuracy (all slots) | {100 * held['axis_accuracy_all']:.2f} % | |")
-    for k, v in held["rmse"].items():
-        name, unit = k.rsplit("_", 1)
-        val = f"{1e3 * v:.2f} mm" if unit == "m" else f"{v:.3f} rad"
-        lines.append(f"| RMSE {name} | {val} | |")
-    lines.append(f"| held-out hands, fingertip error at q=0 (own limits), thumb mean / median | "
-                 f"{held_tips['thumb_mean_mm']:.1f} / {held_tips['thumb_median_mm']:.1f} mm | |")
-    lines.append(f"| held-out hands, fingertip error at q=0 (own limits), other fingers mean / median | "
-                 f"{held_tips['fingers_mean_mm']:.1f} / {held_tips['fingers_median_mm']:.1f} mm | |")
-    ok = sum(r["presence_exact"] for r in reg)
-    sup = [r for r in reg if r["in_sampler_support"]]
-    lines.append(f"| registered hands with presence pattern exactly right (all / in the sampler's support) | "
-                 f"{ok} / {len(reg)} ; {sum(r['presence_exact'] for r in sup)} / {len(sup)} | all |")
-    if reg:
-        lines.append(f"| registered hands, fingertip error at q=0 (mean / worst hand mean) | "
-                     f"{np.mean([r['fingertip_mean_mm'] for r in reg]):.1f} / {max(r['fingertip_mean_mm'] for r in reg):.1f} mm | |")
-    for s in smooth:
-        lines.append(f"| interpolation {s['pair']} ({s['steps']} steps): max / mean fingertip jump | "
-                     f"{s['max_jump_mm']:.1f} / {s['mean_jump_mm']:.1f} mm | |")
-        if s["steps_same_structure"]:
-            lines.append(f"| ... steps with the same joints ({s['steps_same_structure']} of {s['steps'] - 1}): max jump thumb / other fingers | "
-                         f"{s['max_jump_same_structure_thumb_mm']:.1f} / {s['max_jump_same_structure_fingers_mm']:.1f} mm | |")
-    tr = data["training"]
-    if tr["seconds"] is not None:
-        lines.append(f"| training: {tr['epochs']} epochs, {tr['steps']} steps, 65,536 hands, {tr['threads']} thread(s) | "
-                     f"{tr['seconds'] / 60:.1f} min | < 25 min |")
-    if tr["peak_rss_mib"] is not None:
-        lines.append(f"| training peak memory (RSS) | {tr['peak_rss_mib']:.0f} MiB | |")
-    sp = data["speed"]
-    lines.append(f"| sample 65,536 hands (vectorised) | {sp['sample_65536_s']:.2f} s | < 60 s |")
-    lines.append(f"| encode / decode-to-valid-vector, batched | {sp['encode_per_hand_us']:.1f} / {sp['decode_to_valid_vector_per_hand_us']:.1f} us per hand | |")
-    lines.append(f"| decode one latent to BaseParams | {sp['decode_one_params_ms']:.2f} ms | |")
+    hands = base_hands()
+    models = {"new": load_vae(args.model)}
+    if not args.no_reference:
+        models = {"reference66": load_vae(reference_model_dir()), **models}
+    data = {name: evaluate(vae, hands, args.heldout, args.latents) for name, vae in models.items()}
+    data["sample_65536_s"] = best_of(lambda: sample_vectors(65536, 0), 3)
+    data["bench_peak_rss_mib"] = peak_rss_mib()
+    cells = {name: _rows(data[name]) for name in models}
+    head = " | ".join(f"{name} ({data[name]['encoding']})" for name in models)
+    lines = [f"| morphology VAE | {head} | target |", "|---|" + "---|" * len(models) + "---|"]
+    for key, label, target in LABELS:
+        lines.append(f"| {label} | " + " | ".join(cells[m][key] for m in models) + f" | {target} |")
+    lines.append(f"| sample 65,536 hands (vectorised, with thumb redraws) | {data['sample_65536_s']:.2f} s | | < 60 s |")
+    last = list(models)[-1]
     table = "\n".join(lines)
-    if reg:
-        table += "\n\n| hand | joint pattern in sampler support | presence exact | fingertip error at q=0, mean / max [mm] |\n|---|---|---|---|\n"
-        table += "\n".join(f"| {r['hand']} | {'yes' if r['in_sampler_support'] else 'no'} | {'yes' if r['presence_exact'] else 'no (' + str(r['presence_errors']) + ' flags)'} | "
-                           f"{r['fingertip_mean_mm']:.1f} / {r['fingertip_max_mm']:.1f} |" for r in reg)
+    table += f"\n\n| hand ({last}) | in sampler support | presence exact | fingertip error at q=0, mean / max [mm] | thumb rotation error [rad] |\n|---|---|---|---|---|\n"
+    table += "\n".join(f"| {r['hand']} | {'yes' if r['in_sampler_support'] else 'no'} | {'yes' if r['presence_exact'] else 'no'} | "
+                       f"{r['tip_mean_mm']:.1f} / {r['tip_max_mm']:.1f} | {r['thumb_rotation_error_rad']:.3f} |" for r in data[last]["registered_hands"])
     write_results("vae", data, table)
 
 
 if __name__ == "__main__":
+    t0 = time.perf_counter()
     main()
+    print(f"({time.perf_counter() - t0:.0f} s)")

@@ -1,4 +1,4 @@
-"""The synthetic hand sampler: valid, seeded, reference distributions with the quirks fixed."""
+"""The synthetic hand sampler: valid, seeded, every registered hand in its support, plausible hands."""
 
 from __future__ import annotations
 
@@ -6,11 +6,17 @@ import numpy as np
 import pytest
 from scipy import stats
 
+import ohra
 from ohra.canonical.kinematics import HandModel
+from ohra.errors import OhraError
+from ohra.learn import geometry as geo
 from ohra.learn.encoding import segment_presence
 from ohra.learn.sampler import (
-    EXTRA, LENGTHS, THUMB_AXES, UPPERS, XYZ, in_support, mirror_vectors, sample_params, sample_vectors,
+    DEFAULT_CONFIG, EXTRA, LENGTHS, THUMB_AXES, THUMB_RPY, UPPERS, XYZ, SamplerConfig, in_support, mirror_vectors,
+    sample_params, sample_vectors, support_violations,
 )
+from ohra.learn.sampler_reference import sample_reference_vectors
+from ohra.transforms import rpy_to_matrix
 from ohra.canonical.params import BaseParams
 from ohra.canonical.urdfgen import render
 
@@ -76,7 +82,9 @@ def test_finger_and_joint_patterns_follow_the_reference(samples):
     seg_t, seg_f, fingers = segment_presence(present)
     assert fingers[:, 0].all(), "the thumb is always present"
     assert set(np.unique(fingers[:, 1:].sum(axis=1))) == {2, 3, 4}
-    assert present[:, 0].all(), "thumb_joint1 is in every thumb pattern"
+    # thumb patterns: the reference's six, all with joint 1, and Barrett's (joints 4 and 5 only)
+    barrett = np.all(present[:, 0:5] == [0, 0, 0, 1, 1], axis=1)
+    assert present[~barrett, 0].all() and abs(barrett.mean() - 1 / 9) < 0.02  # full thumb 3x as likely
     # one joint pattern shared by all present non-thumb fingers
     pats = [present[:, s : s + 4] for s in (5, 9, 13, 18)]
     for i in range(N)[:2000]:
@@ -87,10 +95,75 @@ def test_finger_and_joint_patterns_follow_the_reference(samples):
     full = present.sum(axis=1) - present[:, 17] >= 20
     assert not present[~full, 17].any()
     assert 0.7 < present[full, 17].mean() < 0.9
-    # joint-count histogram close to the reference's 20k-sample estimate (§7.1)
-    counts = np.bincount(present.sum(axis=1), minlength=23) / N
-    assert abs(counts[11] - 0.170) < 0.02 and abs(counts[8] - 0.113) < 0.02 and counts[:6].sum() == 0
+    assert present.sum(axis=1).min() >= 6  # Barrett's thumb (2) and two fingers of two joints
     assert 0.47 < right.mean() < 0.53
+
+
+def _registered():
+    out = {}
+    for n in ohra.list_hands():
+        try:
+            out[n] = ohra.get_hand(n, "base")
+        except OhraError:
+            pass
+    return out
+
+
+# Registered after the sampler (and the shipped VAE) were fitted: a thumb mounted 6 cm up the palm
+# (support 0-4.5 cm), a 23 mm thumb link (support >= 25 mm), knuckles spread 4.6 mm in x. Widening the
+# support means retraining the VAE (issue 16); until then they are named here, not hidden.
+OUTSIDE_SUPPORT = {"inspire_hand_left", "inspire_hand_right"}
+
+
+def test_every_registered_base_hand_is_inside_the_support():
+    hands = _registered()
+    assert hands, "no registered base-form hands"
+    assert {p.handedness for p in hands.values()} == {"left", "right"}
+    bad = {n: support_violations(p) for n, p in hands.items() if support_violations(p)}
+    assert set(bad) == OUTSIDE_SUPPORT, bad
+
+
+def test_support_violations_name_the_parameter_and_its_range():
+    p = BaseParams.from_vector(sample_vectors(1, 21)[0])
+    assert support_violations(p) == []
+    d = p.to_dict()
+    d["palm_radius"] = 0.07
+    msg = support_violations(BaseParams.from_dict(d))
+    assert msg[0] == "palm_radius = 0.07 outside [0.04, 0.06]"
+    narrow = SamplerConfig(palm_radius=(0.041, 0.042))
+    assert any(m.startswith("palm_radius") for m in support_violations(p, narrow)) or 0.041 <= p.palm_radius <= 0.042
+    # the reference sampler's hands are mostly outside: thumbs into the palm, Euler cube
+    ref = [support_violations(BaseParams.from_vector(r)) for r in sample_reference_vectors(200, 1)]
+    assert sum(any("into the palm" in m for m in r) for r in ref) > 60
+
+
+def test_sampled_hands_are_plausible(samples):
+    v, _ = samples
+    assert not geo.thumb_into_palm(v).any()
+    assert not geo.knuckles_inside_palm(v).any()
+    assert (geo.thumb_clearance(v) >= DEFAULT_CONFIG.thumb_clearance).all()
+    lo, hi = DEFAULT_CONFIG.knuckle_z_bounds(v[:, 0])
+    z = v[:, XYZ].reshape(N, 5, 3)[:, 1:, 2]
+    used = z != 0
+    assert np.all((z >= lo[:, None] - 1e-12)[used]) and np.all((z <= hi[:, None] + 1e-12)[used])
+
+
+def test_thumb_directions_are_uniform_over_the_outward_half(samples):
+    """For a rotation uniform on the half of SO(3) whose z axis points away from the palm centre,
+    the cosine between that axis and the outward direction is uniform on [0, 1], and the thumb's
+    turn about its own axis is uniform."""
+    v, right = samples
+    r = v[right]
+    R = rpy_to_matrix(r[:, THUMB_RPY])
+    out = r[:, XYZ][:, 0:3] - geo.palm_centre(r)
+    out /= np.linalg.norm(out, axis=1, keepdims=True)
+    cos = np.sum(R[:, :, 2] * out, axis=1)
+    assert stats.kstest(cos, "uniform").pvalue > 1e-3
+    # roll: angle of the thumb's x axis around its z axis, against a reference perpendicular to z
+    ref = np.cross(R[:, :, 2], [0.0, 0.0, 1.0])
+    ref /= np.linalg.norm(ref, axis=1, keepdims=True)
+    roll = np.arctan2(np.sum(np.cross(ref, R[:, :, 0]) * R[:, :, 2], 1), np.sum(ref * R[:, :, 0], 1))
+    assert stats.kstest((roll + np.pi) / (2 * np.pi), "uniform").pvalue > 1e-3
 
 
 def test_parts_without_geometry_are_zero(samples):
@@ -108,18 +181,19 @@ def test_parts_without_geometry_are_zero(samples):
     assert not lengths[~seg].any() and (lengths[seg] > 0).all()
 
 
-def test_knuckles_do_not_overlap_and_stay_on_the_palm(samples):
+def test_knuckles_do_not_overlap_and_keep_their_order(samples):
     v, right = samples
     present = _present(v)
     _, _, fingers = segment_presence(present)
     R, r = v[:, 0], v[:, 1]
     y = v[:, XYZ].reshape(N, 5, 3)[:, 1:, 1]
+    wmax = DEFAULT_CONFIG.knuckle_span[1] * (R - r)
     for i in range(N):
         yi = y[i, fingers[i, 1:]]
         # index -> little runs from the thumb side (+y on a right hand) to the other side
         d = -np.diff(yi) if right[i] else np.diff(yi)
-        assert (d >= 2 * r[i] - 1e-12).all()
-        assert (np.abs(yi) <= R[i] - r[i] + 1e-12).all()
+        assert (d >= 2 * r[i] + DEFAULT_CONFIG.finger_gap - 1e-12).all()
+        assert (np.abs(yi) <= max(wmax[i], (len(yi) - 1) * (2 * r[i] + DEFAULT_CONFIG.finger_gap)) + 1e-12).all()
 
 
 def test_little_extra_joint_sits_on_the_little_fingers_side(samples):
@@ -163,5 +237,5 @@ def test_every_sampled_pattern_is_in_the_documented_support(samples):
     flags = v[:, 38:60] != v[:, 60:82]
     assert all(in_support(f) for f in flags[:3000])
     off = flags[0].copy()
-    off[0] = False  # a thumb without joint 1 (Barrett's pattern) is never sampled
+    off[0:5] = [False, True, False, False, True]  # a thumb with joints 2 and 5 only is never sampled
     assert not in_support(off)

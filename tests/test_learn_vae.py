@@ -1,4 +1,4 @@
-"""The morphology VAE: model, loss, training, checkpoints and exact resume, shipped model, use, CLI."""
+"""The morphology VAE: model, losses, training, checkpoints and exact resume, shipped model, use, CLI."""
 
 from __future__ import annotations
 
@@ -13,18 +13,21 @@ torch = pytest.importorskip("torch")
 
 import ohra  # noqa: E402
 from ohra.cli.main import main as cli_main  # noqa: E402
-from ohra.errors import CheckpointError  # noqa: E402
+from ohra.errors import CheckpointError, OhraError  # noqa: E402
 from ohra.hands import registry  # noqa: E402
 from ohra.canonical.kinematics import HandModel  # noqa: E402
 from ohra.learn import encode_vectors, sample_vectors  # noqa: E402
-from ohra.learn.encoding import FLAGS, LatentError  # noqa: E402
+from ohra.learn.encoding import LatentError  # noqa: E402
 from ohra.learn.sampler import in_support  # noqa: E402
-from ohra.learn.morph import Interpolation, default_model_dir, load_vae  # noqa: E402
-from ohra.learn.train_vae import TrainConfig, reconstruct, reconstruction_metrics, train  # noqa: E402
-from ohra.learn.vae import MorphologyVAE, VAEConfig, make_optimizer, vae_loss  # noqa: E402
+from ohra.learn import geometry as geo  # noqa: E402
+from ohra.learn.morph import Interpolation, default_model_dir, load_vae, reference_model_dir  # noqa: E402
+from ohra.learn.sampler_reference import sample_reference_vectors  # noqa: E402
+from ohra.learn.train_vae import TrainConfig, learning_rate, make_dataset, train  # noqa: E402
+from ohra.learn.vae import GeometryLoss, MorphologyVAE, VAEConfig, make_optimizer, path_smoothness, vae_loss  # noqa: E402
+from ohra.learn.vae_metrics import reconstruct, reconstruction_metrics  # noqa: E402
 from ohra.canonical.params import BaseParams  # noqa: E402
 
-SMALL = TrainConfig(samples=2048, batch_size=256, epochs=4, threads=1, heldout=256, checkpoint_every=1)
+SMALL = TrainConfig(samples=2048, batch_size=256, epochs=4, threads=1, heldout=256, checkpoint_every=1, lr_schedule="constant")
 
 
 def _states_equal(a: dict, b: dict) -> bool:
@@ -61,6 +64,58 @@ def test_loss_terms_match_their_definitions():
     assert torch.isclose(t["kl"], kl)
     total = t["mse"] + t["ce_axis1"] + t["ce_axis2"] + t["bce"] + 0.01 * t["kl"]
     assert torch.isclose(t["total"], total)
+
+
+def test_rot6d70_model_shapes_and_config_round_trip():
+    cfg = TrainConfig(latent_dim=32).vae_config()
+    assert cfg.encoding == "rot6d70" and cfg.input_dim == 70
+    m = MorphologyVAE(cfg).eval()
+    out = m.decode(m.encode(torch.zeros(3, 70))[0])
+    assert {k: tuple(v.shape) for k, v in out.items()} == {"cont": (3, 35), "axis1": (3, 6), "axis2": (3, 6), "presence": (3, 23)}
+    assert VAEConfig.from_dict(cfg.to_dict()) == cfg
+    old = {"input_dim": 66, "hidden": [512, 256, 128], "latent_dim": 16, "beta": 0.01}  # a model saved before
+    assert VAEConfig.from_dict(old).encoding == "reference66"
+    with pytest.raises(ValueError, match="does not match"):
+        VAEConfig(input_dim=66, encoding="rot6d70")
+    with pytest.raises(OhraError, match="unknown key"):
+        TrainConfig.from_dict({"samples": 10, "bogus": 1}, "run/config.json")
+
+
+def test_geometry_terms_are_zero_for_the_truth_and_grow_with_the_error():
+    data = make_dataset(64, 3, encoding="rot6d70")
+    cfg = VAEConfig(input_dim=70, encoding="rot6d70", tip_weight=1.0, rot_weight=1.0)
+    geom = GeometryLoss(cfg, data.standardizer.mean, data.standardizer.std)
+    # the training targets use the right-hand form of each hand, as the encoding does
+    exact = geom(data.x[:, :35], data.rotation, data.present, data.tips)
+    assert exact["tip"] < 1e-4 and exact["rot"] < 1e-4
+    shifted = data.x[:, :35].clone()
+    shifted[:, 8:23] += 0.01 / torch.as_tensor(data.standardizer.std[8:23], dtype=torch.float32)  # every base +1 cm
+    t = geom(shifted, data.rotation, data.present, data.tips)["tip"]
+    assert abs(float(t) - (np.sqrt(3 + 0.01) - 0.1)) < 1e-3  # pseudo-Huber of a sqrt(3) cm move
+
+
+def test_path_smoothness_is_zero_without_moves_and_counts_big_steps():
+    data = make_dataset(64, 4, encoding="rot6d70")
+    cfg = VAEConfig(input_dim=70, encoding="rot6d70", smooth_weight=1.0)
+    geom = GeometryLoss(cfg, data.standardizer.mean, data.standardizer.std)
+    torch.manual_seed(0)
+    m = MorphologyVAE(cfg).eval()
+    g = torch.Generator().manual_seed(0)
+    with torch.no_grad():
+        same = torch.zeros(64, cfg.latent_dim)
+        assert float(path_smoothness(m, geom, same, data.present, g)) == 0.0
+        spread = torch.randn(64, cfg.latent_dim, generator=g)
+        small = float(path_smoothness(m, geom, spread, data.present, g, limit=1.0))  # 1 m: nothing exceeds it
+        big = float(path_smoothness(m, geom, 1e3 * spread, data.present, g, limit=0.0))
+    assert small == 0.0 and big > 0.0
+
+
+def test_cosine_learning_rate_schedule():
+    cfg = TrainConfig(lr=1e-3, lr_schedule="cosine", lr_final_ratio=0.01)
+    assert learning_rate(cfg, 0, 101) == pytest.approx(1e-3)
+    assert learning_rate(cfg, 50, 101) == pytest.approx(1e-3 * (0.01 + 0.99 * 0.5))
+    assert learning_rate(cfg, 100, 101) == pytest.approx(1e-5)
+    assert learning_rate(TrainConfig(lr=1e-3, lr_schedule="constant"), 70, 101) == 1e-3
 
 
 # -- training ---------------------------------------------------------------------------------------
@@ -138,49 +193,61 @@ def vae():
 
 
 def test_shipped_model_loads_with_config_and_metrics_and_meets_the_targets(vae):
-    assert vae.latent_dim == 16 and not vae.model.training
+    assert vae.encoding.name == "rot6d70" and vae.latent_dim == vae.config["latent_dim"] and not vae.model.training
     assert vae.config["samples"] == 65536 and vae.metrics["heldout"]["presence_accuracy"] >= 0.99
     size = sum(f.stat().st_size for f in default_model_dir().iterdir())
     assert size < 4 * 2 ** 20
-    x = encode_vectors(sample_vectors(2048, 424242), warn=False)  # fresh held-out hands
-    m = reconstruction_metrics(x, reconstruct(vae.model, vae.standardizer, x))
+    v = sample_vectors(2048, 424242)  # fresh held-out hands
+    x = vae.encoding.encode_vectors(v, warn=False)
+    m = reconstruction_metrics(x, reconstruct(vae.model, vae.standardizer, x), vae.encoding)
+    assert m["presence_accuracy"] >= 0.99 and m["axis_accuracy"] >= 0.98 and m["handedness_accuracy"] >= 0.99
+
+
+def test_the_reference_model_still_loads_and_reconstructs_its_encoding():
+    ref = load_vae(reference_model_dir())
+    assert ref.encoding.name == "reference66" and ref.latent_dim == 16
+    x = encode_vectors(sample_reference_vectors(512, 7), warn=False)
+    m = reconstruction_metrics(x, reconstruct(ref.model, ref.standardizer, x), ref.encoding)
     assert m["presence_accuracy"] >= 0.99 and m["axis_accuracy"] >= 0.98
 
 
-def test_encode_is_deterministic_and_decode_of_any_latent_is_valid(vae):
+def test_encode_is_deterministic_and_decode_of_any_latent_is_valid_and_plausible(vae):
+    d = vae.latent_dim
     p = sample_vectors(1, 3)[0]
     mu1, lv1 = vae.encode(BaseParams.from_vector(p))
     mu2, _ = vae.encode(BaseParams.from_vector(p))
-    assert mu1.shape == lv1.shape == (16,) and np.array_equal(mu1, mu2) and isinstance(mu1, np.ndarray)
+    assert mu1.shape == lv1.shape == (d,) and np.array_equal(mu1, mu2) and isinstance(mu1, np.ndarray)
     rng = np.random.default_rng(0)
-    zs = np.concatenate([rng.normal(size=(40, 16)), rng.normal(size=(10, 16)) * 1e3, np.full((1, 16), 1e3),
-                         np.full((1, 16), -1e3), np.full((1, 16), 1e30), np.full((1, 16), np.inf)])
+    zs = np.concatenate([rng.normal(size=(200, d)), rng.normal(size=(10, d)) * 1e3, np.full((1, d), 1e3),
+                         np.full((1, d), -1e3), np.full((1, d), 1e30), np.full((1, d), np.inf)])
+    V = vae.decode_vectors(zs)
+    assert not geo.knuckles_inside_palm(V).any() and not geo.thumb_into_palm(V).any()
+    assert (geo.finger_clearance(V) >= 0).all()
     hands = vae.decode(zs)
     assert len(hands) == len(zs)
     for h in hands[-6:] + hands[:3]:
         HandModel.from_params(h)  # renders and loads
-    with pytest.raises(LatentError, match=r"\(16,\)"):
-        vae.decode(np.zeros(15))
+    with pytest.raises(LatentError, match=rf"\({d},\)"):
+        vae.decode(np.zeros(d - 1))
     with pytest.raises(LatentError, match="NaN"):
-        vae.decode(np.full(16, np.nan))
+        vae.decode(np.full(d, np.nan))
 
 
 def test_registered_hands_encode_and_reconstruct_their_presence_pattern(vae):
-    """Every registered base hand encodes; those whose joint pattern the sampler can produce get
-    their presence pattern back exactly. Barrett's "thumb" (finger 3) has no joint 1, a pattern the
-    reference sampler never draws: it is outside the training distribution."""
+    """Every registered base hand is inside the sampler's support and gets its presence pattern
+    and handedness back exactly."""
     names = [n for n in ohra.list_hands() if "base" in registry.registered_forms(n)]
     assert {"dex3_right", "shadow_hand_right", "barrett_hand"} <= set(names)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         mu, logvar = vae.encode(names)
-        x = np.stack([encode_vectors(ohra.get_hand(n, "base").to_vector()) for n in names])
-    assert mu.shape == (len(names), 16) and np.isfinite(mu).all() and np.isfinite(logvar).all()
-    support = [in_support(f > 0.5) for f in x[:, FLAGS]]
-    assert [n for n, s in zip(names, support) if not s] == ["barrett_hand"]
+        x = vae.encoding.encode_vectors(np.stack([ohra.get_hand(n, "base").to_vector() for n in names]))
+    assert mu.shape == (len(names), vae.latent_dim) and np.isfinite(mu).all() and np.isfinite(logvar).all()
+    assert all(in_support(f > 0.5) for f in x[:, vae.encoding.flags])
     y = reconstruct(vae.model, vae.standardizer, x)
-    wrong = [n for n, a, b, s in zip(names, x[:, FLAGS], y[:, FLAGS], support) if s and not np.array_equal(a, b)]
-    assert not wrong, f"presence pattern not reconstructed for {wrong}"
+    b = vae.encoding.binary
+    wrong = [n for n, a, c in zip(names, x[:, b], y[:, b]) if not np.array_equal(a, c)]
+    assert not wrong, f"presence pattern or handedness not reconstructed for {wrong}"
 
 
 def test_interpolation_from_dex3_to_shadow(vae):
@@ -192,6 +259,7 @@ def test_interpolation_from_dex3_to_shadow(vae):
     assert it.params[0].dof == ohra.get_hand("dex3_right", "base").dof
     assert it.params[-1].dof == 22
     assert all(p.handedness == "right" for p in it.params)
+    assert [p.isclose(ohra.get_hand(n, "base")) for p, n in zip(it.originals, ("dex3_right", "shadow_hand_right"))] == [True, True]
     for text in it.urdfs:
         HandModel(text)
 
@@ -209,7 +277,7 @@ def test_cli_interpolate_writes_urdfs_png_and_html(vae, tmp_path, capsys):
 def test_cli_bad_input_is_one_line_and_exit_2(vae, tmp_path, capsys):
     ext = ohra.get_hand("shadow_hand_right", "base").to_extended()
     cases = [
-        (["vae", "decode", "1,2,3"], "expected shape (16,)"),
+        (["vae", "decode", "1,2,3"], f"expected shape ({vae.latent_dim},)"),
         (["vae", "decode", "a,b"], "comma-separated"),
         (["vae", "encode", "no_such_hand"], "unknown hand"),
     ]
@@ -235,7 +303,11 @@ def test_cli_train_small_run_and_resume(tmp_path, capsys):
     assert cli_main(args) == 0
     assert "held-out (128 hands)" in capsys.readouterr().out
     assert cli_main(args) == 2 and "--resume" in capsys.readouterr().err
+    assert cli_main(args + ["--resume"]) == 0  # a finished run resumes to itself
+    assert json.loads((out / "metrics.json").read_text())["steps"] == 2
+    assert load_vae(out).latent_dim == TrainConfig().latent_dim
+    # the default cosine learning rate depends on the run's length: it cannot be extended
     args[args.index("--epochs") + 1] = "2"
-    assert cli_main(args + ["--resume"]) == 0
-    assert json.loads((out / "metrics.json").read_text())["steps"] == 4
-    assert load_vae(out).latent_dim == 16
+    assert cli_main(args + ["--resume"]) == 2
+    err = capsys.readouterr().err
+    assert "epochs=1" in err and err.count("\n") == 1

@@ -30,7 +30,8 @@ def test_morphology_notebook_executes(tmp_path):
     texts = [_text(c) for c in nb.cells if c.cell_type == "code"]
     assert "4096 hands, 82 numbers each" in texts[0] and "<png>" in texts[0]
     assert "epoch 3: total" in texts[1]
-    assert "shipped model: latent 16" in texts[2]
+    assert "shipped model: latent" in texts[2] and "encoding rot6d70" in texts[2]
     assert "fingers: [3," in texts[3] and "<png>" in texts[3]
-    assert "valid: True" in texts[4]
+    assert "reference model, steps with a thumb pointing into the palm" in texts[4] and "<png>" in texts[4]
+    assert "valid: True | plausible: True" in texts[5]
     assert (tmp_path / "interpolation.png").is_file() and (tmp_path / "small_run" / "model.pt").is_file()

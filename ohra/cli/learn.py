@@ -52,7 +52,8 @@ def register(sub) -> None:
     p.add_argument("--model", help=model_help)
     p.set_defaults(func=_cmd_decode)
 
-    p = vae.add_parser("interpolate", help="hands along the latent line between two hands: URDFs, PNG strip, HTML")
+    p = vae.add_parser("interpolate", help="hands along the latent line between two hands: URDFs, PNG strip "
+                       "(the two original hands beside the decoded ends), meshcat HTML")
     p.add_argument("hand_a")
     p.add_argument("hand_b")
     p.add_argument("-n", "--steps", type=int, default=8, help="number of hands, endpoints included (default 8)")
@@ -178,11 +179,11 @@ def _cmd_interpolate(args: argparse.Namespace) -> int:
     if not args.no_png:
         from ohra.learn.strip import strip_png
 
-        png = strip_png(interp.params, out / "strip.png", labels=interp.labels())
+        png = strip_png(interp.params, out / "strip.png", labels=interp.labels(), originals=interp.labelled_originals())
         print(f"wrote {png}")
     if not args.no_html:
         from ohra.learn.strip import sequence_html
 
-        html = sequence_html(interp.params, out / "scene.html")
+        html = sequence_html(interp.params, out / "scene.html", originals=interp.originals)
         print(f"wrote {html}")
     return 0

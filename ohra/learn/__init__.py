@@ -1,6 +1,7 @@
-"""Learning on canonical hands: the synthetic hand sampler, the 66-D morphology encoding and the
-morphology VAE (16-D latent space; encode, decode and interpolate hands), and the cross-embodiment
-grasp model (:mod:`ohra.learn.grasp`).
+"""Learning on canonical hands: the synthetic hand sampler, the morphology encodings (the 70-D
+``rot6d70`` of the shipped model, :mod:`ohra.learn.encoding_rot6d`; the paper's 66-D ``reference66``,
+whose functions are re-exported here), the morphology VAE (32-D latent space; encode, decode and
+interpolate hands) and the cross-embodiment grasp model (:mod:`ohra.learn.grasp`).
 
 The sampler and the encoding need only numpy and import eagerly. Everything that needs torch
 (the VAE model, training, ``load_vae``, ``encode``/``decode``/``interpolate``) is imported on first
@@ -27,6 +28,7 @@ from ohra.learn.encoding import (
     encode_vectors,
 )
 from ohra.learn.config import TrainConfig
+from ohra.learn.encodings import ENCODINGS, get_encoding
 from ohra.learn.sampler import SamplerConfig, sample_hand, sample_params, sample_vectors
 
 
@@ -74,5 +76,6 @@ def __getattr__(name: str) -> Any:
 __all__ = [
     "sample_vectors", "sample_params", "sample_hand", "SamplerConfig", "encode_vectors", "encode_params",
     "decode_vectors", "decode_params", "Standardizer", "AxisSnapWarning", "LatentError", "ENCODING_DIM",
-    "CONT_DIM", "AXIS_CATEGORIES", "TrainConfig", "MissingDependencyError", "require_torch", *_LAZY,
+    "CONT_DIM", "AXIS_CATEGORIES", "TrainConfig", "ENCODINGS", "get_encoding", "MissingDependencyError", "require_torch",
+    *_LAZY,
 ]

@@ -322,7 +322,7 @@ def _spread_knuckles(xyz: np.ndarray, fingers: np.ndarray, r: np.ndarray, tol: f
 # -- standardisation --------------------------------------------------------------------------------
 @dataclass
 class Standardizer:
-    """Per-dimension z-scores of the 32 continuous values: ``(x - mean) / std``.
+    """Per-dimension z-scores of an encoding's continuous values: ``(x - mean) / std``.
 
     Constant dimensions (e.g. little-extra pitch and yaw, always 0 in the sampler) get ``std = 1``:
     they carry no information, and unit scale keeps small real-hand deviations small.
@@ -351,6 +351,6 @@ class Standardizer:
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "Standardizer":
         mean, std = np.asarray(d["mean"], dtype=float), np.asarray(d["std"], dtype=float)
-        if mean.shape != (CONT_DIM,) or std.shape != (CONT_DIM,) or np.any(std <= 0):
-            raise ParamsError(f"standardiser: expected {CONT_DIM} means and positive stds")
+        if mean.ndim != 1 or mean.shape != std.shape or not np.all(np.isfinite(mean)) or np.any(~(std > 0)):
+            raise ParamsError(f"standardiser: expected equally many means and positive stds, got shapes {mean.shape} and {std.shape}")
         return cls(mean, std)

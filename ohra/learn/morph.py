@@ -25,18 +25,25 @@ import torch
 from ohra.errors import CheckpointError
 from ohra.canonical.params import BaseParams, ExtendedParams
 from ohra.canonical.urdfgen import render
-from ohra.learn.encoding import AXIS1, AXIS2, CONT, FLAGS, LatentError, Standardizer, as_base, decode_vectors, encode_vectors
+from ohra.learn.encoding import LatentError, Standardizer, as_base
+from ohra.learn.encodings import Encoding, get_encoding
 from ohra.learn.train_vae import CHECKPOINT_FORMAT, MODEL_FORMAT, load_torch_file
 from ohra.learn.vae import MorphologyVAE, VAEConfig
 
 HandLike = Union[str, Path, BaseParams, ExtendedParams]
 DEFAULT_MODEL = "vae_default"
+REFERENCE_MODEL = "vae_reference66"  # the paper-setting model shipped before, kept for comparison
 _BIG = 1e6  # replaces infinities in decoder outputs before projection (then clipped to the bounds)
 
 
 def default_model_dir() -> Path:
     """Folder of the model shipped with the package."""
     return Path(str(resources.files("ohra.learn").joinpath("models", DEFAULT_MODEL)))
+
+
+def reference_model_dir() -> Path:
+    """Folder of the kept reference model (66-D encoding, paper settings)."""
+    return Path(str(resources.files("ohra.learn").joinpath("models", REFERENCE_MODEL)))
 
 
 def resolve_hand(hand: HandLike) -> BaseParams:
@@ -62,11 +69,21 @@ class VAEBundle:
     def latent_dim(self) -> int:
         return self.model.config.latent_dim
 
+    @property
+    def encoding(self) -> Encoding:
+        """The encoding this model was trained on (``reference66`` or ``rot6d70``)."""
+        return get_encoding(self.model.config.encoding)
+
     # -- encoding -----------------------------------------------------------------------------
-    def encode_encodings(self, x66: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Raw 66-D encodings (N, 66) -> (mu, logvar), each (N, latent_dim)."""
-        x = np.array(x66, dtype=float, copy=True)
-        x[:, CONT] = self.standardizer.transform(x[:, CONT])
+    def encode_vectors(self, v82: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Base vectors (N, 82) -> (mu, logvar), each (N, latent_dim) (axes snapped silently)."""
+        return self.encode_encodings(self.encoding.encode_vectors(np.atleast_2d(v82), warn=False))
+
+    def encode_encodings(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Raw encodings (N, D) -> (mu, logvar), each (N, latent_dim)."""
+        enc = self.encoding
+        x = np.array(x, dtype=float, copy=True)
+        x[:, enc.cont] = self.standardizer.transform(x[:, enc.cont])
         with torch.no_grad():
             mu, logvar = self.model.encode(torch.from_numpy(x.astype(np.float32)))
         return mu.double().numpy(), logvar.double().numpy()
@@ -75,7 +92,7 @@ class VAEBundle:
         """(mu, logvar) of one hand ((latent_dim,) each) or a sequence of hands ((N, latent_dim) each)."""
         single = isinstance(hands, (str, Path, BaseParams, ExtendedParams))
         items = [hands] if single else list(hands)
-        x = np.stack([encode_vectors(resolve_hand(h).to_vector()) for h in items])
+        x = np.stack([self.encoding.encode_vectors(resolve_hand(h).to_vector()) for h in items])
         mu, logvar = self.encode_encodings(x)
         return (mu[0], logvar[0]) if single else (mu, logvar)
 
@@ -93,25 +110,26 @@ class VAEBundle:
         return np.atleast_2d(arr), arr.ndim == 1
 
     def decode_encodings(self, z: Any) -> np.ndarray:
-        """Latents (N, latent_dim) -> raw 66-D decoder outputs (continuous in raw units, axis logits,
-        presence probabilities)."""
+        """Latents (N, latent_dim) -> raw decoder outputs (N, D): continuous in raw units, axis
+        logits, presence probabilities."""
         zz, _ = self.check_latent(z)
         zz = np.clip(zz, -1e30, 1e30)  # keep float32 finite; the projection clips the result anyway
+        enc = self.encoding
         with torch.no_grad():
             out = self.model.decode(torch.from_numpy(zz.astype(np.float32)))
-        y = np.zeros((len(zz), 66))
-        cont = out["cont"].double().numpy()
-        y[:, CONT] = self.standardizer.inverse(np.nan_to_num(cont, nan=0.0, posinf=_BIG, neginf=-_BIG))
-        y[:, AXIS1] = np.nan_to_num(out["axis1"].double().numpy(), nan=0.0, posinf=_BIG, neginf=-_BIG)
-        y[:, AXIS2] = np.nan_to_num(out["axis2"].double().numpy(), nan=0.0, posinf=_BIG, neginf=-_BIG)
-        y[:, FLAGS] = np.nan_to_num(torch.sigmoid(out["presence"]).double().numpy(), nan=0.0)
-        y[:, CONT] = np.nan_to_num(y[:, CONT], nan=0.0, posinf=_BIG, neginf=-_BIG)
+        clean = lambda t: np.nan_to_num(t.double().numpy(), nan=0.0, posinf=_BIG, neginf=-_BIG)  # noqa: E731
+        y = np.zeros((len(zz), enc.dim))
+        y[:, enc.cont] = np.nan_to_num(self.standardizer.inverse(clean(out["cont"])), nan=0.0, posinf=_BIG, neginf=-_BIG)
+        y[:, enc.axis1] = clean(out["axis1"])
+        y[:, enc.axis2] = clean(out["axis2"])
+        y[:, enc.binary] = np.nan_to_num(torch.sigmoid(out["presence"]).double().numpy(), nan=0.0)
         return y
 
     def decode_vectors(self, z: Any, limits: Any = None) -> np.ndarray:
-        """Latents -> valid base vectors (N, 82) (or (82,) for one latent); see :func:`decode_vectors`."""
+        """Latents -> valid base vectors (N, 82) (or (82,) for one latent); see the encoding's
+        ``decode_vectors`` (the rot6d encoding also makes them plausible)."""
         _, single = self.check_latent(z)
-        v = decode_vectors(self.decode_encodings(z), limits)
+        v = self.encoding.decode_vectors(self.decode_encodings(z), limits)
         return v[0] if single else v
 
     def decode(self, z: Any, limits: Any = None) -> BaseParams | list[BaseParams]:
@@ -142,24 +160,32 @@ class VAEBundle:
         assert isinstance(params, list)
         names = [str(a) if isinstance(a, (str, Path)) else "hand_a", str(b) if isinstance(b, (str, Path)) else "hand_b"]
         return Interpolation(alphas, z, params, [render(p, robot_name=f"vae_interp_{i}") for i, p in enumerate(params)],
-                             tuple(Path(x).stem for x in names))
+                             tuple(Path(x).stem for x in names), (resolve_hand(a), resolve_hand(b)))
 
 
 @dataclass
 class Interpolation:
-    """A latent interpolation: ``alphas`` (n,), latents ``z`` (n, d), decoded ``params`` and their ``urdfs``."""
+    """A latent interpolation: ``alphas`` (n,), latents ``z`` (n, d), decoded ``params`` and their
+    ``urdfs``; ``originals`` are the two hands it was made from (base form), for pictures."""
 
     alphas: np.ndarray
     z: np.ndarray
     params: list[BaseParams]
     urdfs: list[str]
     endpoints: tuple[str, str] = ("hand_a", "hand_b")
+    originals: tuple[BaseParams, BaseParams] | None = None
 
     def __len__(self) -> int:
         return len(self.params)
 
     def labels(self) -> list[str]:
         return [f"{i}: a={a:.2f}" for i, a in enumerate(self.alphas)]
+
+    def labelled_originals(self) -> list[tuple[str, BaseParams]] | None:
+        """``[("original <a>", params_a), ("original <b>", params_b)]`` for :func:`ohra.learn.strip.strip_png`."""
+        if self.originals is None:
+            return None
+        return [(f"original {name}", p) for name, p in zip(self.endpoints, self.originals)]
 
     def write(self, out_dir: str | Path, stem: str = "interp") -> list[Path]:
         """Write ``<stem>_<i>.urdf`` and ``<stem>_<i>.json`` (params) for every step; returns the URDF paths."""

@@ -1,21 +1,33 @@
 """Synthetic hand sampler: random valid base-form hands for training the morphology VAE.
 
-The distributions follow the reference sampler (``ohra_reference.md`` §7.1) with its quirks fixed
-(DESIGN decision 4, reference §11 item 12):
+The joint patterns follow the reference sampler (``ohra_reference.md`` §7.1) with its quirks fixed
+(DESIGN decision 4, reference §11 item 12): seeded and vectorised; no shared mutable template; the
+little finger's extra (metacarpal) joint on the little finger's side; parts without geometry carry
+zeros, as in the registered real hands (absent fingers have ``finger_xyz = 0``, absent thumb joints
+1/2 a zero axis, the little extra origin is zero without ``little_joint0``, segments without geometry
+length 0); vectors in the canonical key order of :class:`ohra.canonical.params.BaseParams`.
 
-* seeded (``numpy.random.Generator``) and vectorised: a whole batch is drawn with array operations;
-* no shared mutable template (there is none: every batch is built from fresh arrays);
-* the little finger's extra (metacarpal) joint sits on the little finger's side of the palm
-  (right hand: ``-y`` with positive roll, like Shadow/Sharpa right; left hand: mirrored);
-* parts without geometry carry zeros, as in the registered real hands: absent fingers have
-  ``finger_xyz = 0``, absent thumb joints 1/2 have a zero axis, the little extra origin is zero when
-  ``little_joint0`` is absent, and segments without geometry have length 0. (None of these numbers
-  changes the rendered hand; zeroing makes every hand's vector unique.)
-* vectors are in the canonical key order of :class:`ohra.canonical.params.BaseParams` (82 numbers).
+The continuous distributions are wider than the reference's and shaped so that **every registered
+base-form hand lies inside the support** (:func:`support_violations` says why one would not; the
+README lists them). The reference's ranges missed most real hands: its finger radius stops at 12 mm
+(LEAP: 17 mm), its knuckle heights at ``2 R - 1 cm +- 5 mm`` (Barrett's knuckles sit at the palm
+centre, 8 standard deviations lower; Sharpa's 3 higher), its little metacarpal frame below 2.5 cm
+(Sharpa: 8.5 cm), and it never draws a thumb without joint 1 (Barrett). Its thumb mounting rotation
+was uniform in the Euler cube ``[-pi, pi]^3``, which covers every rotation twice and points half the
+thumbs into the palm. Here:
 
-Kept from the reference on purpose (they define the training distribution of the paper's VAE): one
-joint pattern shared by all non-thumb fingers, one knuckle ``x`` shared by all non-thumb fingers,
-limits ``[0, pi/2]`` for present joints, and the parameter ranges below.
+* the thumb mounting rotation is uniform over the rotations whose z axis (the thumb's direction at
+  q = 0) does not point towards the palm centre from the thumb base (a uniform rotation is turned by
+  pi about an axis perpendicular to that direction when it does: a measure-preserving map from one
+  half onto the other), and a thumb that would touch a finger at q = 0 is drawn again;
+* knuckles sit in one row at height ``2 R + o R`` (``o`` shared by the hand) with a small per-finger
+  jitter in height and depth, spread across a row of half-width ``s (R - r)`` with Dirichlet gaps,
+  never closer than one finger diameter;
+* left hands are exact mirror images of right hands (:func:`mirror_vectors`).
+
+Kept from the reference on purpose: one joint pattern shared by all non-thumb fingers, limits
+``[0, pi/2]`` for present joints, signed basis axes for thumb joints 1 and 2. The full thumb and
+finger patterns are drawn three times as often as each other pattern (:func:`_pattern_odds`).
 
 Units: metres and radians, canonical palm frame (+x palm normal, +y thumb side of a right hand,
 +z finger-forward). A right hand has its thumb at ``+y``.
@@ -42,9 +54,10 @@ THUMB_AXES = slice(32, 38)  # (2,3)
 LOWERS = slice(38, 60)
 UPPERS = slice(60, 82)
 
-# Thumb joint patterns (j1..j5) and the eight non-thumb patterns (j1..j4 with j2+j3+j4 >= 2).
+# Thumb joint patterns (j1..j5): the reference's six, plus Barrett's thumb without base joints.
 THUMB_PATTERNS = np.array(
-    [[1, 1, 1, 1, 1], [1, 1, 0, 1, 1], [1, 1, 0, 0, 1], [1, 0, 0, 1, 1], [1, 0, 0, 1, 0], [1, 0, 0, 0, 1]], dtype=bool
+    [[1, 1, 1, 1, 1], [1, 1, 0, 1, 1], [1, 1, 0, 0, 1], [1, 0, 0, 1, 1], [1, 0, 0, 1, 0], [1, 0, 0, 0, 1],
+     [0, 0, 0, 1, 1]], dtype=bool
 )
 _ALL4 = np.array([[(k >> (3 - b)) & 1 for b in range(4)] for k in range(16)], dtype=bool)
 FINGER_PATTERNS = _ALL4[_ALL4[:, 1:].sum(axis=1) >= 2]  # 8 patterns, uniform (= rejection sampling)
@@ -54,28 +67,151 @@ BASIS_AXES = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], 
 
 @dataclass(frozen=True)
 class SamplerConfig:
-    """Ranges of the reference sampler [m, rad]; ``U(a, b)`` unless noted."""
+    """Ranges of the sampler [m, rad, or as noted]; ``U(a, b)`` unless noted. Right-hand values
+    (left hands mirror them)."""
 
     p_finger: float = 0.75  # each non-thumb finger present (at least 2 of 4 forced)
     p_little_joint0: float = 0.8  # extra little joint, only when >= 20 joints are present
+    full_pattern_weight: float = 3.0  # odds of the full thumb / finger pattern against each other one
     palm_radius: tuple[float, float] = (0.04, 0.06)
-    finger_radius: tuple[float, float] = (0.0075, 0.012)  # upper bound also <= palm_radius / 4
-    thumb_lengths: tuple[float, float] = (0.035, 0.07)
-    finger_lengths: tuple[float, float] = (0.025, 0.07)
-    thumb_x: tuple[float, float] = (-0.02, 0.02)
-    thumb_y: tuple[float, float] = (0.0, 0.04)  # |y|, on the thumb side
-    thumb_z: tuple[float, float] = (0.015, 0.025)
-    knuckle_x_std: float = 0.001  # N(0, std^2), shared by the non-thumb fingers
-    knuckle_z_offset: float = -0.01  # N(2 R + offset, std^2) per finger
-    knuckle_z_std: float = 0.005
-    extra_x: tuple[float, float] = (-0.01, 0.01)
-    extra_y: tuple[float, float] = (0.03, 0.04)  # |y|, on the little finger's side
-    extra_z: tuple[float, float] = (0.018, 0.025)
-    extra_roll: tuple[float, float] = (5 * math.pi / 16, 7 * math.pi / 16)  # |roll|; right hand positive
+    finger_radius: tuple[float, float] = (0.007, 0.018)  # upper bound also <= max_radius_ratio * palm radius
+    max_radius_ratio: float = 1.0 / 3.0
+    thumb_lengths: tuple[float, float] = (0.025, 0.075)
+    finger_lengths: tuple[float, float] = (0.02, 0.075)
+    thumb_x: tuple[float, float] = (-0.025, 0.025)
+    thumb_y: tuple[float, float] = (0.0, 0.045)  # |y|, on the thumb side
+    thumb_z: tuple[float, float] = (0.0, 0.045)
+    knuckle_x: tuple[float, float] = (-0.006, 0.012)  # shared by the non-thumb fingers
+    knuckle_x_jitter: float = 0.002  # U(-a, a) per finger
+    knuckle_row: tuple[float, float] = (-1.05, 0.35)  # row height 2 R + o R, o in palm radii
+    knuckle_z_jitter: float = 0.007  # U(-a, a) per finger
+    knuckle_span: tuple[float, float] = (0.85, 1.3)  # half-width of the knuckle row / (R - r)
+    finger_gap: float = 2e-4  # least free space between neighbouring knuckles' capsules [m]
+    extra_x: tuple[float, float] = (-0.015, 0.015)
+    extra_y: tuple[float, float] = (0.02, 0.045)  # |y|, on the little finger's side
+    extra_z: tuple[float, float] = (0.015, 0.09)
+    extra_roll: tuple[float, float] = (0.9, 1.45)  # right hand; left: negated
+    extra_pitch: tuple[float, float] = (-0.1, 0.1)
+    extra_yaw: tuple[float, float] = (-1.65, 0.15)  # right hand; left: negated
     joint_upper: float = math.pi / 2
+    thumb_clearance: float = 5e-4  # m: a thumb closer than this to a finger at q = 0 is drawn again
+    max_redraws: int = 100  # redraw rounds before giving up (each round redraws only the failing thumbs)
+
+    def knuckle_z_bounds(self, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Lowest and highest knuckle height [m] for palm radii ``R``."""
+        R = np.asarray(R, dtype=float)
+        return (2.0 + self.knuckle_row[0]) * R - self.knuckle_z_jitter, (2.0 + self.knuckle_row[1]) * R + self.knuckle_z_jitter
 
 
 DEFAULT_CONFIG = SamplerConfig()
+
+
+def _pattern_odds(patterns: np.ndarray, c: SamplerConfig) -> np.ndarray:
+    """Probabilities of the patterns (K, J): the full one (every joint) ``full_pattern_weight`` times
+    as likely as each other one. Most real hands have full fingers (6 of the 13 registered base
+    hands have a full thumb or full fingers), and the full 22-joint hand with a little metacarpal
+    joint would otherwise be 0.4 % of the samples."""
+    w = np.where(patterns.all(axis=1), c.full_pattern_weight, 1.0)
+    return w / w.sum()
+
+
+def _patterns(rng: np.random.Generator, n: int, c: SamplerConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Joint presence (n, 22), non-thumb fingers used (n, 4) and the shared finger pattern (n, 4)."""
+    use = rng.random((n, 4)) < c.p_finger  # thumb always; >= 2 of the 4 non-thumb fingers
+    while True:
+        short = np.flatnonzero(use.sum(axis=1) < 2)
+        if short.size == 0:
+            break
+        use[short, rng.integers(0, 4, short.size)] = True
+    thumb_pat = THUMB_PATTERNS[rng.choice(len(THUMB_PATTERNS), n, p=_pattern_odds(THUMB_PATTERNS, c))]
+    finger_pat = FINGER_PATTERNS[rng.choice(len(FINGER_PATTERNS), n, p=_pattern_odds(FINGER_PATTERNS, c))]
+    present = np.zeros((n, 22), dtype=bool)
+    present[:, 0:5] = thumb_pat
+    for fi, start in enumerate((5, 9, 13, 18)):  # index, middle, ring, little (joint1..4)
+        present[:, start : start + 4] = finger_pat & use[:, fi : fi + 1]
+    full = present.sum(axis=1) >= 20
+    present[:, 17] = full & (rng.random(n) < c.p_little_joint0)
+    return present, use, finger_pat
+
+
+def _knuckles(rng: np.random.Generator, R: np.ndarray, r: np.ndarray, use: np.ndarray, c: SamplerConfig) -> np.ndarray:
+    """Right-hand knuckle positions (n, 4, 3) of index..little (zeros where unused).
+
+    k fingers of diameter 2 r in a row of half-width W = s (R - r), index at the +y (thumb) end,
+    with Dirichlet(1, ..., 1) free space before, between and after them (centres never closer than
+    d = 2 r + ``finger_gap``).
+    """
+    n = len(R)
+    k = use.sum(axis=1)
+    W = (R - r) * rng.uniform(*c.knuckle_span, n)
+    d = 2.0 * r + c.finger_gap
+    space = np.maximum(2.0 * W - (k - 1) * d, 0.0)
+    w = np.zeros((n, 5))
+    for kk in (2, 3, 4):
+        rows = np.flatnonzero(k == kk)
+        if rows.size:
+            w[rows, : kk + 1] = rng.dirichlet(np.ones(kk + 1), rows.size)
+    cum = np.cumsum(w, axis=1)  # cum[:, i] = sum of the first i + 1 gaps
+    rank = np.clip(np.cumsum(use, axis=1) - 1, 0, 3)  # rank of each used finger, index -> little
+    xyz = np.zeros((n, 4, 3))
+    xyz[:, :, 1] = W[:, None] - np.take_along_axis(cum, rank, axis=1) * space[:, None] - rank * d[:, None]
+    xyz[:, :, 0] = rng.uniform(*c.knuckle_x, n)[:, None] + rng.uniform(-c.knuckle_x_jitter, c.knuckle_x_jitter, (n, 4))
+    row = (2.0 + rng.uniform(*c.knuckle_row, n)) * R
+    xyz[:, :, 2] = row[:, None] + rng.uniform(-c.knuckle_z_jitter, c.knuckle_z_jitter, (n, 4))
+    xyz[~use] = 0.0
+    return xyz
+
+
+def _outward_rotations(rng: np.random.Generator, base: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """Uniform random rotations (n, 3, 3) whose z axis does not point towards the palm centre
+    ``(0, 0, R)`` from ``base`` (n, 3); see the module docstring."""
+    from ohra.learn.geometry import rotation_about  # geometry imports this module's constants
+
+    n = len(base)
+    q = rng.normal(size=(n, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    from scipy.spatial.transform import Rotation
+
+    M = Rotation.from_quat(q).as_matrix()
+    w = np.stack([np.zeros(n), np.zeros(n), R], axis=1) - base
+    inward = np.sum(M[:, :, 2] * w, axis=1) > 0.0
+    if inward.any():
+        wi = w[inward] / np.linalg.norm(w[inward], axis=1, keepdims=True)
+        helper = np.where(np.abs(wi[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+        u = np.cross(wi, helper)
+        u /= np.linalg.norm(u, axis=1, keepdims=True)
+        M[inward] = rotation_about(u, np.full(len(u), math.pi)) @ M[inward]  # maps w -> -w
+    return M
+
+
+def _thumbs(rng: np.random.Generator, R: np.ndarray, c: SamplerConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Right-hand thumb bases (n, 3) and mounting rotations (n, 3, 3)."""
+    n = len(R)
+    base = np.stack([rng.uniform(*c.thumb_x, n), rng.uniform(*c.thumb_y, n), rng.uniform(*c.thumb_z, n)], axis=1)
+    return base, _outward_rotations(rng, base, R)
+
+
+def _little_extra(rng: np.random.Generator, n: int, c: SamplerConfig) -> np.ndarray:
+    """Right-hand little metacarpal origins (n, 6): xyz at -y, rpy."""
+    return np.stack([rng.uniform(*c.extra_x, n), -rng.uniform(*c.extra_y, n), rng.uniform(*c.extra_z, n),
+                     rng.uniform(*c.extra_roll, n), rng.uniform(*c.extra_pitch, n), rng.uniform(*c.extra_yaw, n)], axis=1)
+
+
+def _redraw_touching_thumbs(rng: np.random.Generator, out: np.ndarray, c: SamplerConfig) -> None:
+    """In place: draw thumb base and rotation again where the thumb is closer than ``c.thumb_clearance``
+    to a finger at q = 0, until none is."""
+    from ohra.learn.geometry import thumb_clearance
+    from ohra.transforms import matrix_to_rpy
+
+    bad = np.arange(len(out))
+    for _ in range(c.max_redraws):
+        bad = bad[thumb_clearance(out[bad]) < c.thumb_clearance]
+        if bad.size == 0:
+            return
+        base, rot = _thumbs(rng, out[bad, PALM], c)
+        out[bad, XYZ.start : XYZ.start + 3] = base
+        out[bad, THUMB_RPY] = matrix_to_rpy(rot)
+    raise ParamsError(f"sampler: {bad.size} thumbs still touch a finger after {c.max_redraws} redraws; widen the thumb ranges")
 
 
 def sample_vectors(n: int, seed: int, config: SamplerConfig = DEFAULT_CONFIG, return_handedness: bool = False):
@@ -84,87 +220,38 @@ def sample_vectors(n: int, seed: int, config: SamplerConfig = DEFAULT_CONFIG, re
     Deterministic given ``seed``. With ``return_handedness`` also returns an (n,) bool array, True
     for right hands. Every row is a valid :class:`BaseParams` vector.
     """
+    from ohra.transforms import matrix_to_rpy
+
     if int(n) < 0:
         raise ParamsError(f"number of samples must be >= 0, got {n}")
     n = int(n)
     c = config
     rng = np.random.default_rng(seed)
     right = rng.random(n) < 0.5
-    side = np.where(right, 1.0, -1.0)  # +1: thumb at +y
+    present, use, finger_pat = _patterns(rng, n, c)
 
-    # -- fingers: thumb always; >= 2 of the 4 non-thumb fingers --------------------------------
-    use = rng.random((n, 4)) < c.p_finger
-    while True:
-        short = np.flatnonzero(use.sum(axis=1) < 2)
-        if short.size == 0:
-            break
-        use[short, rng.integers(0, 4, short.size)] = True
-    k = use.sum(axis=1)  # active non-thumb fingers, 2..4
-
-    # -- joint patterns ------------------------------------------------------------------------
-    thumb_pat = THUMB_PATTERNS[rng.integers(0, len(THUMB_PATTERNS), n)]
-    finger_pat = FINGER_PATTERNS[rng.integers(0, len(FINGER_PATTERNS), n)]
-    present = np.zeros((n, 22), dtype=bool)
-    present[:, 0:5] = thumb_pat
-    for fi, start in enumerate((5, 9, 13, 18)):  # index, middle, ring, little (joint1..4)
-        present[:, start : start + 4] = finger_pat & use[:, fi : fi + 1]
-    full = present.sum(axis=1) >= 20
-    present[:, 17] = full & (rng.random(n) < c.p_little_joint0)
-
-    # -- sizes -----------------------------------------------------------------------------------
     R = rng.uniform(*c.palm_radius, n)
-    r = rng.uniform(c.finger_radius[0], np.minimum(c.finger_radius[1], R / 4.0))
-    lengths = np.concatenate([rng.uniform(*c.thumb_lengths, (n, 3)), rng.uniform(*c.finger_lengths, (n, 3))], axis=1)
+    r = rng.uniform(c.finger_radius[0], np.minimum(c.finger_radius[1], c.max_radius_ratio * R))
+    lo = np.maximum(np.array([c.thumb_lengths[0]] * 3 + [c.finger_lengths[0]] * 3), 2.0 * r[:, None])  # capsule >= diameter
+    hi = np.array([c.thumb_lengths[1]] * 3 + [c.finger_lengths[1]] * 3)
+    lengths = rng.uniform(lo, hi)
+    t = present[:, 0:5]  # segments without geometry have no length (link rules of the base template)
+    seg_t = np.stack([t[:, 0] | t[:, 1], t[:, 2] | t[:, 3], t[:, 4]], axis=1)
+    seg_f = np.stack([finger_pat[:, 0] | finger_pat[:, 1], finger_pat[:, 2], finger_pat[:, 3]], axis=1)
+    lengths *= np.concatenate([seg_t, seg_f], axis=1)
 
-    # -- positions -------------------------------------------------------------------------------
     xyz = np.zeros((n, 5, 3))
-    xyz[:, 0, 0] = rng.uniform(*c.thumb_x, n)
-    xyz[:, 0, 1] = rng.uniform(*c.thumb_y, n) * side
-    xyz[:, 0, 2] = rng.uniform(*c.thumb_z, n)
-    xyz[:, 1:, 0] = rng.normal(0.0, c.knuckle_x_std, n)[:, None]
-    xyz[:, 1:, 2] = rng.normal(2.0 * R[:, None] + c.knuckle_z_offset, c.knuckle_z_std, (n, 4))
-    # Knuckles across the palm without overlap: k capsules of diameter d = 2r in the span
-    # [r - R, R - r] with Dirichlet-distributed free space between them, index first (thumb side).
-    d = 2.0 * r
-    space = np.maximum(2.0 * (R - r) - (k - 1) * d, 0.0)
-    # Dirichlet(1, ..., 1) over the k + 1 gaps (before, between and after the k fingers).
-    w = np.zeros((n, 5))
-    for kk in (2, 3, 4):
-        rows = np.flatnonzero(k == kk)
-        if rows.size:
-            w[rows, : kk + 1] = rng.dirichlet(np.ones(kk + 1), rows.size)
-    cum = np.cumsum(w, axis=1)  # cum[:, i] = sum of the first i + 1 gaps
-    order = np.cumsum(use, axis=1) - 1  # rank of each active finger, index -> little
-    rank = np.clip(order, 0, 3)
-    y_mag = (r - R)[:, None] + np.take_along_axis(cum, rank, axis=1) * space[:, None] + rank * d[:, None]
-    # Pre-flip the index finger is most negative; a right hand (side=+1) mirrors to index at +y.
-    xyz[:, 1:, 1] = -y_mag * side[:, None]
-    finger_present = np.concatenate([np.ones((n, 1), dtype=bool), use], axis=1)
-    xyz[~finger_present] = 0.0
+    xyz[:, 1:] = _knuckles(rng, R, r, use, c)
+    xyz[:, 0], thumb_rot = _thumbs(rng, R, c)
 
-    # -- thumb orientation and axes --------------------------------------------------------------
-    thumb_rpy = rng.uniform(-math.pi, math.pi, (n, 3))
     a1 = rng.integers(0, 6, n)
     a2 = rng.integers(0, 5, n)
     a2 = a2 + (a2 >= a1)  # uniform over the 5 categories != a1 (axis2 == -axis1 is allowed)
     axes = np.stack([BASIS_AXES[a1], BASIS_AXES[a2]], axis=1)
     axes[~present[:, 0], 0] = 0.0
     axes[~present[:, 1], 1] = 0.0
-
-    # -- little finger metacarpal frame, on the little finger's side (-y for a right hand) -------
-    extra = np.zeros((n, 6))
-    extra[:, 0] = rng.uniform(*c.extra_x, n)
-    extra[:, 1] = -side * rng.uniform(*c.extra_y, n)
-    extra[:, 2] = rng.uniform(*c.extra_z, n)
-    extra[:, 3] = side * rng.uniform(*c.extra_roll, n)
+    extra = _little_extra(rng, n, c)
     extra[~present[:, 17]] = 0.0
-
-    # -- segments without geometry have no length (link rules of the base template) --------------
-    t = present[:, 0:5]
-    seg_t = np.stack([t[:, 0] | t[:, 1], t[:, 2] | t[:, 3], t[:, 4]], axis=1)
-    f = finger_pat
-    seg_f = np.stack([f[:, 0] | f[:, 1], f[:, 2], f[:, 3]], axis=1)
-    lengths *= np.concatenate([seg_t, seg_f], axis=1)
 
     out = np.zeros((n, 82))
     out[:, PALM] = R
@@ -172,9 +259,11 @@ def sample_vectors(n: int, seed: int, config: SamplerConfig = DEFAULT_CONFIG, re
     out[:, LENGTHS] = lengths
     out[:, XYZ] = xyz.reshape(n, 15)
     out[:, EXTRA] = extra
-    out[:, THUMB_RPY] = thumb_rpy
+    out[:, THUMB_RPY] = matrix_to_rpy(thumb_rot)
     out[:, THUMB_AXES] = axes.reshape(n, 6)
     out[:, UPPERS] = np.where(present, c.joint_upper, 0.0)
+    _redraw_touching_thumbs(rng, out, c)
+    out[~right] = mirror_vectors(out[~right])
     if return_handedness:
         return out, right
     return out
@@ -212,7 +301,7 @@ def in_support(flags: np.ndarray) -> bool:
 
     The sampler's patterns: thumb one of ``THUMB_PATTERNS``; 2-4 non-thumb fingers sharing one of
     ``FINGER_PATTERNS``; ``little_joint0`` only with at least 20 other joints. Hands outside this support
-    (e.g. Barrett, whose "thumb" has no joint 1) are encoded fine but reconstructed less reliably.
+    are encoded fine but reconstructed less reliably.
     """
     f = np.asarray(flags, dtype=bool).reshape(22)
     if not any(np.array_equal(f[0:5], t) for t in THUMB_PATTERNS):
@@ -224,3 +313,59 @@ def in_support(flags: np.ndarray) -> bool:
     if not any(np.array_equal(used[0], p) for p in FINGER_PATTERNS):
         return False
     return not f[17] or int(f.sum()) - 1 >= 20
+
+
+def _range(out: list[str], name: str, values: np.ndarray, lo: float, hi: float, tol: float = 1e-9) -> None:
+    for i, x in enumerate(np.atleast_1d(values)):
+        if not lo - tol <= x <= hi + tol:
+            label = name if np.size(values) == 1 else f"{name}[{i}]"
+            out.append(f"{label} = {x:.4g} outside [{lo:.4g}, {hi:.4g}]")
+
+
+def support_violations(params: BaseParams, config: SamplerConfig = DEFAULT_CONFIG) -> list[str]:
+    """Why a base-form hand lies outside the sampler's support: one line per violated range or rule
+    (right-hand values: a left hand is mirrored first). An empty list means the sampler can draw it,
+    up to its thumb axes, which the encoding snaps to signed basis axes anyway.
+    """
+    from ohra.learn.geometry import thumb_clearance, thumb_inwardness
+
+    c = config
+    v = params.to_vector()[None]
+    if params.handedness == "left":
+        v = mirror_vectors(v)
+    v0 = v[0]
+    out: list[str] = []
+    flags = v0[LOWERS] != v0[UPPERS]
+    if not in_support(flags):
+        out.append(f"joint pattern {flags.astype(int).tolist()} is not one the sampler draws")
+    R, r = v0[PALM], v0[FINGER_RADIUS]
+    _range(out, "palm_radius", R, *c.palm_radius)
+    _range(out, "finger_radius", r, c.finger_radius[0], min(c.finger_radius[1], c.max_radius_ratio * R))
+    L = v0[LENGTHS].reshape(2, 3)
+    _range(out, "thumb lengths", L[0][L[0] > 0], max(c.thumb_lengths[0], 2 * r), c.thumb_lengths[1])
+    _range(out, "finger lengths", L[1][L[1] > 0], max(c.finger_lengths[0], 2 * r), c.finger_lengths[1])
+    xyz = v0[XYZ].reshape(5, 3)
+    for k, (name, lim) in enumerate((("thumb x", c.thumb_x), ("thumb y", c.thumb_y), ("thumb z", c.thumb_z))):
+        _range(out, name, xyz[0, k], *lim)
+    used = params.present_fingers[1:]
+    k = xyz[1:][used]
+    jx, jz = c.knuckle_x_jitter, c.knuckle_z_jitter
+    _range(out, "knuckle x", k[:, 0], c.knuckle_x[0] - jx, c.knuckle_x[1] + jx)
+    _range(out, "knuckle x spread", np.ptp(k[:, 0]), 0.0, 2 * jx)
+    zlo, zhi = c.knuckle_z_bounds(R)
+    _range(out, "knuckle z", k[:, 2], float(zlo), float(zhi))
+    _range(out, "knuckle z spread", np.ptp(k[:, 2]), 0.0, 2 * jz)
+    wmax = c.knuckle_span[1] * (R - r)
+    _range(out, "knuckle |y|", np.abs(k[:, 1]), 0.0, max(wmax, (len(k) - 1) * (2 * r + c.finger_gap)))  # a full row overflows
+    _range(out, "knuckle gaps - finger diameter", -np.diff(k[:, 1]) - 2 * r, c.finger_gap, np.inf)
+    if thumb_inwardness(v)[0] > 0:
+        out.append("the thumb points into the palm at q = 0")
+    clear = thumb_clearance(v)[0]
+    if clear < c.thumb_clearance:
+        out.append(f"the thumb is {1e3 * clear:.1f} mm from a finger at q = 0 (sampler: >= {1e3 * c.thumb_clearance:.1f} mm)")
+    if flags[17]:
+        e = v0[EXTRA]
+        for i, (name, lim) in enumerate((("extra x", c.extra_x), ("extra -y", c.extra_y), ("extra z", c.extra_z),
+                                         ("extra roll", c.extra_roll), ("extra pitch", c.extra_pitch), ("extra yaw", c.extra_yaw))):
+            _range(out, name, -e[i] if i == 1 else e[i], *lim)
+    return out

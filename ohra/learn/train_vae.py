@@ -20,6 +20,7 @@ import contextlib
 import hashlib
 import io
 import json
+import math
 import time
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -30,16 +31,20 @@ import torch
 
 from ohra.errors import CheckpointError
 from ohra.io import atomic_write, write_text
-from ohra.learn.encoding import AXIS1, AXIS2, CONT, CONT_GROUPS, FLAGS, Standardizer, encode_vectors
-from ohra.learn.sampler import sample_vectors
 from ohra.learn.config import TrainConfig
-from ohra.learn.vae import MorphologyVAE, make_optimizer, vae_loss
+from ohra.learn.encoding import Standardizer
+from ohra.learn.encodings import DEFAULT_ENCODING, get_encoding
+from ohra.learn.geometry import tips_q0
+from ohra.learn.sampler import LOWERS, THUMB_RPY, UPPERS, mirror_vectors, sample_vectors
+from ohra.learn.vae import GeometryLoss, MorphologyVAE, make_optimizer, path_smoothness, vae_loss
+from ohra.learn.vae_metrics import reconstruct, reconstruct_vectors, reconstruction_metrics, shape_metrics
+from ohra.transforms import rpy_to_matrix
 
 CHECKPOINT_FORMAT = "ohra-vae-checkpoint"
 MODEL_FORMAT = "ohra-vae-model"
 FORMAT_VERSION = 1
 HELDOUT_SEED_OFFSET = 1_000_003  # held-out hands come from a different seed than the training set
-LOSS_TERMS = ("total", "mse", "ce_axis1", "ce_axis2", "bce", "kl")
+LOSS_TERMS = ("total", "mse", "ce_axis1", "ce_axis2", "bce", "kl", "rot", "tip", "smooth")
 
 
 @dataclass
@@ -51,13 +56,34 @@ class TrainResult:
 
 
 # -- data -------------------------------------------------------------------------------------------
-def make_dataset(samples: int, seed: int, standardizer: Standardizer | None = None) -> tuple[torch.Tensor, Standardizer]:
-    """Encoded synthetic hands (float32, continuous part standardised) and the standardiser used."""
-    x = encode_vectors(sample_vectors(samples, seed), warn=False)
+@dataclass
+class Dataset:
+    """Training hands: standardised encodings (N, D) float32 and the geometry targets (thumb
+    rotation (N, 3, 3), joint presence (N, 22), q = 0 fingertips (N, 5, 3), NaN-free), of the
+    form the encoding holds (right-hand form for an encoding with a left flag)."""
+
+    x: torch.Tensor
+    rotation: torch.Tensor
+    present: torch.Tensor
+    tips: torch.Tensor
+    standardizer: Standardizer
+
+
+def make_dataset(samples: int, seed: int, standardizer: Standardizer | None = None,
+                 encoding: str = DEFAULT_ENCODING) -> Dataset:
+    """Encoded synthetic hands (continuous part standardised) with their geometry targets."""
+    enc = get_encoding(encoding)
+    v = sample_vectors(samples, seed)
+    x = enc.encode_vectors(v, warn=False)
+    if enc.left is not None:  # the geometry targets of the form the encoding holds: left hands mirrored
+        left = x[:, enc.left.start] > 0.5
+        v[left] = mirror_vectors(v[left])
     if standardizer is None:
-        standardizer = Standardizer.fit(x[:, CONT])
-    x[:, CONT] = standardizer.transform(x[:, CONT])
-    return torch.from_numpy(x.astype(np.float32)), standardizer
+        standardizer = Standardizer.fit(x[:, enc.cont])
+    x[:, enc.cont] = standardizer.transform(x[:, enc.cont])
+    f32 = lambda a: torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32))  # noqa: E731
+    return Dataset(f32(x), f32(rpy_to_matrix(v[:, THUMB_RPY])), torch.from_numpy((v[:, LOWERS] != 0) | (v[:, UPPERS] != 0)),
+                   f32(np.nan_to_num(tips_q0(v))), standardizer)
 
 
 def _digest(x: torch.Tensor) -> str:
@@ -101,60 +127,6 @@ def torch_settings(threads: int) -> Iterator[None]:
         torch.use_deterministic_algorithms(old_det)
 
 
-# -- evaluation -------------------------------------------------------------------------------------
-@torch.no_grad()
-def reconstruct(model: MorphologyVAE, standardizer: Standardizer, x_raw: np.ndarray, batch: int = 8192) -> np.ndarray:
-    """Encode with the mean latent and decode (eval mode): raw encodings (N, 66) -> (N, 66).
-
-    Output: continuous part in raw units, axis groups as one-hot, presence flags as 0/1.
-    """
-    was_training = model.training
-    model.eval()
-    outs = []
-    for i in range(0, len(x_raw), batch):
-        xb = np.array(x_raw[i : i + batch], dtype=float, copy=True)
-        xb[:, CONT] = standardizer.transform(xb[:, CONT])
-        mu, _ = model.encode(torch.from_numpy(xb.astype(np.float32)))
-        o = model.decode(mu)
-        y = np.zeros((len(xb), 66))
-        y[:, CONT] = standardizer.inverse(o["cont"].double().numpy())
-        rows = np.arange(len(xb))
-        y[rows, AXIS1.start + o["axis1"].argmax(dim=1).numpy()] = 1.0
-        y[rows, AXIS2.start + o["axis2"].argmax(dim=1).numpy()] = 1.0
-        y[:, FLAGS] = (o["presence"] > 0).double().numpy()
-        outs.append(y)
-    model.train(was_training)
-    return np.concatenate(outs) if outs else np.zeros((0, 66))
-
-
-def reconstruction_metrics(x_raw: np.ndarray, y: np.ndarray) -> dict[str, Any]:
-    """Accuracy and RMSE of reconstructions ``y`` of raw encodings ``x_raw`` (both (N, 66)).
-
-    ``presence_accuracy``: fraction of the 22N flags right; ``presence_exact``: fraction of hands
-    with all 22 right. ``axis_accuracy``: thumb axes of present (movable) thumb joints 1/2;
-    ``axis_accuracy_all``: both axis slots of every hand (absent axes encode as +x).
-    RMSE per parameter group in metres / radians, over the values of the present parts.
-    """
-    flags_t, flags_y = x_raw[:, FLAGS] > 0.5, y[:, FLAGS] > 0.5
-    a_t = np.stack([x_raw[:, AXIS1].argmax(1), x_raw[:, AXIS2].argmax(1)], axis=1)
-    a_y = np.stack([y[:, AXIS1].argmax(1), y[:, AXIS2].argmax(1)], axis=1)
-    present_axes = flags_t[:, :2]
-    err = y[:, CONT] - x_raw[:, CONT]
-    rmse = {}
-    for name, (sl, unit) in CONT_GROUPS.items():
-        e = err[:, sl]
-        mask = x_raw[:, CONT][:, sl] != 0.0  # zeros mark parts that are absent in this hand
-        rmse[f"{name}_{unit}"] = float(np.sqrt(np.mean(e[mask] ** 2))) if mask.any() else 0.0
-    return {
-        "n": int(len(x_raw)),
-        "presence_accuracy": float(np.mean(flags_t == flags_y)),
-        "presence_exact": float(np.mean(np.all(flags_t == flags_y, axis=1))),
-        "axis_accuracy": float(np.mean((a_t == a_y)[present_axes])) if present_axes.any() else 1.0,
-        "axis_accuracy_all": float(np.mean(a_t == a_y)),
-        "rmse": rmse,
-    }
-
-
 def _peak_rss_mib() -> float | None:
     """Peak resident memory of this process so far [MiB] (None where the platform has no getrusage)."""
     try:
@@ -194,9 +166,9 @@ def model_payload(model: MorphologyVAE, std: Standardizer) -> dict[str, Any]:
 
 
 def _check_resume(ckpt: dict[str, Any], cfg: TrainConfig, path: Path) -> None:
-    old = TrainConfig.from_dict(ckpt["config"])
+    old = TrainConfig.from_dict(ckpt["config"], str(path))
     for f in fields(TrainConfig):
-        if f.name in TrainConfig.RESUMABLE_CHANGES:
+        if f.name in TrainConfig.RESUMABLE_CHANGES and not (f.name == "epochs" and cfg.lr_schedule != "constant"):
             continue
         if getattr(old, f.name) != getattr(cfg, f.name):
             raise CheckpointError(
@@ -207,12 +179,89 @@ def _check_resume(ckpt: dict[str, Any], cfg: TrainConfig, path: Path) -> None:
         raise CheckpointError(f"{path}: checkpoint is at epoch {ckpt['epoch']}, beyond the requested {cfg.epochs} epochs")
 
 
+def _resume_into(ckpt_path: Path, cfg: TrainConfig, digest: str, model, opt, gens) -> tuple[int, int, list]:
+    """Load a checkpoint into model, optimiser and generators; returns (epoch, step, history)."""
+    ckpt = load_torch_file(ckpt_path, CHECKPOINT_FORMAT)
+    _check_resume(ckpt, cfg, ckpt_path)
+    if ckpt.get("data_digest") != digest:
+        raise CheckpointError(f"{ckpt_path}: training data differ from the checkpoint's (digest mismatch)")
+    try:
+        model.load_state_dict(ckpt["model"])
+        opt.load_state_dict(ckpt["optimizer"])
+        torch.set_rng_state(ckpt["rng"]["torch"])
+        gens[0].set_state(ckpt["rng"]["data"])
+        gens[1].set_state(ckpt["rng"]["noise"])
+    except (RuntimeError, KeyError, ValueError) as exc:
+        raise CheckpointError(f"{ckpt_path}: incompatible checkpoint ({str(exc).splitlines()[0][:160]})") from None
+    return int(ckpt["epoch"]), int(ckpt["step"]), list(ckpt["history"])
+
+
+def learning_rate(cfg: TrainConfig, step: int, total_steps: int) -> float:
+    """Learning rate at ``step``: constant, or cosine from ``lr`` to ``lr * lr_final_ratio``."""
+    if cfg.lr_schedule == "constant" or total_steps <= 1:
+        return cfg.lr
+    t = min(step / (total_steps - 1), 1.0)
+    return cfg.lr * (cfg.lr_final_ratio + (1.0 - cfg.lr_final_ratio) * 0.5 * (1.0 + math.cos(math.pi * t)))
+
+
+def _epoch(model, opt, data: Dataset, geom: GeometryLoss | None, cfg: TrainConfig, gens, step: int,
+           total_steps: int) -> tuple[int, dict[str, float]]:
+    """One pass over shuffled batches (last partial batch dropped); returns (step, mean losses)."""
+    vc = model.config
+    perm = torch.randperm(len(data.x), generator=gens[0])
+    n_batches = len(data.x) // cfg.batch_size
+    sums = {k: 0.0 for k in LOSS_TERMS}
+    for b in range(n_batches):
+        idx = perm[b * cfg.batch_size : (b + 1) * cfg.batch_size]
+        xb = data.x[idx]
+        out, mu, logvar = model(xb, generator=gens[1])
+        terms = vae_loss(out, xb, mu, logvar, vc.beta, vc.encoding, vc.cont_weight, vc.presence_weight)
+        if geom is not None:
+            terms.update(geom(out["cont"], data.rotation[idx], data.present[idx], data.tips[idx]))
+            terms["total"] = terms["total"] + vc.rot_weight * terms["rot"] + vc.tip_weight * terms["tip"]
+            if vc.smooth_weight:
+                terms["smooth"] = path_smoothness(model, geom, mu, data.present[idx], gens[1])
+                terms["total"] = terms["total"] + vc.smooth_weight * terms["smooth"]
+        for group in opt.param_groups:
+            group["lr"] = learning_rate(cfg, step, total_steps)
+        opt.zero_grad(set_to_none=True)
+        terms["total"].backward()
+        opt.step()
+        step += 1
+        for k in LOSS_TERMS:
+            sums[k] += float(terms[k].detach()) if k in terms else 0.0
+    return step, {k: sums[k] / n_batches for k in LOSS_TERMS}
+
+
+def heldout_metrics(model, std: Standardizer, n: int, seed: int) -> dict[str, Any]:
+    """Encoding-level and hand-level reconstruction metrics on ``n`` sampled hands of ``seed``."""
+    enc = get_encoding(model.config.encoding)
+    v = sample_vectors(n, seed)
+    x = enc.encode_vectors(v, warn=False)
+    out = {"seed": seed, **reconstruction_metrics(x, reconstruct(model, std, x), enc)}
+    out["shape"] = shape_metrics(v, reconstruct_vectors(model, std, v))
+    return out
+
+
+def _final_metrics(model, std: Standardizer, cfg: TrainConfig, step: int, history: list, seconds: float) -> dict[str, Any]:
+    """What metrics.json holds: losses per epoch, timing, memory, held-out reconstruction."""
+    metrics: dict[str, Any] = {
+        "epochs": cfg.epochs, "steps": step, "train_seconds_this_run": seconds,
+        "train_seconds_total": history[-1]["elapsed_s"] if history else 0.0, "history": history,
+        "final_losses": {k: history[-1][k] for k in LOSS_TERMS} if history else {},
+        "cpu_seconds": time.process_time(), "peak_rss_mib": _peak_rss_mib(),
+    }
+    if cfg.heldout > 0:
+        metrics["heldout"] = heldout_metrics(model, std, cfg.heldout, cfg.seed + HELDOUT_SEED_OFFSET)
+    return metrics
+
+
 def train(config: TrainConfig = TrainConfig(), run_dir: str | Path | None = None, resume: bool = False,
           progress: bool = True, on_epoch: Callable[[int, dict[str, float]], None] | None = None) -> TrainResult:
     """Train the VAE on ``config.samples`` synthetic hands; see the module docstring for outputs.
 
     ``resume``: continue from ``run_dir/checkpoints/last.pt`` (the configuration must match except
-    for ``epochs``, ``checkpoint_every`` and ``heldout``; the result equals an uninterrupted run).
+    for ``checkpoint_every`` and ``heldout``; the result equals an uninterrupted run).
     ``on_epoch(epoch, losses)`` is called after every epoch (e.g. to stop a run in a test).
     """
     from tqdm import tqdm
@@ -224,78 +273,41 @@ def train(config: TrainConfig = TrainConfig(), run_dir: str | Path | None = None
     ckpt_path = run / "checkpoints" / "last.pt" if run is not None else None
     t_start = time.perf_counter()
     with torch_settings(cfg.threads):
-        x, std = make_dataset(cfg.samples, cfg.seed)
-        digest = _digest(x)
+        vc = cfg.vae_config()
+        data = make_dataset(cfg.samples, cfg.seed, encoding=vc.encoding)
+        std = data.standardizer
+        digest = _digest(data.x)
         torch.manual_seed(cfg.seed)
-        model = MorphologyVAE(cfg.vae_config())
+        model = MorphologyVAE(vc)
+        geom = GeometryLoss(vc, std.mean, std.std) if (vc.rot_weight or vc.tip_weight or vc.smooth_weight) else None
         opt = make_optimizer(model, cfg.lr, cfg.betas, cfg.weight_decay)
-        g_data = torch.Generator().manual_seed(cfg.seed)
-        g_noise = torch.Generator().manual_seed(cfg.seed + 1)
-        epoch, step, history, elapsed_before = 0, 0, [], 0.0
+        gens = (torch.Generator().manual_seed(cfg.seed), torch.Generator().manual_seed(cfg.seed + 1))
+        epoch, step, history = 0, 0, []
         if resume:
             if ckpt_path is None:
                 raise CheckpointError("resume needs a run directory")
-            ckpt = load_torch_file(ckpt_path, CHECKPOINT_FORMAT)
-            _check_resume(ckpt, cfg, ckpt_path)
-            if ckpt.get("data_digest") != digest:
-                raise CheckpointError(f"{ckpt_path}: training data differ from the checkpoint's (digest mismatch)")
-            try:
-                model.load_state_dict(ckpt["model"])
-                opt.load_state_dict(ckpt["optimizer"])
-                torch.set_rng_state(ckpt["rng"]["torch"])
-                g_data.set_state(ckpt["rng"]["data"])
-                g_noise.set_state(ckpt["rng"]["noise"])
-            except (RuntimeError, KeyError, ValueError) as exc:
-                raise CheckpointError(f"{ckpt_path}: incompatible checkpoint ({str(exc).splitlines()[0][:160]})") from None
-            epoch, step, history = int(ckpt["epoch"]), int(ckpt["step"]), list(ckpt["history"])
-            elapsed_before = float(history[-1]["elapsed_s"]) if history else 0.0
+            epoch, step, history = _resume_into(ckpt_path, cfg, digest, model, opt, gens)
+        elapsed_before = float(history[-1]["elapsed_s"]) if history else 0.0
         if run is not None:
             write_text(run / "config.json", json.dumps(cfg.to_dict(), indent=2) + "\n")
 
         model.train()
-        n_batches = len(x) // cfg.batch_size
+        total_steps = cfg.epochs * (len(data.x) // cfg.batch_size)
         bar = tqdm(range(epoch, cfg.epochs), initial=epoch, total=cfg.epochs, desc="train vae", unit="epoch",
                    disable=not progress, dynamic_ncols=True)
         t_run = time.perf_counter()
         for ep in bar:
-            perm = torch.randperm(len(x), generator=g_data)
-            sums = {k: 0.0 for k in LOSS_TERMS}
-            for b in range(n_batches):
-                xb = x[perm[b * cfg.batch_size : (b + 1) * cfg.batch_size]]
-                out, mu, logvar = model(xb, generator=g_noise)
-                terms = vae_loss(out, xb, mu, logvar, cfg.beta)
-                opt.zero_grad(set_to_none=True)
-                terms["total"].backward()
-                opt.step()
-                step += 1
-                for k in LOSS_TERMS:
-                    sums[k] += float(terms[k].detach())
-            losses = {k: sums[k] / n_batches for k in LOSS_TERMS}
-            history.append({"epoch": ep + 1, "step": step, **losses,
-                            "elapsed_s": elapsed_before + time.perf_counter() - t_run})
+            step, losses = _epoch(model, opt, data, geom, cfg, gens, step, total_steps)
+            history.append({"epoch": ep + 1, "step": step, **losses, "elapsed_s": elapsed_before + time.perf_counter() - t_run})
             bar.set_postfix(loss=f"{losses['total']:.4f}", kl=f"{losses['kl']:.2f}")
             done = ep + 1
             if ckpt_path is not None and (done % cfg.checkpoint_every == 0 or done == cfg.epochs):
-                atomic_save(_state(model, opt, done, step, (g_data, g_noise), history, cfg, std, digest), ckpt_path)
+                atomic_save(_state(model, opt, done, step, gens, history, cfg, std, digest), ckpt_path)
             if on_epoch is not None:
                 on_epoch(done, losses)
         bar.close()
-        train_seconds = time.perf_counter() - t_run
-
-        metrics: dict[str, Any] = {
-            "epochs": cfg.epochs,
-            "steps": step,
-            "train_seconds_this_run": train_seconds,
-            "train_seconds_total": history[-1]["elapsed_s"] if history else 0.0,
-            "history": history,
-            "final_losses": {k: history[-1][k] for k in LOSS_TERMS} if history else {},
-        }
-        if cfg.heldout > 0:
-            x_held = encode_vectors(sample_vectors(cfg.heldout, cfg.seed + HELDOUT_SEED_OFFSET), warn=False)
-            metrics["heldout"] = {"seed": cfg.seed + HELDOUT_SEED_OFFSET,
-                                  **reconstruction_metrics(x_held, reconstruct(model, std, x_held))}
+        metrics = _final_metrics(model, std, cfg, step, history, time.perf_counter() - t_run)
         metrics["wall_seconds"] = time.perf_counter() - t_start
-        metrics["peak_rss_mib"] = _peak_rss_mib()
     if run is not None:
         atomic_save(model_payload(model, std), run / "model.pt")
         write_text(run / "metrics.json", json.dumps(metrics, indent=2) + "\n")

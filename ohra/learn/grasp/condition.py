@@ -131,11 +131,10 @@ class HandCondition:
                     base = as_base(params)
                 except ParamsError as exc:
                     raise ParamsError(f"{exc}; a grasp model with condition='params' can use such hands") from None
-                from ohra.learn.encoding import encode_vectors
-
-                # fitted hands carry thumb axes a few degrees off the basis axes: the VAE snaps them
-                # (it warns about that once, in `ohra vae encode`; here it would repeat per hand)
-                mu, _ = self.vae.encode_encodings(encode_vectors(base.to_vector(), warn=False)[None])
+                # the VAE's own encoding (rot6d70 or reference66); fitted hands carry thumb axes a few
+                # degrees off the basis axes: it snaps them without a warning per hand
+                x = self.vae.encoding.encode_vectors(base.to_vector()[None], warn=False)
+                mu, _ = self.vae.encode_encodings(x)
                 self._cache[key] = np.asarray(mu[0], dtype=float)
             else:
                 self._cache[key] = (params_vector(params) - self.mean) / self.scale
