@@ -29,7 +29,6 @@ from ohra.learn.morph import load_vae, reference_model_dir  # noqa: E402
 from ohra.learn.sampler import THUMB_RPY, support_violations  # noqa: E402
 from ohra.learn.sampler_reference import sample_reference_vectors  # noqa: E402
 from ohra.learn.vae_metrics import reconstruct, reconstruct_vectors, shape_errors  # noqa: E402
-from ohra.transforms import rpy_to_matrix  # noqa: E402
 
 SEED = 2_000_003
 

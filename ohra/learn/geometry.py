@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ohra.learn.sampler import EXTRA, FINGER_RADIUS, LENGTHS, LOWERS, PALM, THUMB_RPY, UPPERS, XYZ
+from ohra.learn.sampler import FINGER_RADIUS, LENGTHS, LOWERS, PALM, THUMB_RPY, UPPERS, XYZ
 from ohra.transforms import rpy_to_matrix
 
 KNUCKLE_MIN_Z = 0.5  # x palm radius: a knuckle below this height is "inside the palm" (rule above)
