@@ -13,7 +13,7 @@ nbformat = pytest.importorskip("nbformat")
 
 NOTEBOOKS_DIR = Path(__file__).resolve().parents[1] / "notebooks"
 # Written out, so that a missing notebook fails here instead of parametrizing nothing.
-NOTEBOOKS = ["01_canonical_hand", "02_parse_and_compare", "03_morphology_vae", "04_grasp_evaluation", "05_grasp_synthesis", "06_grasp_model"]
+NOTEBOOKS = ["01_canonical_hand", "02_parse_and_compare", "03_morphology_vae", "04_grasp_evaluation", "05_grasp_synthesis", "06_grasp_model", "08_in_hand_rotation"]
 RASTER = re.compile(r"\bplt\.|\.imshow\(|\bImage\(|\bstrip_png\(")  # cells that draw a PNG figure
 SCENE = re.compile(r"\brender_static\(|\bstatic_html\(|\bcompare_html\(")  # cells that show a meshcat scene
 

@@ -125,10 +125,7 @@ def strip_png(params: Sequence[BaseParams | ExtendedParams], path: str | Path, l
     ``originals``: two (label, params) drawn pale before the first and after the last hand (the
     hands a latent interpolation starts and ends at, beside their decoded versions).
     """
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure  # no pyplot: a notebook's inline backend is left alone
 
     hands = list(params)
     titles = [labels[i] if labels is not None else f"{i}: {p.num_fingers} fingers, {p.dof} dof" for i, p in enumerate(hands)]
@@ -137,7 +134,8 @@ def strip_png(params: Sequence[BaseParams | ExtendedParams], path: str | Path, l
         (la, pa), (lb, pb) = originals
         hands, titles, faded = [pa, *hands, pb], [la, *titles, lb], [True, *faded, True]
     n, m = len(hands), len(views)
-    fig, axes = plt.subplots(m, n, figsize=(panel_size * n, panel_size * 1.1 * m), squeeze=False)
+    fig = Figure(figsize=(panel_size * n, panel_size * 1.1 * m))
+    axes = fig.subplots(m, n, squeeze=False)
     for row, (az, el) in enumerate(views):
         half = 0.0
         for i, p in enumerate(hands):  # first pass: the largest extent, so a row shares one scale
@@ -152,7 +150,6 @@ def strip_png(params: Sequence[BaseParams | ExtendedParams], path: str | Path, l
     path = Path(path)
     with atomic_path(path, suffix=path.suffix or ".png") as tmp:  # savefig picks the format from the name
         fig.savefig(tmp, dpi=dpi)
-    plt.close(fig)
     return path
 
 

@@ -48,12 +48,12 @@ def mean_std_curve(runs: list[str | Path], key: str = "ep_reward_mean", x: str =
 def reward_curves(groups: dict[str, list[str | Path]], path: str | Path, key: str = "ep_reward_mean",
                   x: str = "timesteps", title: str = "") -> Path:
     """PNG of one curve per group (label -> run dirs): mean line, +-std band over its runs."""
-    import matplotlib
+    from matplotlib.figure import Figure  # no pyplot: a notebook's inline backend is left alone
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from ohra.io import atomic_path
 
-    fig, ax = plt.subplots(figsize=(6.0, 3.6), dpi=120)
+    fig = Figure(figsize=(6.0, 3.6), dpi=120)
+    ax = fig.subplots()
     for label, runs in groups.items():
         g, m, s = mean_std_curve(runs, key, x)
         ax.plot(g, m, label=f"{label} ({len(runs)} seed{'s' if len(runs) > 1 else ''})")
@@ -68,10 +68,8 @@ def reward_curves(groups: dict[str, list[str | Path]], path: str | Path, key: st
     fig.tight_layout()
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp.png")
-    fig.savefig(tmp)
-    plt.close(fig)
-    tmp.replace(path)
+    with atomic_path(path, suffix=".png") as tmp:
+        fig.savefig(tmp)
     return path
 
 
