@@ -2,24 +2,17 @@
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import pytest
 
 nbformat = pytest.importorskip("nbformat")
 nbclient = pytest.importorskip("nbclient")
 
-NB = Path(__file__).resolve().parents[1] / "notebooks" / "04_grasp_evaluation.ipynb"
-
-
-def _text(cell) -> str:
-    return "\n".join(o.get("text", "") + str(o.get("data", {}).get("text/plain", "")) for o in cell.get("outputs", []))
+from notebook_utils import execute  # noqa: E402
 
 
 def test_grasp_evaluation_notebook_executes(tmp_path):
-    nb = nbformat.read(NB, as_version=4)
-    nbclient.NotebookClient(nb, timeout=180, kernel_name="python3", resources={"metadata": {"path": str(tmp_path)}}).execute()
-    texts = [_text(c) for c in nb.cells if c.cell_type == "code"]
+    nb, texts = execute("04_grasp_evaluation.ipynb", tmp_path, timeout=180)
     assert "sphere: volume" in texts[0] and "l_block" in texts[0]
     assert "friction 3.0" in texts[1] and "strict: friction 1.0" in texts[1]
     assert "success rate" in texts[2] and "inf" not in texts[2]

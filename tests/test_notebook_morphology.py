@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import pytest
 
@@ -10,24 +9,11 @@ nbformat = pytest.importorskip("nbformat")
 nbclient = pytest.importorskip("nbclient")
 pytest.importorskip("torch")
 
-
-NB = Path(__file__).resolve().parents[1] / "notebooks" / "03_morphology_vae.ipynb"
-
-
-def _text(cell) -> str:
-    out = []
-    for o in cell.get("outputs", []):
-        out.append(o.get("text", ""))
-        out.append(str(o.get("data", {}).get("text/plain", "")))
-        if "image/png" in o.get("data", {}):
-            out.append("<png>")
-    return "\n".join(out)
+from notebook_utils import execute  # noqa: E402
 
 
 def test_morphology_notebook_executes(tmp_path):
-    nb = nbformat.read(NB, as_version=4)
-    nbclient.NotebookClient(nb, timeout=300, kernel_name="python3", resources={"metadata": {"path": str(tmp_path)}}).execute()
-    texts = [_text(c) for c in nb.cells if c.cell_type == "code"]
+    nb, texts = execute("03_morphology_vae.ipynb", tmp_path, timeout=300)
     assert "4096 hands, 82 numbers each" in texts[0] and "<png>" in texts[0]
     assert "epoch 3: total" in texts[1]
     assert "shipped model: latent" in texts[2] and "encoding rot6d70" in texts[2]

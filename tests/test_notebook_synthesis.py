@@ -2,20 +2,17 @@
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import pytest
 
 nbformat = pytest.importorskip("nbformat")
 nbclient = pytest.importorskip("nbclient")
 
-NB = Path(__file__).resolve().parents[1] / "notebooks" / "05_grasp_synthesis.ipynb"
+from notebook_utils import execute  # noqa: E402
 
 
 def test_synthesis_notebook_executes(tmp_path):
-    nb = nbformat.read(NB, as_version=4)
-    nbclient.NotebookClient(nb, timeout=300, kernel_name="python3", resources={"metadata": {"path": str(tmp_path)}}).execute()
-    texts = ["\n".join(o.get("text", "") + str(o.get("data", {}).get("text/plain", "")) for o in c.get("outputs", [])) for c in nb.cells if c.cell_type == "code"]
+    nb, texts = execute("05_grasp_synthesis.ipynb", tmp_path, timeout=300)
     assert "4 solves" in texts[0]
     assert "grasps to show:" in texts[1] and "(0, 31)" not in texts[1] and "inf" not in texts[1]
     code = [c for c in nb.cells if c.cell_type == "code"]
