@@ -292,14 +292,16 @@ def synthesize(hands: list[tuple], objects: list[ObjectModel], out: str | Path, 
     out.mkdir(parents=True, exist_ok=True)
     manifest = open_manifest(out, settings.to_dict(), settings.digest(), overwrite, {"ohra_version": __version__})
     manifest.update(header or {})
-    tasks = []
+    entries, hand_settings = {}, {}
     for name, params, cs in hands:
-        hand_settings = replace(settings, nlp=replace(settings.nlp, couplings=cs))
-        entry = hand_entry(out, manifest, name, params.to_dict(), params_hash(params), overwrite)
-        entry["couplings"] = [c.to_dict() for c in cs]
-        for obj, key, desc in zip(objects, keys, descs):
-            if not (resume and shard_complete(out, entry["shards"].get(key), desc)):
-                tasks.append((name, params, obj, key, hand_settings))
+        hand_settings[name] = replace(settings, nlp=replace(settings.nlp, couplings=cs))
+        entries[name] = hand_entry(out, manifest, name, params.to_dict(), params_hash(params), overwrite)
+        entries[name]["couplings"] = [c.to_dict() for c in cs]
+    # object-major order: an interrupted build has every hand's shards for the objects it reached,
+    # so a partial dataset stays balanced across hands
+    tasks = [(name, params, obj, key, hand_settings[name])
+             for obj, key, desc in zip(objects, keys, descs) for name, params, _ in hands
+             if not (resume and shard_complete(out, entries[name]["shards"].get(key), desc))]
     _run(out, manifest, tasks, len(hands) * len(objects), workers, backend, address, progress)
     _finish(out, manifest)
     return manifest
