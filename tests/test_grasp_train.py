@@ -48,6 +48,24 @@ def test_split_holds_out_test_objects_by_name_and_mesh(tmp_path):
     assert len(TrainingData.load(root, tiny_train_config(test_objects=("sphere",), max_per_pair=2))) == 3 * 2 * 2
 
 
+def test_zero_shot_split_holds_out_test_hands_by_name_and_parameters(tmp_path):
+    """A zero-shot model never sees its test hand, not even a copy stored under another name."""
+    import json
+
+    a = write_dataset(tmp_path / "a", objects=("box", "capsule"))
+    b = write_dataset(tmp_path / "b", hands=("barrett_hand",), objects=("box", "capsule"), seed=1)
+    man = json.loads((b / "manifest.json").read_text())
+    man["hands"]["my_gripper"] = man["hands"].pop("barrett_hand")  # same parameters, another name
+    (b / "manifest.json").write_text(json.dumps(man))
+    full = TrainingData.load([a, b], tiny_train_config(test_objects=()))
+    assert set(full.hands) == {"allegro_hand_left", "barrett_hand", "shadow_hand_right", "my_gripper"}
+    td = TrainingData.load([a, b], tiny_train_config(test_objects=(), test_hands=("barrett_hand",)))
+    assert td.hands == ["allegro_hand_left", "shadow_hand_right"] and len(td) == 2 * 2 * 6
+    assert set(td.summary()["test_hands"]) == {"barrett_hand"}
+    with pytest.raises(DatasetError, match="both training and test"):
+        TrainingData.load([a], tiny_train_config(hands=("barrett_hand",), test_hands=("barrett_hand",)))
+
+
 def test_check_disjoint_raises_on_overlap():
     check_disjoint({"box": "aa"}, {"sphere": "bb"})
     with pytest.raises(DatasetError, match="names \\['box'\\]"):

@@ -20,7 +20,9 @@ def register(sub: Any) -> None:
 
     p = dsub.add_parser("build", help="synthesise the dataset a recipe describes (resumable)")
     p.add_argument("recipe", help="recipe YAML (hands, objects, grasps per pair, cap, split, seed, protocol)")
-    p.add_argument("--out", default=None, help="dataset directory (default out/<recipe name>)")
+    p.add_argument("--out", default=None, help="dataset directory (default out/<recipe name>, out/<name>_s<seed> with --seed)")
+    p.add_argument("--seed", type=int, default=None,
+                   help="replace the recipe's seed: more data from the same recipe, into another directory")
     p.add_argument("--workers", type=int, default=1, help="processes, or local Ray CPUs (default 1)")
     p.add_argument("--resume", action="store_true", help="keep pairs whose shards are complete (sha256 checked)")
     p.add_argument("--overwrite", action="store_true", help="replace a dataset made with other settings (deletes its shards)")
@@ -41,7 +43,9 @@ def _build(args: argparse.Namespace) -> int:
     from ohra.data.recipe import Recipe
 
     recipe = Recipe.load(args.recipe)
-    out = args.out or f"out/{recipe.name}"
+    if args.seed is not None:
+        recipe = recipe.with_seed(args.seed)
+    out = args.out or (f"out/{recipe.name}" if args.seed is None else f"out/{recipe.name}_s{recipe.seed}")
     man = build(recipe, out, workers=args.workers, resume=args.resume, overwrite=args.overwrite, backend=args.backend,
                 address=args.address, progress=not args.quiet)
     print_summary(man, Path(out), filtered=recipe.filter)

@@ -61,6 +61,8 @@ def register_train(train_sub: Any) -> None:
     p.add_argument("--data", nargs="+", required=True, help="dataset directories (written by the synthesiser)")
     p.add_argument("--hands", nargs="*", default=[], help="hands to train on (default: every hand in the data)")
     p.add_argument("--test-objects", nargs="*", default=[], help="objects held out of training (evaluate on them)")
+    p.add_argument("--test-hands", nargs="*", default=[],
+                   help="hands held out of training, by name and by parameters (zero-shot models)")
     p.add_argument("--condition", choices=CONDITIONS, default=m.condition, help="hand condition (default vae)")
     p.add_argument("--encoder", choices=ENCODERS, default=m.encoder, help="object encoder (default pointnet)")
     p.add_argument("--steps", type=int, default=t.steps, help=f"training steps (default {t.steps})")
@@ -101,7 +103,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
     tcfg = GraspTrainConfig(steps=args.steps, batch_size=args.batch_size, lr=args.lr, seed=args.seed, threads=args.threads,
                             rotated_copies=args.rotated_copies, objects_per_step=args.objects_per_step,
                             max_per_pair=args.max_per_pair, checkpoint_every=args.checkpoint_every,
-                            hands=tuple(args.hands), test_objects=tuple(args.test_objects))
+                            hands=tuple(args.hands), test_objects=tuple(args.test_objects),
+                            test_hands=tuple(args.test_hands))
     res = train_grasp(args.data, mcfg, tcfg, out, resume=args.resume, progress=not args.quiet, vae_path=args.vae)
     m = res.metrics
     f = m["final_losses"]

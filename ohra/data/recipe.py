@@ -96,6 +96,15 @@ class Recipe:
             raise RecipeError(f"{path}: not valid YAML ({str(exc).splitlines()[0]})") from None
         return cls.from_dict(d, path)
 
+    def with_seed(self, seed: int) -> "Recipe":
+        """The same recipe with another seed (solver starts, procedural objects keep their own seeds)."""
+        if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
+            raise RecipeError(f"{self.source or '<recipe>'}: seed must be an integer >= 0, got {seed!r}")
+        split = dict(self.split)
+        if "test_fraction" in split:
+            split.setdefault("seed", self.seed)  # the object split must not move with the data seed
+        return replace(self, seed=seed, split=split)
+
     def to_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self) if f.name != "source"}
 

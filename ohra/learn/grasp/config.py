@@ -112,6 +112,9 @@ class GraspTrainConfig:
     joint_loss_weight: float = 1.0
     hands: tuple[str, ...] = ()  # empty: every hand of the dataset
     test_objects: tuple[str, ...] = ()  # held out of training
+    # held out of training by name and by canonical parameters (a renamed copy of a test hand is
+    # held out too): the zero-shot models of the LEAP study never see a grasp of their test variant
+    test_hands: tuple[str, ...] = ()
     max_per_pair: int = 0  # cap on grasps per (hand, object) (0: all)
 
     RESUMABLE_CHANGES = ("steps", "checkpoint_every", "log_every")

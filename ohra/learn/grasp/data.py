@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Mapping, Sequence
 
@@ -73,6 +73,33 @@ def _resolve_object(root: Path, name: str, info: dict, given: Mapping[str, Objec
     return obj
 
 
+def params_key(params: BaseParams | ExtendedParams) -> str:
+    """Content hash of a hand's canonical parameters (values rounded to 1e-9: float noise is not a new hand)."""
+    v = np.round(np.asarray(params.to_vector(), dtype=float), 9) + 0.0  # + 0.0: no -0.0
+    return hashlib.sha256(type(params).__name__.encode() + v.tobytes()).hexdigest()[:16]
+
+
+def _test_hand_keys(roots: Sequence[Path], names: Sequence[str]) -> dict[str, str]:
+    """Test hand name -> params key: from a dataset manifest that holds it, else the registry."""
+    from ohra.hands import get_hand
+
+    keys = {}
+    for n in names:
+        for root in roots:
+            try:
+                if n in json.loads((root / "manifest.json").read_text()).get("hands", {}):
+                    keys[n] = params_key(_manifest_params(root, n))
+                    break
+            except (OSError, json.JSONDecodeError):
+                continue
+        else:
+            try:
+                keys[n] = params_key(get_hand(n))
+            except OhraError as exc:
+                raise DatasetError(f"test hand {n!r}: not in the data and not a known hand ({exc})") from None
+    return keys
+
+
 def check_disjoint(train: Mapping[str, str], test: Mapping[str, str]) -> None:
     """Raise :class:`DatasetError` if a training object (name -> mesh hash) is also a test object
     by name or by mesh hash."""
@@ -98,6 +125,7 @@ class TrainingData:
     test_objects: dict[str, str]  # name -> mesh hash ('' when the test object is not in the data)
     test_grasps: dict[tuple[str, str], np.ndarray]  # (hand, object) -> (M, 31) held-out grasps
     test_models: dict[str, ObjectModel]  # held-out objects that could be loaded (for held-out losses)
+    test_hands: dict[str, str] = field(default_factory=dict)  # held-out hand name -> params key
 
     @classmethod
     def load(cls, paths: str | Path | Sequence[str | Path], cfg: GraspTrainConfig,
@@ -118,7 +146,11 @@ class TrainingData:
             if o in test_names:
                 test[o] = str(sh.get("object", {}).get("mesh_hash", ""))
         test_hashes = {h for h in test.values() if h}
+        test_hand_keys = _test_hand_keys(roots, cfg.test_hands)
+        if set(cfg.test_hands) & set(cfg.hands):
+            raise DatasetError(f"hand(s) {sorted(set(cfg.test_hands) & set(cfg.hands))} are both training and test hands")
         cap = cfg.max_per_pair or None
+        hand_keys: dict[str, str] = {}
         hands: list[str] = []
         params: list = []
         obj_keys: list[str] = []
@@ -133,6 +165,10 @@ class TrainingData:
                 continue
             if len(g) == 0:
                 continue
+            if h not in hand_keys:
+                hand_keys[h] = params_key(_manifest_params(root, h))
+            if h in test_hand_keys or hand_keys[h] in test_hand_keys.values():
+                continue  # a test hand, under its own or another name
             if h not in hands:
                 hands.append(h)
                 params.append(_manifest_params(root, h))
@@ -146,6 +182,9 @@ class TrainingData:
         if not rows:
             raise DatasetError("no training grasps left after holding out the test objects")
         check_disjoint({o.name: o.mesh_hash for o in objs}, test)
+        leaked = sorted(h for h in hands if h in test_hand_keys or hand_keys[h] in test_hand_keys.values())
+        if leaked:  # unreachable by construction; the check states the guarantee
+            raise DatasetError(f"test hand(s) {leaked} are in the training data")
         g = np.concatenate(rows)
         surface = [np.asarray(o.sample_surface(cfg.surface_pool, seed=SURFACE_SEED)[0], dtype=np.float32) for o in objs]
         test_models = {}
@@ -155,7 +194,7 @@ class TrainingData:
             except DatasetError:
                 pass  # only the held-out losses need it
         return cls(g[:, :3], g[:, 3:9], g[:, 9:], np.concatenate(h_idx), np.concatenate(o_idx), hands, params,
-                   objs, surface, test, held, test_models)
+                   objs, surface, test, held, test_models, test_hand_keys)
 
     def __len__(self) -> int:
         return len(self.t)
@@ -175,7 +214,7 @@ class TrainingData:
     def summary(self) -> dict:
         counts = {h: int((self.hand_idx == i).sum()) for i, h in enumerate(self.hands)}
         return {"grasps": len(self), "per_hand": counts, "train_objects": {o.name: o.mesh_hash for o in self.objects},
-                "test_objects": dict(self.test_objects),
+                "test_objects": dict(self.test_objects), "test_hands": dict(self.test_hands),
                 "test_grasps": {f"{h}/{o}": int(len(g)) for (h, o), g in self.test_grasps.items()}}
 
 
