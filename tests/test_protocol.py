@@ -111,3 +111,44 @@ def test_the_closed_cage_holds_the_cube_against_all_six_pushes():
     with GraspEvaluator.from_urdf(urdf, am, cube(), Protocol(friction=0.0)) as ev:
         r = ev.evaluate(palm_at()).results[0]
     assert r.success and np.all(r.displacement[1:] < 0.004), r.displacement
+
+
+# -- the joint drive ---------------------------------------------------------------------------------
+ISAAC_STIFFNESS, ISAAC_DAMPING = 1000.0, 200.0  # the reference's DoF drive [N m/rad], [N m s/rad]
+
+
+def _drive_speed(protocol: Protocol, error: float = 0.02) -> float:
+    """Joint speed [rad/s] of a free canonical index finger (hand far from the object) a few steps
+    after its target is set ``error`` rad past its position: small enough not to hit the force limit."""
+    from ohra.hands import get_hand
+    from ohra.sim import SimHand
+
+    ev = GraspEvaluator(SimHand.from_params(get_hand("leap_3333"), "leap_3333"), cube(), protocol)
+    w = ev.world
+    T = np.eye(4)
+    T[:3, 3] = (0.5, 0.5, 0.5)
+    q = np.clip(np.full(len(w.jidx), 0.3), w.hand.lower, w.hand.upper)
+    w.reset_hand(T, q)
+    w.new_object()
+    k = int(np.argmax(w.hand.upper - w.hand.lower))
+    target = q.copy()
+    target[k] += error
+    w.drive_joints(target)
+    import pybullet as pb
+
+    for _ in range(2):
+        pb.stepSimulation(physicsClientId=w.client)
+    remaining = target[k] - w.joint_values()[k]  # the error the next step's motor sees
+    pb.stepSimulation(physicsClientId=w.client)
+    v = pb.getJointState(w.body, int(w.jidx[k]), physicsClientId=w.client)[1]
+    ev.close()
+    return v / remaining
+
+
+def test_isaac_drive_closes_fingers_at_isaacs_rate():
+    """Isaac's PD (k 1000, d 200) moves a light link at k/d = 5 rad/s per rad of error; the default
+    PyBullet gain 0.3 at 240 Hz at 0.3 * 240 = 72."""
+    assert _drive_speed(Protocol.isaac_drive()) == pytest.approx(ISAAC_STIFFNESS / ISAAC_DAMPING, rel=0.05)
+    assert _drive_speed(Protocol()) == pytest.approx(0.3 * 240.0, rel=0.05)
+    assert Protocol.preset("isaac-drive") == Protocol.isaac_drive()
+    assert Protocol.isaac_drive(dt=0.01).position_gain == pytest.approx(0.01 * 5.0)

@@ -1,7 +1,7 @@
 """``ohra eval``: run the six-direction test on a grasp file and report the success rate.
 
     ohra eval GRASPS.npz --hand NAME --object MESH|builtin:NAME [--workers K] [--mode eval|filter]
-              [--strict] [--isaac-step] [--original] [--render SHEET.png] [--meshcat SCENE.html] [-o report.json]
+              [--strict] [--isaac-step] [--isaac-drive] [--original] [--render SHEET.png] [--meshcat SCENE.html] [-o report.json]
 
 ``GRASPS`` is an ``.npz`` (key ``grasps``, or its only array) or ``.npy`` of shape (N, 31):
 ``[t, rot6d, q22]``, the canonical palm pose in the object's mesh frame and canonical joints. Bad
@@ -39,6 +39,8 @@ def register(subparsers) -> None:
     p.add_argument("--mode", choices=("eval", "filter"), default="eval", help="filter also needs the object within 5 cm of the origin")
     p.add_argument("--strict", action="store_true", help="strict preset: friction 1.0, gravity during the perturbations")
     p.add_argument("--isaac-step", action="store_true", help="Isaac's literal time step (100 Hz x 2 substeps) instead of 240 Hz")
+    p.add_argument("--isaac-drive", action="store_true",
+                   help="fingers close at Isaac's drive speed (position gain dt*1000/200) instead of gain 0.3")
     p.add_argument("--original", action="store_true", help="replay on the hand's original URDF (needs the hand assets)")
     p.add_argument("--no-early-exit", action="store_true", help="simulate every grasp to the end")
     p.add_argument("--limit", type=int, default=None, help="evaluate only the first N grasps")
@@ -73,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
     from ohra.hands import get_couplings, get_hand
     from ohra.objects.model import resolve_objects
     from ohra.sim import GraspEvaluator, Protocol, SimHand
-    from ohra.sim.protocol import ISAAC_STEP
+    from ohra.sim.protocol import ISAAC_DRIVE, ISAAC_STEP
 
     if args.workers < 1:
         raise GraspError(f"--workers must be >= 1, got {args.workers}")
@@ -87,6 +89,8 @@ def run(args: argparse.Namespace) -> int:
     protocol = Protocol.strict() if args.strict else Protocol()
     if args.isaac_step:
         protocol = replace(protocol, **ISAAC_STEP)
+    if args.isaac_drive:
+        protocol = replace(protocol, position_gain=protocol.dt * ISAAC_DRIVE["stiffness"] / ISAAC_DRIVE["damping"], velocity_gain=1.0)
     if args.no_early_exit:
         protocol = replace(protocol, early_exit=False)
     hand = SimHand.registered_original(args.hand) if args.original else SimHand.from_params(get_hand(args.hand), name=args.hand,

@@ -46,6 +46,8 @@ def register(sub: Any) -> None:
     p.add_argument("--model", help=model_help)
     p.add_argument("--original", action="store_true", help="replay on the hands' original URDFs through the action map")
     p.add_argument("--workers", type=int, default=1, help="simulation processes (default 1)")
+    p.add_argument("--protocol", default="reference", choices=("reference", "strict", "isaac-step", "isaac-drive"),
+                   help="six-direction test preset (default reference; use the one the training data was filtered with)")
     p.add_argument("--allow-seen", action="store_true", help="also evaluate objects the model was trained on")
     p.add_argument("-o", "--output", help="write the JSON report here")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -142,8 +144,11 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     if args.workers < 1:
         raise OhraError(f"--workers must be >= 1, got {args.workers}")
     model = _load(args.model)
+    from ohra.sim import Protocol
+
     rep = evaluate_model(model, args.hands, args.objects, n=args.n, seed=args.seed, original=args.original,
-                         workers=args.workers, progress=not args.quiet, allow_seen=args.allow_seen)
+                         workers=args.workers, progress=not args.quiet, allow_seen=args.allow_seen,
+                         protocol=Protocol.preset(args.protocol))
     if args.output:
         from ohra.data.dataset import atomic_write_json
 

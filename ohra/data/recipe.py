@@ -17,7 +17,7 @@ A recipe is a YAML mapping (plain values only; unknown keys are errors naming th
     grasps_per_pair: 16              # solver starts per (hand, object) pair
     cap: 8                           # stop a pair once this many grasps are kept
     split: {test_fraction: 0.25, seed: 0}          # or {test: [name, ...]}
-    protocol: reference              # reference | strict | isaac-step, or {preset: ..., <Protocol field>: value}
+    protocol: reference              # reference | strict | isaac-step | isaac-drive, or {preset: ..., <Protocol field>: value}
     robustness: {trials: 2}          # RobustnessSettings fields
     filter: true
 
