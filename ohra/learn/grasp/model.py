@@ -162,12 +162,14 @@ class GraspModel:
 
     # -- sampling -------------------------------------------------------------------------------------
     def sample(self, hand: HandLike, obj: ObjectLike, n: int, rotations: Any = None, seed: int = 0,
-               timing: dict | None = None) -> np.ndarray:
+               timing: dict | None = None, condition_hand: HandLike | None = None) -> np.ndarray:
         """``n`` grasps (n, 31) of ``hand`` on ``obj`` (see the module docstring).
 
         ``rotations``: wrist rotations (n, 3, 3), rot6d (n, 6) or a scipy ``Rotation``; None draws
         uniformly random ones from ``seed``. The same seed gives the same grasps. ``timing``, if a
         dict, receives ``seconds`` (wall time of the sampling itself, rotations to joints).
+        ``condition_hand``: condition the model on another hand's parameters while the joints stay
+        clamped to ``hand``'s limits (the paper's wrong-condition study, Table 9).
         """
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
             raise GraspError(f"n must be a positive integer, got {n!r}")
@@ -177,7 +179,8 @@ class GraspModel:
         rng = np.random.default_rng(seed)
         rots = random_rotations(n, rng) if rotations is None else as_rotations(rotations, n)
         t0 = time.perf_counter()
-        hand_vec = torch.from_numpy(self.condition.vector(params).astype(np.float32))
+        cond_params = params if condition_hand is None else resolve_hand(condition_hand)
+        hand_vec = torch.from_numpy(self.condition.vector(cond_params).astype(np.float32))
         lower = torch.from_numpy(np.asarray(params.joint_lowers, dtype=np.float32))
         upper = torch.from_numpy(np.asarray(params.joint_uppers, dtype=np.float32))
         r6 = np.concatenate([rots[:, :, 0], rots[:, :, 1]], axis=1)
