@@ -281,3 +281,31 @@ def test_heuristic_benchmark_grasps_are_seeded_and_valid():
     assert np.array_equal(a, heuristic_grasps(hm, obj, 3, seed=5, samples=32))
     check_grasps(a)
     assert np.all((a[:, 9:] >= hm.lower) & (a[:, 9:] <= hm.upper))
+
+
+def test_a_stored_float32_grasp_at_a_locked_joint_is_not_clamped():
+    """Allegro holds its finger twist at 0.0873 rad (lower == upper): float32 cannot store that value
+    exactly, and the stored grasp must not count as outside the limits."""
+    import warnings
+
+    from ohra.hands import get_hand
+    from ohra.objects.model import ObjectModel
+    from ohra.sim import GraspEvaluator, SimHand
+    from ohra.synth.robust import as_stored
+
+    p = get_hand("allegro_hand_left")
+    lo, up = np.asarray(p.joint_lowers), np.asarray(p.joint_uppers)
+    locked = np.flatnonzero((lo == up) & (lo != 0))
+    assert locked.size and np.any(np.float32(lo[locked]).astype(float) != lo[locked])
+    g = np.zeros(31)
+    g[:3] = (0.0, 0.0, 0.3)
+    g[3:9] = (1, 0, 0, 0, 1, 0)
+    g[9:] = np.clip(0.2, lo, up)
+    stored = as_stored(g, lo, up)
+    ev = GraspEvaluator(SimHand.from_params(p, "allegro_hand_left"), ObjectModel.builtin("sphere"))
+    _, out = ev.check(stored[None])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        rep = ev.evaluate(stored[None])
+    ev.close()
+    assert not out.any() and rep.clamped_count == 0

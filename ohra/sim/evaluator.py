@@ -42,6 +42,10 @@ from ohra.sim.world import World
 
 Params = Union[BaseParams, ExtendedParams]
 PHASES = ("squeeze",) + DIRECTION_NAMES
+# rad: a joint this close to its limit is not "outside" it. Stored grasps are float32, whose
+# spacing near pi is 2.4e-7 rad; a locked joint (lower == upper, e.g. Allegro's finger twist held at
+# 0.0873) has no float32 value inside its limits at all, so a 1e-9 test flagged every stored grasp.
+LIMIT_TOL = 1e-6
 
 
 @dataclass
@@ -122,7 +126,7 @@ def run_grasp(world: World, grasp: np.ndarray, mode: str = "eval") -> GraspResul
     prot, c, hand = world.protocol, world.client, world.hand
     T_palm, q = grasp_to_pose(grasp)
     qc = np.clip(q, hand.canon_lower, hand.canon_upper)
-    clamped = bool(np.any(np.abs(qc - q) > 1e-9))
+    clamped = bool(np.any(np.abs(qc - q) > LIMIT_TOL))
     qs = hand.project_sim(np.clip(hand.to_sim(qc), hand.lower, hand.upper))  # a coupled hand takes only coupled poses
     T_root = T_palm @ hand.T_palm_root
     pb.setGravity(0, 0, 0, physicsClientId=c)
@@ -273,7 +277,7 @@ class GraspEvaluator:
         """Validated (N,31) float grasps and the (N,) mask of those with joints outside the limits."""
         g = check_grasps(grasps)
         q = g[:, 9:]
-        out = np.any((q < self.hand.canon_lower - 1e-9) | (q > self.hand.canon_upper + 1e-9), axis=1)
+        out = np.any((q < self.hand.canon_lower - LIMIT_TOL) | (q > self.hand.canon_upper + LIMIT_TOL), axis=1)
         return g, out
 
     def evaluate(self, grasps: np.ndarray, mode: str = "eval", workers: int = 1, progress: bool = False,
