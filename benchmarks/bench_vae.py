@@ -188,7 +188,7 @@ def _rows(d: dict) -> dict[str, str]:
     per_hand = [r["tip_mean_mm"] for r in reg]
     arc, even = _interp_cells(d["interpolation"]), _interp_cells(d["interpolation_even_alphas"])
     over = [r for r in d["interpolation"] if r["steps_over_limit"]]
-    bound = ", ".join(f"{r['pair']} {_worst(r):.1f} (bound {r['turning_thumb_bound_mm']:.1f})" for r in over)
+    bound = ", ".join(f"{r['pair']} {_worst(r):.1f} (bound {r['turning_thumb_bound_mm']:.1f})" for r in over) if len(over) <= 8 else ""
     pr, pi = d["plausibility_random_latents"], d["plausibility_interpolation_steps"]
     tr, sp = d["training"], d["speed"]
     fmt_p = lambda p: f"{p['finger_base_inside_palm']} / {p['thumb_into_palm']} / {p['fingers_intersect_q0_coal']} of {p['n']}"  # noqa: E731
@@ -198,7 +198,7 @@ def _rows(d: dict) -> dict[str, str]:
         "tips": f"{s['tip_mean_mm']:.1f} mm ({s['thumb_tip_mean_mm']:.1f} / {s['finger_tip_mean_mm']:.1f})",
         "reg": f"{np.mean(per_hand):.1f} / {max(per_hand):.1f} mm, {sum(t <= 10.0 for t in per_hand)} of {len(per_hand)} hands <= 10 mm",
         "interp": arc, "interp_even": even,
-        "interp_bound": f"{len(over)} of {len(d['interpolation'])} pairs" + (f": {bound} mm" if over else ""),
+        "interp_bound": f"{len(over)} of {len(d['interpolation'])} pairs" + (f": {bound} mm" if bound else ""),
         "random": fmt_p(pr), "steps": fmt_p(pi),
         "train": f"{tr['seconds'] / 60:.1f} min ({tr['epochs']} epochs, {tr['steps']} steps)" if tr["seconds"] else "-",
         "speed": f"{sp['encode_per_hand_us']:.1f} / {sp['decode_to_valid_vector_per_hand_us']:.1f} us",
@@ -236,18 +236,23 @@ def main() -> None:
     data = {name: evaluate(vae, hands, args.heldout, args.latents) for name, vae in models.items()}
     data["sample_65536_s"] = best_of(lambda: sample_vectors(65536, 0), 3)
     data["bench_peak_rss_mib"] = peak_rss_mib()
+    write_results("vae", data, tables(data, list(models)))
+
+
+def tables(data: dict, models: list[str]) -> str:
+    """The markdown tables of a run's results (one column per model; per-hand rows of the last)."""
     cells = {name: _rows(data[name]) for name in models}
     head = " | ".join(f"{name} ({data[name]['encoding']})" for name in models)
     lines = [f"| morphology VAE | {head} | target |", "|---|" + "---|" * len(models) + "---|"]
     for key, label, target in LABELS:
         lines.append(f"| {label} | " + " | ".join(cells[m][key] for m in models) + f" | {target} |")
     lines.append(f"| sample 65,536 hands (vectorised, with thumb redraws) | {data['sample_65536_s']:.2f} s | | < 60 s |")
-    last = list(models)[-1]
+    last = models[-1]
     table = "\n".join(lines)
     table += f"\n\n| hand ({last}) | in sampler support | presence exact | fingertip error at q=0, mean / max [mm] | thumb rotation error [rad] |\n|---|---|---|---|---|\n"
     table += "\n".join(f"| {r['hand']} | {'yes' if r['in_sampler_support'] else 'no'} | {'yes' if r['presence_exact'] else 'no'} | "
                        f"{r['tip_mean_mm']:.1f} / {r['tip_max_mm']:.1f} | {r['thumb_rotation_error_rad']:.3f} |" for r in data[last]["registered_hands"])
-    write_results("vae", data, table)
+    return table
 
 
 if __name__ == "__main__":
