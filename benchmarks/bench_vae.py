@@ -7,8 +7,10 @@
 * plausibility of decoded hands (random latents from the prior and every interpolation step):
   finger base inside the palm, thumb pointing into the palm (:mod:`ohra.learn.geometry`), fingers
   intersecting at q = 0 (Coal, ``HandModel.self_collision``);
-* interpolation between every pair of registered hands (16 steps): the largest fingertip move of a
-  step that keeps the same joints;
+* interpolation between every pair of registered hands (16 hands, from ``VAEBundle.interpolate``:
+  alphas at equal fingertip arc length, and even alphas for comparison): the largest fingertip move
+  of a step that keeps the same joints and handedness, next to the least a thumb that keeps its
+  length needs per step (:func:`turning_thumb_bound`);
 * training cost (from the model's metrics.json), sampler and inference speed.
 
 Run: python benchmarks/bench_vae.py [--model DIR] [--latents N] [--heldout N]  -> benchmarks/results/vae.{json,md}
@@ -36,7 +38,7 @@ from ohra.errors import OhraError  # noqa: E402
 from ohra.learn import geometry as geo  # noqa: E402
 from ohra.learn.encoding_rot6d import is_left  # noqa: E402
 from ohra.learn.morph import load_vae, reference_model_dir  # noqa: E402
-from ohra.learn.sampler import LOWERS, UPPERS, sample_vectors, support_violations  # noqa: E402
+from ohra.learn.sampler import LOWERS, UPPERS, XYZ, mirror_vectors, sample_vectors, support_violations  # noqa: E402
 from ohra.learn.sampler_reference import sample_reference_vectors  # noqa: E402
 from ohra.learn.vae_metrics import reconstruct, reconstruct_vectors, reconstruction_metrics, shape_errors  # noqa: E402
 
@@ -93,27 +95,55 @@ def plausibility(V: np.ndarray) -> dict:
             "thumb_into_palm": int(geo.thumb_into_palm(V).sum()), "fingers_intersect_q0_coal": int(coal)}
 
 
-def interpolations(vae, hands: dict[str, BaseParams]) -> tuple[list[dict], np.ndarray]:
-    """Every unordered pair of registered hands, STEPS steps: largest fingertip move of a step that
-    keeps the same joints (thumb, other fingers), and all decoded steps (for the plausibility check)."""
-    names = list(hands)
-    mu = {n: vae.encode_vectors(hands[n].to_vector())[0][0] for n in names}
-    alphas = np.linspace(0.0, 1.0, STEPS)
+def turning_thumb_bound(va: np.ndarray, vb: np.ndarray) -> float:
+    """Largest thumb-tip move [m] of a step when the thumb goes from hand ``a`` to hand ``b`` in
+    STEPS even steps of its own path: base and reach linear, direction turned the shortest way at
+    a constant rate (right-hand form). A thumb that keeps its length cannot do with less per step."""
+    from scipy.spatial.transform import Rotation
+
+    ends = []
+    for v in (va, vb):
+        v = v[None].copy()
+        if is_left(v)[0]:
+            v = mirror_vectors(v)
+        reach, _ = geo.finger_reach(v)
+        ends.append((v[0, XYZ][:3], reach[0, 0], geo.finger_directions(v)[0, 0]))
+    (ba, la, da), (bb, lb, db) = ends
+    axis = np.cross(da, db)
+    angle = float(np.arctan2(np.linalg.norm(axis), da @ db))
+    axis = axis / max(np.linalg.norm(axis), 1e-12)
+    t = np.linspace(0.0, 1.0, 64 * (STEPS - 1) + 1)
+    d = Rotation.from_rotvec(np.outer(t * angle, axis)).apply(da)
+    tip = (1 - t)[:, None] * ba + t[:, None] * bb + ((1 - t) * la + t * lb)[:, None] * d
+    return float(np.linalg.norm(np.diff(tip, axis=0), axis=1).sum() / (STEPS - 1))
+
+
+def step_moves(V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Steps (STEPS - 1,) that keep the joints and the handedness, and every fingertip's move of
+    each step (STEPS - 1, 5) [m] (NaN for absent fingers)."""
+    T = geo.tips_q0(V)
+    present = (V[:, LOWERS] != 0) | (V[:, UPPERS] != 0)
+    left = is_left(V)
+    same = np.all(present[1:] == present[:-1], axis=1) & (left[1:] == left[:-1])
+    return same, np.linalg.norm(T[1:] - T[:-1], axis=-1)
+
+
+def interpolations(vae, hands: dict[str, BaseParams], spacing: str = "arc") -> tuple[list[dict], np.ndarray]:
+    """Every unordered pair of registered hands, STEPS hands from the library's interpolation
+    (``VAEBundle.interpolate``, with ``spacing``): largest fingertip move of a step that keeps the
+    same joints (thumb, other fingers), and all decoded steps (for the plausibility check)."""
     rows, all_steps = [], []
-    for a, b in itertools.combinations(names, 2):
-        z = (1.0 - alphas)[:, None] * mu[a] + alphas[:, None] * mu[b]
-        V = vae.decode_vectors(z)
+    for a, b in itertools.combinations(list(hands), 2):
+        V = np.stack([p.to_vector() for p in vae.interpolate(hands[a], hands[b], STEPS, spacing).params])
         all_steps.append(V)
-        T = geo.tips_q0(V)
-        present = (V[:, LOWERS] != 0) | (V[:, UPPERS] != 0)
-        left = is_left(V)
-        # a step keeps the structure when no joint appears or vanishes and the hand stays left or right
-        same = np.all(present[1:] == present[:-1], axis=1) & (left[1:] == left[:-1])
-        d = np.linalg.norm(T[1:] - T[:-1], axis=-1)  # (STEPS - 1, 5), NaN for absent fingers
+        same, d = step_moves(V)
         moves = d[same]
+        T = geo.tips_q0(V)
         bound = np.nanmax(np.linalg.norm(T[-1] - T[0], axis=-1)) / (STEPS - 1)  # even a straight, even path moves this much
         rows.append({"pair": f"{a} -> {b}", "same_handedness": bool(hands[a].handedness == hands[b].handedness),
-                     "straight_path_bound_mm": float(1e3 * bound), "steps_same_joints": int(same.sum()),
+                     "straight_path_bound_mm": float(1e3 * bound),
+                     "turning_thumb_bound_mm": 1e3 * turning_thumb_bound(hands[a].to_vector(), hands[b].to_vector()),
+                     "steps_same_joints": int(same.sum()),
                      "max_move_thumb_mm": float(1e3 * np.nanmax(moves[:, 0])) if same.any() else None,
                      "max_move_fingers_mm": float(1e3 * np.nanmax(moves[:, 1:])) if same.any() else None,
                      "steps_over_limit": int(np.sum(np.nanmax(moves, axis=1) > MOVE_LIMIT_M)) if same.any() else 0})
@@ -126,9 +156,10 @@ def evaluate(vae, hands: dict[str, BaseParams], n_heldout: int, n_latents: int) 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         interp, steps = interpolations(vae, hands)
+        even, _ = interpolations(vae, hands, "even")
         data = {"model": str(vae.path), "encoding": vae.encoding.name, "config": vae.config,
                 "heldout": {"seed": HELDOUT_SEED, **heldout(vae, n_heldout)}, "registered_hands": registered(vae, hands),
-                "interpolation": interp, "plausibility_random_latents": plausibility(vae.decode_vectors(z)),
+                "interpolation": interp, "interpolation_even_alphas": even, "plausibility_random_latents": plausibility(vae.decode_vectors(z)),
                 "plausibility_interpolation_steps": plausibility(steps)}
     train = vae.metrics or {}
     data["training"] = {"epochs": train.get("epochs"), "steps": train.get("steps"), "seconds": train.get("train_seconds_total"),
@@ -141,18 +172,23 @@ def evaluate(vae, hands: dict[str, BaseParams], n_heldout: int, n_latents: int) 
     return data
 
 
+def _worst(r: dict) -> float:
+    return max(r["max_move_thumb_mm"], r["max_move_fingers_mm"]) if r["steps_same_joints"] else float("nan")
+
+
+def _interp_cells(rows: list[dict]) -> str:
+    worst = max((_worst(r) for r in rows if r["steps_same_joints"]), default=float("nan"))
+    over = sum(r["steps_over_limit"] for r in rows)
+    return f"{worst:.1f} mm; {over} of {sum(r['steps_same_joints'] for r in rows)} steps > 20 mm"
+
+
 def _rows(d: dict) -> dict[str, str]:
     """Table cells of one model's results."""
     h, s, reg = d["heldout"], d["heldout"]["shape"], d["registered_hands"]
     per_hand = [r["tip_mean_mm"] for r in reg]
-    interp = [r for r in d["interpolation"] if r["steps_same_joints"]]
-    worst = max(max(r["max_move_thumb_mm"], r["max_move_fingers_mm"]) for r in interp) if interp else float("nan")
-    over = sum(r["steps_over_limit"] for r in d["interpolation"])
-    total = sum(r["steps_same_joints"] for r in d["interpolation"])
-    same = [r for r in interp if r["same_handedness"]]
-    worst_same = max(max(r["max_move_thumb_mm"], r["max_move_fingers_mm"]) for r in same) if same else float("nan")
-    over_same = sum(r["steps_over_limit"] for r in same)
-    total_same = sum(r["steps_same_joints"] for r in same)
+    arc, even = _interp_cells(d["interpolation"]), _interp_cells(d["interpolation_even_alphas"])
+    over = [r for r in d["interpolation"] if r["steps_over_limit"]]
+    bound = ", ".join(f"{r['pair']} {_worst(r):.1f} (bound {r['turning_thumb_bound_mm']:.1f})" for r in over) if len(over) <= 8 else ""
     pr, pi = d["plausibility_random_latents"], d["plausibility_interpolation_steps"]
     tr, sp = d["training"], d["speed"]
     fmt_p = lambda p: f"{p['finger_base_inside_palm']} / {p['thumb_into_palm']} / {p['fingers_intersect_q0_coal']} of {p['n']}"  # noqa: E731
@@ -161,8 +197,8 @@ def _rows(d: dict) -> dict[str, str]:
         "rot": f"{s['thumb_rotation_rmse_rad']:.3f} rad",
         "tips": f"{s['tip_mean_mm']:.1f} mm ({s['thumb_tip_mean_mm']:.1f} / {s['finger_tip_mean_mm']:.1f})",
         "reg": f"{np.mean(per_hand):.1f} / {max(per_hand):.1f} mm, {sum(t <= 10.0 for t in per_hand)} of {len(per_hand)} hands <= 10 mm",
-        "interp": f"{worst:.1f} mm; {over} of {total} steps > 20 mm",
-        "interp_same": f"{worst_same:.1f} mm; {over_same} of {total_same} steps > 20 mm",
+        "interp": arc, "interp_even": even,
+        "interp_bound": f"{len(over)} of {len(d['interpolation'])} pairs" + (f": {bound} mm" if bound else ""),
         "random": fmt_p(pr), "steps": fmt_p(pi),
         "train": f"{tr['seconds'] / 60:.1f} min ({tr['epochs']} epochs, {tr['steps']} steps)" if tr["seconds"] else "-",
         "speed": f"{sp['encode_per_hand_us']:.1f} / {sp['decode_to_valid_vector_per_hand_us']:.1f} us",
@@ -175,8 +211,9 @@ LABELS = [
     ("rot", "held-out hands: thumb mounting rotation error, RMSE (geodesic)", "<= 0.1 rad"),
     ("tips", "held-out hands: fingertip error at q=0, mean (thumb / other fingers)", "<= 10 mm"),
     ("reg", "registered hands: fingertip error at q=0, mean of hands / worst hand", "<= 10 mm per hand"),
-    ("interp", f"interpolation, all 78 pairs of registered hands ({STEPS} steps): largest fingertip move of a step keeping joints and handedness", "<= 20 mm"),
-    ("interp_same", "... pairs of the same handedness (a left-right pair moves the thumb across the palm: 12 pairs need > 20 mm per step even on a straight path)", "<= 20 mm"),
+    ("interp", f"interpolation (`interpolate`, alphas at equal fingertip arc length), every pair of registered hands ({STEPS} hands): largest fingertip move of a step keeping joints and handedness", "<= 20 mm"),
+    ("interp_even", "... same latent line, even alphas (before)", "<= 20 mm"),
+    ("interp_bound", "pairs with a step > 20 mm (equal arc length): largest move, and the least a thumb that keeps its length needs per step (base and reach linear, turning the shortest way at a constant rate)", "0 pairs"),
     ("random", "random latents: finger base inside palm / thumb into palm / fingers intersecting at q=0 (Coal)", "0 / 0 / 0"),
     ("steps", "interpolation steps: finger base inside palm / thumb into palm / fingers intersecting at q=0 (Coal)", "0 / 0 / 0"),
     ("train", "training time (wall, shared 2-core machine)", "<= 30 min"),
@@ -199,18 +236,23 @@ def main() -> None:
     data = {name: evaluate(vae, hands, args.heldout, args.latents) for name, vae in models.items()}
     data["sample_65536_s"] = best_of(lambda: sample_vectors(65536, 0), 3)
     data["bench_peak_rss_mib"] = peak_rss_mib()
+    write_results("vae", data, tables(data, list(models)))
+
+
+def tables(data: dict, models: list[str]) -> str:
+    """The markdown tables of a run's results (one column per model; per-hand rows of the last)."""
     cells = {name: _rows(data[name]) for name in models}
     head = " | ".join(f"{name} ({data[name]['encoding']})" for name in models)
     lines = [f"| morphology VAE | {head} | target |", "|---|" + "---|" * len(models) + "---|"]
     for key, label, target in LABELS:
         lines.append(f"| {label} | " + " | ".join(cells[m][key] for m in models) + f" | {target} |")
     lines.append(f"| sample 65,536 hands (vectorised, with thumb redraws) | {data['sample_65536_s']:.2f} s | | < 60 s |")
-    last = list(models)[-1]
+    last = models[-1]
     table = "\n".join(lines)
     table += f"\n\n| hand ({last}) | in sampler support | presence exact | fingertip error at q=0, mean / max [mm] | thumb rotation error [rad] |\n|---|---|---|---|---|\n"
     table += "\n".join(f"| {r['hand']} | {'yes' if r['in_sampler_support'] else 'no'} | {'yes' if r['presence_exact'] else 'no'} | "
                        f"{r['tip_mean_mm']:.1f} / {r['tip_max_mm']:.1f} | {r['thumb_rotation_error_rad']:.3f} |" for r in data[last]["registered_hands"])
-    write_results("vae", data, table)
+    return table
 
 
 if __name__ == "__main__":

@@ -161,6 +161,18 @@ def test_projection_turns_an_inward_thumb_out_by_the_smallest_rotation():
     assert np.mean(np.all(fixed[:, XYZ.start : XYZ.start + 3] == flipped[:, XYZ.start : XYZ.start + 3], axis=1)) > 0.8
 
 
+def test_decoded_handedness_follows_the_left_flag_when_the_thumb_sits_at_y_0():
+    """Barrett's thumb base sits at y = 0; a decoder output a hair below it must not turn a hand
+    flagged left into a "right" one (BaseParams.handedness reads the thumb base's side first)."""
+    x = E.encode_vectors(ohra.get_hand("barrett_hand", "base").to_vector())
+    x[E.CONT.start + XYZ.start + 1] = -1e-4  # thumb base y, right-hand form
+    for flag, hand in ((0.0, "right"), (1.0, "left")):
+        x[E.LEFT.start] = flag
+        v = E.decode_vectors(x)
+        assert BaseParams.from_vector(v).handedness == hand and E.is_left(v[None])[0] == (hand == "left")
+        assert v[XYZ.start + 1] == 0.0
+
+
 def test_bad_inputs_raise_latent_errors():
     with pytest.raises(LatentError, match=r"\(70,\)"):
         E.decode_vectors(np.zeros(66))

@@ -109,10 +109,9 @@ def _registered():
     return out
 
 
-# Registered after the sampler (and the shipped VAE) were fitted: a thumb mounted 6 cm up the palm
-# (support 0-4.5 cm), a 23 mm thumb link (support >= 25 mm), knuckles spread 4.6 mm in x. Widening the
-# support means retraining the VAE (issue 16); until then they are named here, not hidden.
-OUTSIDE_SUPPORT = {"inspire_hand_left", "inspire_hand_right"}
+# Hands the sampler cannot draw, each with its reason; none since the support was widened for the Inspire
+# hands (thumb 6 cm up the palm, a 23 mm thumb link, knuckles spread 4.6 mm in x).
+OUTSIDE_SUPPORT: set[str] = set()
 
 
 def test_every_registered_base_hand_is_inside_the_support():

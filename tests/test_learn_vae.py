@@ -18,9 +18,9 @@ from ohra.hands import registry  # noqa: E402
 from ohra.canonical.kinematics import HandModel  # noqa: E402
 from ohra.learn import encode_vectors, sample_vectors  # noqa: E402
 from ohra.learn.encoding import LatentError  # noqa: E402
-from ohra.learn.sampler import in_support  # noqa: E402
+from ohra.learn.sampler import in_support, mirror_vectors  # noqa: E402
 from ohra.learn import geometry as geo  # noqa: E402
-from ohra.learn.morph import Interpolation, default_model_dir, load_vae, reference_model_dir  # noqa: E402
+from ohra.learn.morph import Interpolation, default_model_dir, load_vae, reference_model_dir, tip_moves  # noqa: E402
 from ohra.learn.sampler_reference import sample_reference_vectors  # noqa: E402
 from ohra.learn.train_vae import TrainConfig, learning_rate, make_dataset, train  # noqa: E402
 from ohra.learn.vae import GeometryLoss, MorphologyVAE, VAEConfig, make_optimizer, path_smoothness, vae_loss  # noqa: E402
@@ -262,6 +262,39 @@ def test_interpolation_from_dex3_to_shadow(vae):
     assert [p.isclose(ohra.get_hand(n, "base")) for p, n in zip(it.originals, ("dex3_right", "shadow_hand_right"))] == [True, True]
     for text in it.urdfs:
         HandModel(text)
+
+
+def test_interpolation_steps_share_the_fingertip_arc_length_evenly(vae):
+    """Barrett's thumb turns ~130 degrees towards Shadow's: at even alphas the decoder puts most of
+    that into a few steps; at equal arc length every step that keeps the joints moves the fingertips
+    by about total / 15, the total measured on a dense sampling of the same latent line."""
+    a, b = ohra.get_hand("barrett_hand", "base"), ohra.get_hand("shadow_hand_right", "base")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        it = vae.interpolate(a, b, 16)
+        (mu_a, _), (mu_b, _) = vae.encode(a), vae.encode(b)
+    assert np.all(np.diff(it.alphas) > 0) and it.alphas[0] == 0.0 and it.alphas[-1] == 1.0
+    assert np.allclose(it.z, (1 - it.alphas)[:, None] * mu_a + it.alphas[:, None] * mu_b)
+    t = np.linspace(0.0, 1.0, 2001)
+    total = tip_moves(vae.decode_vectors((1 - t)[:, None] * mu_a + t[:, None] * mu_b)).sum()
+    steps = tip_moves(np.stack([p.to_vector() for p in it.params]))
+    kept = steps[steps > 0]
+    assert len(kept) >= 5 and kept.max() <= 1.05 * total / 15 and kept.min() >= 0.5 * total / 15, 1e3 * kept
+    # the alphas depend on the spacing; "even" is the plain latent line
+    even = vae.interpolate(a, b, 16, spacing="even")
+    assert np.array_equal(even.alphas, np.linspace(0, 1, 16))
+    with pytest.raises(LatentError, match="spacing"):
+        vae.interpolate(a, b, 16, spacing="uneven")
+
+
+def test_tip_moves_measure_fingertip_moves_and_skip_structure_changes():
+    v = ohra.get_hand("shadow_hand_left", "base").to_vector()
+    longer = v.copy()
+    longer[5] += 0.01  # non-thumb proximal length: every finger's tip moves 1 cm along +z
+    fewer = v.copy()
+    fewer[[38 + 4, 60 + 4]] = 0.0  # thumb joint 5 gone: a change of structure, not a move
+    right = mirror_vectors(v[None])[0]  # the same hand turned right: a change of structure too
+    assert np.allclose(tip_moves(np.stack([v, longer, longer, fewer, right])), [0.01, 0.0, 0.0, 0.0])
 
 
 # -- CLI --------------------------------------------------------------------------------------------

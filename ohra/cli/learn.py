@@ -57,6 +57,8 @@ def register(sub) -> None:
     p.add_argument("hand_a")
     p.add_argument("hand_b")
     p.add_argument("-n", "--steps", type=int, default=8, help="number of hands, endpoints included (default 8)")
+    p.add_argument("--spacing", choices=("arc", "even"), default="arc",
+                   help="hands at equal fingertip arc length along the latent line (arc, default) or at even latent steps")
     p.add_argument("-o", "--output", required=True, help="output directory")
     p.add_argument("--model", help=model_help)
     p.add_argument("--no-png", action="store_true", help="skip the PNG strip")
@@ -169,7 +171,7 @@ def _cmd_interpolate(args: argparse.Namespace) -> int:
     vae = _load(args.model)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        interp = vae.interpolate(args.hand_a, args.hand_b, args.steps)
+        interp = vae.interpolate(args.hand_a, args.hand_b, args.steps, args.spacing)
     _warnings_to_stderr(caught)
     out = Path(args.output)
     paths = interp.write(out)

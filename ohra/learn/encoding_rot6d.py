@@ -78,6 +78,13 @@ CONT_NAMES: tuple[str, ...] = (
 THUMB_OUTWARD_EPS = 1e-6  # cosine the projection leaves between the thumb and the palm-centre direction
 CLEARANCE_MARGIN = 1e-6  # m of free space the projection leaves between two fingers' q = 0 cores
 _PASSES = 20  # projection rounds (turn the thumb out, push it off the fingers) before the fallback
+THUMB_Y = XYZ.start + 1  # the thumb base's y in the base vector
+# Decoding box of a hand in right-hand form: its thumb base on the thumb side, y >= 0 (as in the
+# sampler). A base at y < 0 would make the decoded hand's handedness (BaseParams.handedness: by the
+# thumb base's side first) disagree with the left flag; Barrett's thumb sits at y = 0, and the
+# latent path from it to a left hand flipped between "left" and "right" that way (a 125 mm step).
+RIGHT_FORM_LOWER = DECODE_LOWER.copy()
+RIGHT_FORM_LOWER[THUMB_Y] = 0.0
 
 
 # -- stand-ins for absent parts ----------------------------------------------------------------------
@@ -203,7 +210,9 @@ def decode_vectors(x70: Any, limits: Any = None) -> np.ndarray:
     v[:, THUMB_AXES] = BASIS_AXES[cats].reshape(n, 6)
     v[:, LOWERS] = lo
     v[:, UPPERS] = up
-    v = project_plausible(project_vectors(v))
+    v = project_vectors(v)
+    v[:, THUMB_Y] = np.maximum(v[:, THUMB_Y], 0.0)  # see RIGHT_FORM_LOWER
+    v = project_plausible(v, RIGHT_FORM_LOWER)
     left = x[:, LEFT.start] > 0.5
     v[left] = mirror_vectors(v[left])
     return v[0] if single else v
@@ -234,9 +243,10 @@ def _turn_thumbs_out(v: np.ndarray) -> None:
     v[rows, THUMB_RPY] = matrix_to_rpy(rotation_about(axis, angle) @ R)
 
 
-def _push_thumbs_off(v: np.ndarray) -> bool:
+def _push_thumbs_off(v: np.ndarray, lower: np.ndarray = DECODE_LOWER) -> bool:
     """In place: translate each thumb away from the finger it overlaps most (q = 0 cores), by the
-    overlap plus a margin. Returns whether any thumb moved."""
+    overlap plus a margin, staying inside the box ``[lower, DECODE_UPPER]``. Returns whether any
+    thumb moved."""
     s, e, present = finger_cores(v)
     two_r = 2.0 * v[:, FINGER_RADIUS]
     worst = np.full(len(v), np.inf)
@@ -259,12 +269,13 @@ def _push_thumbs_off(v: np.ndarray) -> bool:
         push[hit] = u * (CLEARANCE_MARGIN - gap[hit] + 1e-7)[:, None]
     moved = np.isfinite(worst)
     b = slice(XYZ.start, XYZ.start + 3)
-    v[moved, b] = np.clip(v[moved, b] + push[moved], DECODE_LOWER[b], DECODE_UPPER[b])  # stay in the decoding box
+    v[moved, b] = np.clip(v[moved, b] + push[moved], lower[b], DECODE_UPPER[b])  # stay in the decoding box
     return bool(moved.any())
 
 
-def project_plausible(v82: np.ndarray) -> np.ndarray:
-    """Valid base vectors (N, 82) -> the same hands obeying the rules of :mod:`ohra.learn.geometry`.
+def project_plausible(v82: np.ndarray, lower: np.ndarray = DECODE_LOWER) -> np.ndarray:
+    """Valid base vectors (N, 82) -> the same hands obeying the rules of :mod:`ohra.learn.geometry`
+    (a pushed thumb stays at or above ``lower``, e.g. :data:`RIGHT_FORM_LOWER`).
 
     1. every present non-thumb knuckle at least as high as the sampler's lowest one (so never
        inside the palm), and neighbouring knuckles more than one finger diameter apart;
@@ -291,7 +302,7 @@ def project_plausible(v82: np.ndarray) -> np.ndarray:
     v[:, XYZ] = xyz.reshape(n, 15)
     for _ in range(_PASSES):
         _turn_thumbs_out(v)
-        if not _push_thumbs_off(v):
+        if not _push_thumbs_off(v, lower):
             break
     _turn_thumbs_out(v)  # the last push may have turned a thumb inwards
     _tuck_stuck_thumbs(v, floor)

@@ -76,14 +76,14 @@ class SamplerConfig:
     palm_radius: tuple[float, float] = (0.04, 0.06)
     finger_radius: tuple[float, float] = (0.007, 0.018)  # upper bound also <= max_radius_ratio * palm radius
     max_radius_ratio: float = 1.0 / 3.0
-    thumb_lengths: tuple[float, float] = (0.025, 0.075)
+    thumb_lengths: tuple[float, float] = (0.02, 0.075)  # Inspire: a 23 mm middle thumb link
     finger_lengths: tuple[float, float] = (0.02, 0.075)
     thumb_x: tuple[float, float] = (-0.025, 0.025)
     thumb_y: tuple[float, float] = (0.0, 0.045)  # |y|, on the thumb side
-    thumb_z: tuple[float, float] = (0.0, 0.045)
+    thumb_z: tuple[float, float] = (0.0, 0.07)  # Inspire mounts its thumb 6 cm up the palm
     knuckle_x: tuple[float, float] = (-0.006, 0.012)  # shared by the non-thumb fingers
-    knuckle_x_jitter: float = 0.002  # U(-a, a) per finger
-    knuckle_row: tuple[float, float] = (-1.05, 0.35)  # row height 2 R + o R, o in palm radii
+    knuckle_x_jitter: float = 0.003  # U(-a, a) per finger (Inspire's knuckles spread 4.6 mm in x)
+    knuckle_row: tuple[float, float] = (-1.05, 0.5)  # row height 2 R + o R, o in palm radii (Inspire: 0.46)
     knuckle_z_jitter: float = 0.007  # U(-a, a) per finger
     knuckle_span: tuple[float, float] = (0.85, 1.3)  # half-width of the knuckle row / (R - r)
     finger_gap: float = 2e-4  # least free space between neighbouring knuckles' capsules [m]
