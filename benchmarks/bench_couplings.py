@@ -19,6 +19,12 @@ points with standard error ``sqrt(var(d) / n)`` (sample variance, ddof 1), and t
 table (both pass / canonical only / original only / both fail). Per-object rows have n <= 24 and
 swing widely; the decision is the pooled row.
 
+Two diagnostics put the disagreement in scale. *Noise floor*: the canonical grasps re-evaluated on the
+canonical hand after a 0.1 mm palm shift (seeded random direction): how many outcomes flip for a change
+far below any geometric difference between the two hands. *Contact gap*: at the grasp pose, for every
+finger whose canonical links touch the object (signed distance <= 1 mm), the original finger's
+distance minus the canonical one [mm] (positive: the original finger surface lies farther out).
+
 Each (form, object) is written atomically to ``out/bench_couplings/`` (grasps and per-grasp
 outcomes) and reused on a re-run with the same starts and seed, so a killed run resumes;
 ``--reeval`` keeps the solved grasps and re-runs both evaluations (after a simulator fix).
@@ -39,12 +45,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import write_results  # noqa: E402
 
 import numpy as np  # noqa: E402
+import pybullet as pb  # noqa: E402
 
 from ohra.canonical.couplings import residual  # noqa: E402
 from ohra.canonical.kinematics import HandModel  # noqa: E402
 from ohra.hands import resolve_hand  # noqa: E402
 from ohra.objects.model import ObjectModel, resolve_objects  # noqa: E402
 from ohra.paths import objects_root  # noqa: E402
+from ohra.rotations import grasp_to_pose  # noqa: E402
 from ohra.sim import GraspEvaluator, SimHand  # noqa: E402
 from ohra.synth.init import initial_poses  # noqa: E402
 from ohra.synth.nlp import GraspNLP, NLPSettings  # noqa: E402
@@ -52,6 +60,8 @@ from ohra.synth.nlp import GraspNLP, NLPSettings  # noqa: E402
 HAND = "inspire_hand_right"
 OBJECTS = ("builtin:box", "builtin:sphere", "builtin:cylinder", "builtin:capsule", "ycb/MustardBottle", "ycb/TomatoSoupCan", "ycb/PottedMeatCan",
            "procedural:superquadric:3001", "procedural:ellipsoid:3001", "procedural:cylinder:3001")
+SHIFT_M = 1e-4  # palm shift of the noise-floor evaluation [m]
+TOUCH_M = 1e-3  # a canonical finger within this signed distance of the object counts as touching [m]
 CACHE = Path(__file__).resolve().parent.parent / "out" / "bench_couplings"
 
 
@@ -78,6 +88,40 @@ def outcomes(ev: GraspEvaluator, grasps: np.ndarray) -> list[dict]:
              "penetration_m": float(r.initial_penetration)} for r in rep.results]
 
 
+def finger_distances(ev: GraspEvaluator, grasp: np.ndarray) -> dict[int, float]:
+    """Finger index -> smallest signed distance [m] of its links to the object at the grasp pose
+    (the evaluator's own start: clamped, coupled joints, palm pose mapped to the URDF root)."""
+    w, hand = ev.world, ev.hand
+    T_palm, q = grasp_to_pose(grasp)
+    qs = hand.project_sim(np.clip(hand.to_sim(np.clip(q, hand.canon_lower, hand.canon_upper)), hand.lower, hand.upper))
+    w.reset_hand(T_palm @ hand.T_palm_root, qs)
+    body = w.new_object()
+    out: dict[int, float] = {}
+    for j, _ in w.links:
+        f = w.link_finger[j]
+        cps = pb.getClosestPoints(w.body, body, 0.05, linkIndexA=j, physicsClientId=w.client) if f >= 0 else ()
+        for cp in cps:
+            out[f] = min(out.get(f, np.inf), float(cp[8]))
+    return out
+
+
+def contact_gaps(ec: GraspEvaluator, eo: GraspEvaluator, grasps: np.ndarray) -> list[list[float]]:
+    """Per grasp: original minus canonical distance [m] of each finger the canonical hand touches."""
+    out = []
+    for g in grasps:
+        dc, do = finger_distances(ec, g), finger_distances(eo, g)
+        out.append([do.get(f, 0.05) - d for f, d in sorted(dc.items()) if d <= TOUCH_M])
+    return out
+
+
+def shifted(grasps: np.ndarray, seed: int) -> np.ndarray:
+    """The grasps with the palm moved SHIFT_M along a seeded random direction each."""
+    d = np.random.default_rng(seed).normal(size=(len(grasps), 3))
+    g = grasps.copy()
+    g[:, :3] += SHIFT_M * d / np.linalg.norm(d, axis=1, keepdims=True)
+    return g
+
+
 def run_object(ref, spec: str, starts: int, seed: int, reeval: bool) -> dict:
     """One (form, object): solved grasps and both evaluations, from the cache when it matches."""
     f = CACHE / f"{ref.form}_{spec.replace('/', '_').replace(':', '_')}.json"
@@ -89,10 +133,14 @@ def run_object(ref, spec: str, starts: int, seed: int, reeval: bool) -> dict:
     obj = resolve_objects(str(objects_root() / spec) if spec.startswith("ycb/") else spec)[0]
     t = time.perf_counter()
     grasps, res = (np.array(old["grasps"]).reshape(-1, 31), old["max_residual_rad"]) if old else solve(ref, obj, starts, seed)
-    canon = outcomes(GraspEvaluator(SimHand.from_params(ref.params, HAND, couplings=ref.couplings), obj), grasps)
-    orig = outcomes(GraspEvaluator.original(HAND, obj, form=ref.form), grasps)
+    canonical = SimHand.from_params(ref.params, HAND, couplings=ref.couplings)
+    ec, eo = GraspEvaluator(canonical, obj), GraspEvaluator.original(HAND, obj, form=ref.form)
+    gaps = contact_gaps(ec, eo, grasps) if len(grasps) else []
+    canon, orig = outcomes(ec, grasps), outcomes(eo, grasps)
+    floor = outcomes(GraspEvaluator(canonical, obj), shifted(grasps, seed))
     row = {"form": ref.form, "object": obj.name, "spec": spec, "starts": starts, "seed": seed, "grasps": grasps.tolist(),
-           "max_residual_rad": res, "canonical": canon, "original": orig, "seconds": time.perf_counter() - t}
+           "max_residual_rad": res, "canonical": canon, "original": orig, "canonical_shifted": floor,
+           "contact_gaps_m": gaps, "seconds": time.perf_counter() - t}
     CACHE.mkdir(parents=True, exist_ok=True)
     tmp = f.with_suffix(".tmp")
     tmp.write_text(json.dumps(row))
@@ -104,6 +152,8 @@ def paired(form: str, name: str, rows: list[dict]) -> dict:
     """Pooled paired statistics of ``rows`` (d = original - canonical per grasp)."""
     c = np.array([o["success"] for r in rows for o in r["canonical"]], dtype=float)
     o = np.array([o["success"] for r in rows for o in r["original"]], dtype=float)
+    s = np.array([o["success"] for r in rows for o in r.get("canonical_shifted", [])], dtype=float)
+    gaps = np.array([x for r in rows for g in r.get("contact_gaps_m", []) for x in g])
     n, d = len(c), o - c
     se = float(np.sqrt(d.var(ddof=1) / n)) if n > 1 else float("nan")
     return {"form": form, "object": name, "starts": sum(r["starts"] for r in rows), "grasps": n,
@@ -113,6 +163,8 @@ def paired(form: str, name: str, rows: list[dict]) -> dict:
             "change_points": 100.0 * float(d.mean()) if n else 0.0, "se_points": 100.0 * se,
             "both_pass": int((c * o).sum()), "canonical_only": int((c * (1 - o)).sum()),
             "original_only": int(((1 - c) * o).sum()), "both_fail": int(((1 - c) * (1 - o)).sum()),
+            "flips_original": int((c != o).sum()), "flips_shifted": int((c != s).sum()) if len(s) == n else None,
+            "contact_gap_median_mm": 1e3 * float(np.median(gaps)) if len(gaps) else None,
             "seconds": sum(r["seconds"] for r in rows)}
 
 
@@ -120,14 +172,22 @@ def table(rows: list[dict], starts: int, seed: int) -> str:
     lines = [f"Inspire right hand ({HAND}), both forms, {starts} starts per object, seed {seed}: converged, non-self-intersecting",
              "canonical grasps evaluated (six directions, default protocol) on the coupled canonical hand and replayed on",
              "the original URDF (`ohra eval --original`). Change = original - canonical [points], paired per grasp, with",
-             "its standard error sqrt(var(d)/n); agreement: both pass / canonical only / original only / both fail.", "",
-             "| form | object | grasps | max coupling residual [rad] | canonical pass | original pass | change [points] | SE | agreement |",
-             "|---|---|---:|---:|---:|---:|---:|---:|---|"]
+             "its standard error sqrt(var(d)/n); agreement: both pass / canonical only / original only / both fail.",
+             f"Flips: grasps whose outcome differs from the canonical one on the original / on the canonical hand after a",
+             f"{1e3 * SHIFT_M:.1f} mm palm shift (noise floor). Gap: median over canonical finger contacts (<= {1e3 * TOUCH_M:.0f} mm) of the",
+             "original finger's distance to the object minus the canonical one, at the grasp pose [mm].", "",
+             "| form | object | grasps | max coupling residual [rad] | canonical pass | original pass | change [points] | SE | agreement | flips: original / shift | gap [mm] |",
+             "|---|---|---:|---:|---:|---:|---:|---:|---|---|---:|"]
     for r in rows:
         lines.append(f"| {r['form']} | {r['object']} | {r['grasps']} | {r['max_residual_rad']:.1e} | {r['canonical_pass']} ({100 * r['canonical_rate']:.0f} %) "
                      f"| {r['original_pass']} ({100 * r['original_rate']:.0f} %) | {r['change_points']:+.1f} | {r['se_points']:.1f} "
-                     f"| {r['both_pass']} / {r['canonical_only']} / {r['original_only']} / {r['both_fail']} |")
+                     f"| {r['both_pass']} / {r['canonical_only']} / {r['original_only']} / {r['both_fail']} "
+                     f"| {r['flips_original']} / {r['flips_shifted']} | {_num(r['contact_gap_median_mm'])} |")
     return "\n".join(lines)
+
+
+def _num(x: float | None) -> str:
+    return "-" if x is None else f"{x:+.1f}"
 
 
 def main() -> None:
