@@ -102,7 +102,7 @@ def _table(rows: list[dict], args, n_ycb: int, n_proc: int, mem: float, load: tu
     lines = [
         f"Objects: the {n_ycb} YCB meshes in `../shared/objects` (ycb) and {n_proc} procedural shapes (2 per family, seeds "
         f"{args.procedural_seed}+, not used anywhere else: held-out style); {args.grasps_per_object} solver starts per pair; "
-        "verified = passed the six-direction PyBullet test (default protocol) **and** its robustness trials "
+        f"verified = passed the six-direction PyBullet test ({args.protocol} protocol) **and** its robustness trials "
         f"({SynthSettings().robustness.trials} perturbed re-tests: palm 1 mm / 10 mrad, joints 10 mrad). "
         f"Machine load average during the run: {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} on {os.cpu_count()} cores "
         "(shared with other helpers' jobs: wall-clock per-core rates are lower than on an idle machine, so the rate that counts "
@@ -146,24 +146,30 @@ def main() -> None:
     ap.add_argument("--ray-hand", default="leap_3333", help="hand measured on the Ray backend too (1 and 2 workers); '' to skip")
     ap.add_argument("--keep", type=Path, default=None, help="keep the datasets under this folder (bench_levers.py reads them)")
     ap.add_argument("--parallel", type=int, default=1, help="run this many one-worker measurements at once (CPU-time rates stay valid)")
+    ap.add_argument("--protocol", default="reference", help="six-direction preset of the filter (reference, isaac-drive, ...)")
+    ap.add_argument("--name", default=None, help="results name (default synth, synth_<protocol> for another protocol)")
     ap.add_argument("--from-json", action="store_true", help="only rewrite results/synth.md from results/synth.json")
     args = ap.parse_args()
+    name = args.name or ("synth" if args.protocol == "reference" else f"synth_{args.protocol.replace('-', '_')}")
     if args.from_json:
         import json
 
         from _common import RESULTS
 
-        d = json.loads((RESULTS / "synth.json").read_text())
+        d = json.loads((RESULTS / f"{name}.json").read_text())
+        args.protocol = d.get("protocol", "reference")
         args.grasps_per_object = d["grasps_per_object"]
         rows = d["rows"]
         n_ycb = next(r["objects"] for r in rows if r["object_set"] == "ycb")
         n_proc = next(r["objects"] for r in rows if r["object_set"] == "procedural")
-        write_results("synth", d, _table(rows, args, n_ycb, n_proc, d["peak_rss_mib"], tuple(d["load_average"])))
+        write_results(name, d, _table(rows, args, n_ycb, n_proc, d["peak_rss_mib"], tuple(d["load_average"])))
         return
     warnings.simplefilter("ignore")  # object-body notes are in the manifests
     ycb = resolve_objects([str(objects_root() / "ycb")])
     proc = [o for f in FAMILIES for o in procedural_objects(f, 2, args.procedural_seed)]
-    settings = SynthSettings(grasps_per_object=args.grasps_per_object, seed=0)
+    from ohra.sim import Protocol
+
+    settings = SynthSettings(grasps_per_object=args.grasps_per_object, seed=0, protocol=Protocol.preset(args.protocol))
     rows, skipped = [], {}
     single, scaling = [], []  # one-worker runs may share the machine (--parallel); scaling runs go alone
     for hand in args.hands:
@@ -205,8 +211,8 @@ def main() -> None:
     table = _table(rows, args, len(ycb), len(proc), mem, load)
     for h, why in skipped.items():
         table += f"\n\nSkipped {h}: {why}"
-    write_results("synth", {"rows": rows, "skipped": skipped, "peak_rss_mib": mem, "grasps_per_object": args.grasps_per_object,
-                            "load_average": load}, table)
+    write_results(name, {"rows": rows, "skipped": skipped, "peak_rss_mib": mem, "grasps_per_object": args.grasps_per_object,
+                         "load_average": load, "protocol": args.protocol}, table)
 
 
 if __name__ == "__main__":

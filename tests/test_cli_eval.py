@@ -81,3 +81,16 @@ def test_joints_outside_limits_are_clamped_and_counted(setup, capsys):
     rc, out, err = _run(capsys, f, "--hand", hand, "--object", mesh, "-o", tmp / "r.json")
     assert rc == 0 and "clamped" in err and "1 clamped" in out
     assert json.loads((tmp / "r.json").read_text())["clamped_joints_grasps"] == 1
+
+
+@pytest.mark.parametrize("original", [False, True])
+def test_form_picks_the_canonical_hand_and_the_action_map(original, hands_dir):
+    """Grasps made for Allegro's extended form (finger twist free) replay through the extended map."""
+    from ohra.cli.eval import eval_hand
+    from ohra.hands import get_hand
+
+    for form in ("base", "extended"):
+        h = eval_hand("allegro_hand_left", original, form)
+        assert np.array_equal(h.canon_lower, np.asarray(get_hand("allegro_hand_left", form).joint_lowers))
+    assert not np.array_equal(eval_hand("allegro_hand_left", original, "base").canon_lower,
+                              eval_hand("allegro_hand_left", original, "extended").canon_lower)

@@ -1,7 +1,7 @@
 """``ohra eval``: run the six-direction test on a grasp file and report the success rate.
 
     ohra eval GRASPS.npz --hand NAME --object MESH|builtin:NAME [--workers K] [--mode eval|filter]
-              [--strict] [--isaac-step] [--isaac-drive] [--original] [--render SHEET.png] [--meshcat SCENE.html] [-o report.json]
+              [--strict] [--isaac-step] [--isaac-drive] [--original] [--form base|extended] [--render SHEET.png] [--meshcat SCENE.html] [-o report.json]
 
 ``GRASPS`` is an ``.npz`` (key ``grasps``, or its only array) or ``.npy`` of shape (N, 31):
 ``[t, rot6d, q22]``, the canonical palm pose in the object's mesh frame and canonical joints. Bad
@@ -42,6 +42,9 @@ def register(subparsers) -> None:
     p.add_argument("--isaac-drive", action="store_true",
                    help="fingers close at Isaac's drive speed (position gain dt*1000/200) instead of gain 0.3")
     p.add_argument("--original", action="store_true", help="replay on the hand's original URDF (needs the hand assets)")
+    p.add_argument("--form", choices=("base", "extended"), default=None,
+                   help="canonical form the grasps were made for (default: the hand's natural form); with --original it "
+                        "picks the action map that carries them to the original joints")
     p.add_argument("--no-early-exit", action="store_true", help="simulate every grasp to the end")
     p.add_argument("--limit", type=int, default=None, help="evaluate only the first N grasps")
     p.add_argument("--render", metavar="PNG", default=None, help="write a contact sheet of the grasps (first 16)")
@@ -49,6 +52,17 @@ def register(subparsers) -> None:
     p.add_argument("-o", "--output", metavar="JSON", default=None, help="write the JSON report here")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
+
+
+def eval_hand(name: str, original: bool = False, form: str | None = None):
+    """The simulated hand ``ohra eval`` runs: the canonical hand of ``form`` (with its couplings), or
+    the original URDF driven through that form's action map."""
+    from ohra.hands import get_couplings, get_hand
+    from ohra.sim import SimHand
+
+    if original:
+        return SimHand.registered_original(name, form=form)
+    return SimHand.from_params(get_hand(name, form), name=name, couplings=get_couplings(name))
 
 
 def load_grasp_file(path: str | Path, key: str | None = None) -> np.ndarray:
@@ -93,8 +107,7 @@ def run(args: argparse.Namespace) -> int:
         protocol = replace(protocol, position_gain=protocol.dt * ISAAC_DRIVE["stiffness"] / ISAAC_DRIVE["damping"], velocity_gain=1.0)
     if args.no_early_exit:
         protocol = replace(protocol, early_exit=False)
-    hand = SimHand.registered_original(args.hand) if args.original else SimHand.from_params(get_hand(args.hand), name=args.hand,
-                                                                                                  couplings=get_couplings(args.hand))
+    hand = eval_hand(args.hand, args.original, args.form)
     ev = GraspEvaluator(hand, obj, protocol)
     g, out_of_limits = ev.check(grasps)  # validates before any simulation or output
     if out_of_limits.any():
