@@ -33,17 +33,20 @@ def random_grasps(params, obj: ObjectModel, n: int, rng: np.random.Generator) ->
 
 
 def write_dataset(root: Path, hands=HANDS, objects=OBJECTS, per_pair=6, seed: int = 0,
-                  renamed: dict[str, str] | None = None, counts: dict[str, int] | None = None) -> Path:
+                  renamed: dict[str, str] | None = None, counts: dict[str, int] | None = None,
+                  procedural: tuple[tuple[str, int], ...] = ()) -> Path:
     """A dataset directory like ``python -m ohra.synth`` writes. ``renamed``: extra shards of an
-    object under another name (same mesh); ``counts``: grasps per pair for some hands."""
+    object under another name (same mesh); ``counts``: grasps per pair for some hands;
+    ``procedural``: (family, seed) shapes added to the objects."""
     rng = np.random.default_rng(seed)
     manifest = {"format": "ohra-grasps/2", "hands": {}}
     items = [(o, o) for o in objects] + list((renamed or {}).items())
     for h in hands:
         params = get_hand(h)
         entry = manifest["hands"].setdefault(h, {"params": params.to_dict(), "shards": {}})
-        for name, builtin in items:
-            obj = ObjectModel.builtin(builtin)
+        models = [(name, ObjectModel.builtin(b)) for name, b in items]
+        models += [(f"{f}-{k}", ObjectModel.procedural(f, k)) for f, k in procedural]
+        for name, obj in models:
             g = random_grasps(params, obj, (counts or {}).get(h, per_pair), rng)
             path = root / h / shard_name(name, obj.mesh_hash)
             atomic_write_npz(path, {"grasps": g, "grasps_post": g})

@@ -66,6 +66,25 @@ def test_zero_shot_split_holds_out_test_hands_by_name_and_parameters(tmp_path):
         TrainingData.load([a], tiny_train_config(hands=("barrett_hand",), test_hands=("barrett_hand",)))
 
 
+@pytest.mark.parametrize("legacy", [False, True])
+def test_procedural_training_objects_are_rebuilt_from_the_manifest(tmp_path, legacy):
+    """Procedural shapes have no file: the manifest names them (``procedural:box:3``; datasets made
+    before that said ``builtin`` under the shape's default name) and the loader rebuilds them."""
+    import json
+
+    root = write_dataset(tmp_path, hands=("barrett_hand",), objects=("capsule",), procedural=(("box", 3), ("ellipsoid", 7)))
+    man = json.loads((root / "manifest.json").read_text())
+    assert man["hands"]["barrett_hand"]["shards"]["box-3"]["object"]["source"] == "procedural:box:3"
+    if legacy:
+        for sh in man["hands"]["barrett_hand"]["shards"].values():
+            sh["object"]["source"] = "builtin"
+        (root / "manifest.json").write_text(json.dumps(man))
+    td = TrainingData.load(root, tiny_train_config())
+    assert {o.name for o in td.objects} == {"box-3", "ellipsoid-7"}
+    assert {o.mesh_hash for o in td.objects} == {ObjectModel.procedural("box", 3).mesh_hash,
+                                                 ObjectModel.procedural("ellipsoid", 7).mesh_hash}
+
+
 def test_check_disjoint_raises_on_overlap():
     check_disjoint({"box": "aa"}, {"sphere": "bb"})
     with pytest.raises(DatasetError, match="names \\['box'\\]"):

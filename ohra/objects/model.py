@@ -358,11 +358,18 @@ class ObjectModel:
         cache[key] = grid
         return grid
 
+    def _source_spec(self) -> str:
+        """Where the object can be loaded from again: its file, ``procedural:FAMILY:SEED`` or ``builtin``."""
+        if self.source:
+            return str(self.source)
+        pp = getattr(self, "procedural_params", None)
+        return f"procedural:{pp['family']}:{pp['seed']}" if pp else "builtin"
+
     def describe(self) -> dict:
         """Summary for reports and manifests (body, its fidelity to the mesh, how mass was obtained)."""
         mp = self.mass_properties
         return {
-            "name": self.name, "source": str(self.source) if self.source else "builtin", "mesh_hash": self.mesh_hash,
+            "name": self.name, "source": self._source_spec(), "mesh_hash": self.mesh_hash,
             "body_hash": self.body_hash, "faces": int(len(self.mesh.faces)), "watertight": self.watertight,
             "extents_m": [float(x) for x in self.extents], "volume_m3": self.volume, "mass_kg": self.mass,
             "density": self.density, "radius_m": self.radius, "center_mass_m": [float(x) for x in mp.center_mass],

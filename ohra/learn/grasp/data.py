@@ -52,6 +52,14 @@ def _manifest_params(root: Path, hand: str) -> BaseParams | ExtendedParams:
     return get_hand(hand)
 
 
+def _procedural_name(name: str) -> tuple[str, str] | None:
+    """(family, seed) of a procedural object's default name ``family-seed``, else None."""
+    from ohra.objects.procedural import FAMILIES
+
+    family, _, seed = name.rpartition("-")
+    return (family, seed) if family in FAMILIES and seed.isdigit() else None
+
+
 def _resolve_object(root: Path, name: str, info: dict, given: Mapping[str, ObjectModel]) -> ObjectModel:
     want = str(info.get("mesh_hash", ""))
     if name in given:
@@ -59,7 +67,11 @@ def _resolve_object(root: Path, name: str, info: dict, given: Mapping[str, Objec
     else:
         src = str(info.get("source", ""))
         try:
-            if src == "builtin":
+            procedural = _procedural_name(name) if src == "builtin" else None  # datasets before sources named them
+            if src.startswith("procedural:") or procedural:
+                family, seed = src.split(":")[1:3] if src.startswith("procedural:") else procedural
+                obj = ObjectModel.procedural(family, int(seed))
+            elif src == "builtin":
                 obj = ObjectModel.builtin(name)
             elif src:
                 path = Path(src) if Path(src).exists() else root / src

@@ -1,0 +1,144 @@
+"""The grasp-model study of issue 13 (paper Tables 4-6): unified vs hand-specific models, success on
+unseen objects, canonical -> original replay. Resumable: every training run and every evaluation
+is cached under ``--runs`` and reused (an interrupted study loses at most one unfinished step).
+
+Models, all with the same architecture, steps, batch size and seed (the same budget):
+``unified`` (every hand of the data, VAE condition) and ``specific-<hand>`` (one hand's grasps
+only). Evaluation: ``-n`` grasps per (hand, object) with random wrist rotations on the objects of
+``recipes/grasp_eval_objects.yaml`` (never trained on; the model refuses seen objects), six-direction
+test with the protocol the data was filtered with (read from the first dataset's manifest);
+the unified model's grasps are replayed on the original URDFs too.
+
+Run: python benchmarks/grasp_study.py --data out/grasp_unified [out/grasp_unified_s1 ...] [--steps 4000] [-n 100]
+       [--runs runs/grasp_study] [--hands ...] [--objects-file recipes/grasp_eval_objects.yaml]
+  -> benchmarks/results/grasp_study.{json,md}
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import write_results  # noqa: E402
+
+import numpy as np  # noqa: E402
+import yaml  # noqa: E402
+
+from ohra.data.dataset import atomic_write_json  # noqa: E402
+from ohra.data.recipe import Recipe  # noqa: E402
+from ohra.learn.grasp import GraspModelConfig, GraspTrainConfig  # noqa: E402
+from ohra.learn.grasp.evaluate import evaluate_model  # noqa: E402
+from ohra.learn.grasp.model import load_grasp_model  # noqa: E402
+from ohra.learn.grasp.train import train_grasp  # noqa: E402
+from ohra.sim import Protocol  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+PAPER = {"allegro_hand_left": 84.2, "barrett_hand": 88.1, "shadow_hand_right": 62.9}  # OHRA Table 5, Isaac Gym
+PAPER_REPLAY = {"allegro_hand_left": -12.6, "barrett_hand": 0.6, "shadow_hand_right": -0.3}  # Table 4, points
+
+
+def data_protocol(data: list[str]) -> Protocol:
+    """The six-direction protocol the first dataset was filtered with (its manifest's settings)."""
+    man = json.loads((Path(data[0]) / "manifest.json").read_text())
+    return Protocol(**man["settings"]["protocol"])
+
+
+def eval_objects(path: Path) -> list:
+    d = yaml.safe_load(path.read_text())
+    return Recipe.from_dict({"hands": ["leap_3333"], "objects": d["objects"]}, path).resolve_objects()
+
+
+def trained(name: str, data: list[str], hands: list[str], args) -> object:
+    """The model ``name`` trained on ``hands`` (resumed or reused when its run exists)."""
+    run = Path(args.runs) / name
+    if (run / "model.pt").exists() and json.loads((run / "metrics.json").read_text()).get("steps") == args.steps:
+        return load_grasp_model(run)
+    tcfg = GraspTrainConfig(steps=args.steps, seed=args.seed, threads=args.threads, hands=tuple(hands))
+    res = train_grasp(data, GraspModelConfig(condition="vae"), tcfg, run, resume=(run / "checkpoints" / "last.pt").exists(),
+                      progress=not args.quiet)
+    return res.model
+
+
+def evaluated(model, key: str, hands: list[str], objects: list, original: bool, protocol: Protocol, args) -> dict:
+    path = Path(args.runs) / f"eval_{key}{'_original' if original else ''}.json"
+    if path.exists():
+        return json.loads(path.read_text())
+    t0 = time.perf_counter()
+    rep = evaluate_model(model, hands, objects, n=args.n, seed=0, original=original, protocol=protocol, workers=args.workers)
+    out = {"per_hand": rep.per_hand(), "pairs": [{"hand": p.hand, "object": p.object, "successes": int(p.success.sum()),
+                                                  "n": int(len(p.success))} for p in rep.pairs],
+           "success": {p.hand + "/" + p.object: p.success.astype(int).tolist() for p in rep.pairs},
+           "seconds": time.perf_counter() - t0}
+    atomic_write_json(path, out)
+    return out
+
+
+def paired_change(a: dict, b: dict, hand: str) -> tuple[float, float]:
+    """Original - canonical success [points] over the same grasps, and its standard error."""
+    d = np.concatenate([np.asarray(b["success"][k]) - np.asarray(a["success"][k]) for k in a["success"] if k.startswith(hand + "/")])
+    return 100 * d.mean(), 100 * d.std(ddof=1) / np.sqrt(len(d)) if len(d) > 1 else float("nan")
+
+
+def tables(res: dict) -> str:
+    u, uo = res["unified"], res["unified_original"]
+    lines = ["Table 5 analogue: success on unseen objects (unified model)", "",
+             "| hand | training grasps | success (canonical) | ms / grasp | OHRA paper (reported, Isaac Gym, other objects) |",
+             "|---|---|---|---|---|"]
+    for h in res["hands"]:
+        r = u["per_hand"][h]
+        lines.append(f"| {h} | {res['train_counts'].get(h, 0)} | {100 * r['success_rate']:.1f} % of {r['n']} | "
+                     f"{r['sample_ms_per_grasp']:.2f} | {PAPER.get(h, '-')} % |")
+    lines += ["", "Table 6 analogue: unified vs hand-specific (same data, steps, batch, seed)", "",
+              "| hand | unified | specific | unified - specific [points] |", "|---|---|---|---|"]
+    for h in res["hands"]:
+        a, b = u["per_hand"][h]["success_rate"], res["specific"][h]["per_hand"][h]["success_rate"]
+        lines.append(f"| {h} | {100 * a:.1f} % | {100 * b:.1f} % | {100 * (a - b):+.1f} |")
+    lines += ["", "Table 4 analogue: the unified model's grasps replayed on the original URDFs", "",
+              "| hand | canonical | original | change ± SE [points] | paper (reported) |", "|---|---|---|---|---|"]
+    for h in res["hands"]:
+        c, s = paired_change(u, uo, h)
+        lines.append(f"| {h} | {100 * u['per_hand'][h]['success_rate']:.1f} % | {100 * uo['per_hand'][h]['success_rate']:.1f} % | "
+                     f"{c:+.1f} ± {s:.1f} | {PAPER_REPLAY.get(h, '-')} |")
+    lines += ["", f"Budget: {res['steps']} steps per model; evaluation {res['n']} grasps per (hand, object) on "
+              f"{len(res['objects'])} unseen objects; protocol {res['protocol_note']}."]
+    return "\n".join(lines)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--data", nargs="+", required=True)
+    ap.add_argument("--hands", nargs="+", default=list(PAPER))
+    ap.add_argument("--objects-file", type=Path, default=ROOT / "recipes" / "grasp_eval_objects.yaml")
+    ap.add_argument("--steps", type=int, default=4000)
+    ap.add_argument("-n", type=int, default=100)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--workers", type=int, default=1, help="simulation processes")
+    ap.add_argument("--runs", default=str(ROOT / "runs" / "grasp_study"))
+    ap.add_argument("--name", default="grasp_study", help="results name")
+    ap.add_argument("--quiet", action="store_true")
+    args = ap.parse_args()
+    objects = eval_objects(args.objects_file)
+    protocol = data_protocol(args.data)
+    unified = trained("unified", args.data, args.hands, args)
+    res = {"hands": args.hands, "steps": args.steps, "n": args.n, "objects": [o.name for o in objects], "data": args.data,
+           "train_counts": json.loads((Path(args.runs) / "unified" / "metrics.json").read_text())["data"]["per_hand"],
+           "protocol": {k: getattr(protocol, k) for k in ("dt", "position_gain", "velocity_gain", "motor_force", "friction")},
+           "protocol_note": "isaac-drive" if abs(protocol.position_gain - Protocol.isaac_drive().position_gain) < 1e-12 else
+           ("reference" if protocol == Protocol() else "custom (see JSON)")}
+    res["unified"] = evaluated(unified, "unified", args.hands, objects, False, protocol, args)
+    res["unified_original"] = evaluated(unified, "unified", args.hands, objects, True, protocol, args)
+    res["specific"] = {}
+    for h in args.hands:
+        m = trained(f"specific-{h}", args.data, [h], args)
+        res["specific"][h] = evaluated(m, f"specific-{h}", [h], objects, False, protocol, args)
+    write_results(args.name, res, tables(res))
+
+
+if __name__ == "__main__":
+    main()
