@@ -45,6 +45,8 @@ PAPER_REPLAY = {"allegro_hand_left": -12.6, "barrett_hand": 0.6, "shadow_hand_ri
 def data_protocol(data: list[str]) -> Protocol:
     """The six-direction protocol the first dataset was filtered with (its manifest's settings)."""
     man = json.loads((Path(data[0]) / "manifest.json").read_text())
+    if "settings" not in man:  # a dataset written by other tools: the default protocol
+        return Protocol()
     return Protocol(**man["settings"]["protocol"])
 
 
