@@ -174,3 +174,9 @@ def test_every_readme_command_parses():
     for argv in commands:
         args = parser.parse_args(argv)
         assert callable(args.func), argv
+
+
+def test_synth_help_prints_only_the_help():
+    """``python -m ohra.synth --help`` loads neither CasADi nor PyBullet (no build banner on stdout)."""
+    proc = subprocess.run([sys.executable, "-m", "ohra.synth", "--help"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0 and proc.stdout.startswith("usage:") and "pybullet" not in proc.stdout + proc.stderr

@@ -1,6 +1,21 @@
-"""Grasp synthesis for any canonical hand: CasADi/IPOPT force-closure NLP + PyBullet filter."""
+"""Grasp synthesis for any canonical hand: CasADi/IPOPT force-closure NLP + PyBullet filter.
 
-from ohra.synth.nlp import GraspNLP, NLPSettings
-from ohra.synth.pipeline import SynthSettings, synthesize, synthesize_shard
+The names below load on first use, so ``python -m ohra.synth --help`` (which imports this package
+first) neither pays for CasADi and PyBullet nor prints PyBullet's build banner.
+"""
 
-__all__ = ["GraspNLP", "NLPSettings", "SynthSettings", "synthesize", "synthesize_shard"]
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+_LAZY = {"GraspNLP": "ohra.synth.nlp", "NLPSettings": "ohra.synth.nlp", "SynthSettings": "ohra.synth.pipeline",
+         "synthesize": "ohra.synth.pipeline", "synthesize_shard": "ohra.synth.pipeline"}
+
+__all__ = list(_LAZY)
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'ohra.synth' has no attribute {name!r}")
