@@ -182,8 +182,9 @@ SPACINGS = ("geodesic", "arc", "even")
 
 @dataclass
 class Interpolation:
-    """A latent interpolation: ``alphas`` (n,), latents ``z`` (n, d), decoded ``params`` and their
-    ``urdfs``; ``originals`` are the two hands it was made from (base form), for pictures."""
+    """A latent interpolation: ``alphas`` (n,) (where each hand sits on the path, 0 to 1), latents
+    ``z`` (n, d), decoded ``params`` and their ``urdfs``; ``originals`` are the two hands it was made
+    from (base form), for pictures."""
 
     alphas: np.ndarray
     z: np.ndarray
