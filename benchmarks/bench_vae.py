@@ -208,7 +208,7 @@ def _rows(d: dict) -> dict[str, str]:
     arc_over = {r["pair"]: r for r in d["interpolation_arc"] if r["steps_over_limit"]}
     geo_rows = {r["pair"]: r for r in d["interpolation"]}
     fixed = ", ".join(f"{p} {_worst(r):.1f} -> {_worst(geo_rows[p]):.1f} (bound {r['turning_thumb_bound_mm']:.1f})"
-                      for p, r in arc_over.items()) if len(arc_over) <= 8 else f"{len(arc_over)} pairs"
+                      for p, r in arc_over.items()) if len(arc_over) <= 8 else ""
     pr, pi = d["plausibility_random_latents"], d["plausibility_interpolation_steps"]
     tr, sp = d["training"], d["speed"]
     fmt_p = lambda p: f"{p['finger_base_inside_palm']} / {p['thumb_into_palm']} / {p['fingers_intersect_q0_coal']} of {p['n']}"  # noqa: E731
