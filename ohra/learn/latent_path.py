@@ -7,9 +7,10 @@ Three ways to place ``n`` hands between two mean latents (``VAEBundle.interpolat
 * ``"arc"``: the straight line at equal fingertip arc length (:func:`arc_length_alphas`);
 * ``"geodesic"``: a bent latent path that shortens the fingertips' way (:func:`geodesic_latents`):
   the interior hands start on the ``"arc"`` line and move to lower the discrete path energy (the
-  sum over consecutive hands of their squared fingertip moves, decoded by the differentiable
-  decoder and the batched torch FK the training loss uses), then the bent path is placed at equal
-  fingertip arc length again, decoded the usual way (``project_plausible`` included).
+  sum over consecutive hands of their squared fingertip moves, through the differentiable decoder
+  and q = 0 tips in closed form, equal to the batched torch FK the training loss uses), then the
+  bent path is placed at equal fingertip arc length again and decoded the usual way
+  (``project_plausible`` included); it is kept only where it beats the straight ``"arc"`` path.
 
 Why bend: a straight latent line turns Barrett's thumb (pointing to the wrist) towards Shadow's
 thumb keeping roughly its length, and a thumb of constant length turning the shortest way cannot
