@@ -8,9 +8,10 @@
   finger base inside the palm, thumb pointing into the palm (:mod:`ohra.learn.geometry`), fingers
   intersecting at q = 0 (Coal, ``HandModel.self_collision``);
 * interpolation between every pair of registered hands (16 hands, from ``VAEBundle.interpolate``:
-  alphas at equal fingertip arc length, and even alphas for comparison): the largest fingertip move
-  of a step that keeps the same joints and handedness, next to the least a thumb that keeps its
-  length needs per step (:func:`turning_thumb_bound`);
+  the default geodesic path, the straight line at equal fingertip arc length and at even alphas for
+  comparison): the largest fingertip move of a step that keeps the same joints and handedness, next
+  to the least a thumb that keeps its length needs per step (:func:`turning_thumb_bound`), and the
+  time per interpolation;
 * training cost (from the model's metrics.json), sampler and inference speed.
 
 Run: python benchmarks/bench_vae.py [--model DIR] [--latents N] [--heldout N]  -> benchmarks/results/vae.{json,md}
@@ -128,13 +129,15 @@ def step_moves(V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return same, np.linalg.norm(T[1:] - T[:-1], axis=-1)
 
 
-def interpolations(vae, hands: dict[str, BaseParams], spacing: str = "arc") -> tuple[list[dict], np.ndarray]:
+def interpolations(vae, hands: dict[str, BaseParams], spacing: str = "geodesic") -> tuple[list[dict], np.ndarray]:
     """Every unordered pair of registered hands, STEPS hands from the library's interpolation
     (``VAEBundle.interpolate``, with ``spacing``): largest fingertip move of a step that keeps the
     same joints (thumb, other fingers), and all decoded steps (for the plausibility check)."""
     rows, all_steps = [], []
     for a, b in itertools.combinations(list(hands), 2):
+        t0 = time.perf_counter()
         V = np.stack([p.to_vector() for p in vae.interpolate(hands[a], hands[b], STEPS, spacing).params])
+        seconds = time.perf_counter() - t0
         all_steps.append(V)
         same, d = step_moves(V)
         moves = d[same]
@@ -143,11 +146,23 @@ def interpolations(vae, hands: dict[str, BaseParams], spacing: str = "arc") -> t
         rows.append({"pair": f"{a} -> {b}", "same_handedness": bool(hands[a].handedness == hands[b].handedness),
                      "straight_path_bound_mm": float(1e3 * bound),
                      "turning_thumb_bound_mm": 1e3 * turning_thumb_bound(hands[a].to_vector(), hands[b].to_vector()),
-                     "steps_same_joints": int(same.sum()),
+                     "steps_same_joints": int(same.sum()), "seconds": seconds,
                      "max_move_thumb_mm": float(1e3 * np.nanmax(moves[:, 0])) if same.any() else None,
                      "max_move_fingers_mm": float(1e3 * np.nanmax(moves[:, 1:])) if same.any() else None,
                      "steps_over_limit": int(np.sum(np.nanmax(moves, axis=1) > MOVE_LIMIT_M)) if same.any() else 0})
     return rows, np.concatenate(all_steps)
+
+
+def interpolation_part(vae, hands: dict[str, BaseParams]) -> dict:
+    """The interpolation results: geodesic (default), straight at equal arc length, even alphas, and
+    the plausibility of every step ``interpolate`` returns."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        interp, steps = interpolations(vae, hands)
+        arc, _ = interpolations(vae, hands, "arc")
+        even, _ = interpolations(vae, hands, "even")
+    return {"interpolation": interp, "interpolation_arc": arc, "interpolation_even_alphas": even,
+            "plausibility_interpolation_steps": plausibility(steps)}
 
 
 def evaluate(vae, hands: dict[str, BaseParams], n_heldout: int, n_latents: int) -> dict:
@@ -155,12 +170,9 @@ def evaluate(vae, hands: dict[str, BaseParams], n_heldout: int, n_latents: int) 
     z = np.random.default_rng(LATENT_SEED).standard_normal((n_latents, vae.latent_dim))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        interp, steps = interpolations(vae, hands)
-        even, _ = interpolations(vae, hands, "even")
         data = {"model": str(vae.path), "encoding": vae.encoding.name, "config": vae.config,
                 "heldout": {"seed": HELDOUT_SEED, **heldout(vae, n_heldout)}, "registered_hands": registered(vae, hands),
-                "interpolation": interp, "interpolation_even_alphas": even, "plausibility_random_latents": plausibility(vae.decode_vectors(z)),
-                "plausibility_interpolation_steps": plausibility(steps)}
+                **interpolation_part(vae, hands), "plausibility_random_latents": plausibility(vae.decode_vectors(z))}
     train = vae.metrics or {}
     data["training"] = {"epochs": train.get("epochs"), "steps": train.get("steps"), "seconds": train.get("train_seconds_total"),
                         "peak_rss_mib": train.get("peak_rss_mib"), "threads": vae.config.get("threads")}
@@ -179,16 +191,24 @@ def _worst(r: dict) -> float:
 def _interp_cells(rows: list[dict]) -> str:
     worst = max((_worst(r) for r in rows if r["steps_same_joints"]), default=float("nan"))
     over = sum(r["steps_over_limit"] for r in rows)
-    return f"{worst:.1f} mm; {over} of {sum(r['steps_same_joints'] for r in rows)} steps > 20 mm"
+    secs = [r.get("seconds", float("nan")) for r in rows]
+    return (f"{worst:.1f} mm; {over} of {sum(r['steps_same_joints'] for r in rows)} steps > 20 mm; "
+            f"{np.mean(secs):.2f} s per pair (max {max(secs):.2f})")
 
 
 def _rows(d: dict) -> dict[str, str]:
     """Table cells of one model's results."""
     h, s, reg = d["heldout"], d["heldout"]["shape"], d["registered_hands"]
     per_hand = [r["tip_mean_mm"] for r in reg]
-    arc, even = _interp_cells(d["interpolation"]), _interp_cells(d["interpolation_even_alphas"])
+    if "interpolation_arc" not in d:  # results of a run before the geodesic: "interpolation" was the straight arc
+        return {**_rows({**d, "interpolation_arc": d["interpolation"]}), "interp": "not run"}
+    geo, arc, even = (_interp_cells(d[k]) for k in ("interpolation", "interpolation_arc", "interpolation_even_alphas"))
     over = [r for r in d["interpolation"] if r["steps_over_limit"]]
     bound = ", ".join(f"{r['pair']} {_worst(r):.1f} (bound {r['turning_thumb_bound_mm']:.1f})" for r in over) if len(over) <= 8 else ""
+    arc_over = {r["pair"]: r for r in d["interpolation_arc"] if r["steps_over_limit"]}
+    geo_rows = {r["pair"]: r for r in d["interpolation"]}
+    fixed = ", ".join(f"{p} {_worst(r):.1f} -> {_worst(geo_rows[p]):.1f} (bound {r['turning_thumb_bound_mm']:.1f})"
+                      for p, r in arc_over.items()) if len(arc_over) <= 8 else ""
     pr, pi = d["plausibility_random_latents"], d["plausibility_interpolation_steps"]
     tr, sp = d["training"], d["speed"]
     fmt_p = lambda p: f"{p['finger_base_inside_palm']} / {p['thumb_into_palm']} / {p['fingers_intersect_q0_coal']} of {p['n']}"  # noqa: E731
@@ -197,8 +217,9 @@ def _rows(d: dict) -> dict[str, str]:
         "rot": f"{s['thumb_rotation_rmse_rad']:.3f} rad",
         "tips": f"{s['tip_mean_mm']:.1f} mm ({s['thumb_tip_mean_mm']:.1f} / {s['finger_tip_mean_mm']:.1f})",
         "reg": f"{np.mean(per_hand):.1f} / {max(per_hand):.1f} mm, {sum(t <= 10.0 for t in per_hand)} of {len(per_hand)} hands <= 10 mm",
-        "interp": arc, "interp_even": even,
+        "interp": geo, "interp_arc": arc, "interp_even": even,
         "interp_bound": f"{len(over)} of {len(d['interpolation'])} pairs" + (f": {bound} mm" if bound else ""),
+        "interp_fixed": f"{len(arc_over)} pairs" + (f": {fixed} mm" if fixed and arc_over else ""),
         "random": fmt_p(pr), "steps": fmt_p(pi),
         "train": f"{tr['seconds'] / 60:.1f} min ({tr['epochs']} epochs, {tr['steps']} steps)" if tr["seconds"] else "-",
         "speed": f"{sp['encode_per_hand_us']:.1f} / {sp['decode_to_valid_vector_per_hand_us']:.1f} us",
@@ -211,9 +232,11 @@ LABELS = [
     ("rot", "held-out hands: thumb mounting rotation error, RMSE (geodesic)", "<= 0.1 rad"),
     ("tips", "held-out hands: fingertip error at q=0, mean (thumb / other fingers)", "<= 10 mm"),
     ("reg", "registered hands: fingertip error at q=0, mean of hands / worst hand", "<= 10 mm per hand"),
-    ("interp", f"interpolation (`interpolate`, alphas at equal fingertip arc length), every pair of registered hands ({STEPS} hands): largest fingertip move of a step keeping joints and handedness", "<= 20 mm"),
-    ("interp_even", "... same latent line, even alphas (before)", "<= 20 mm"),
-    ("interp_bound", "pairs with a step > 20 mm (equal arc length): largest move, and the least a thumb that keeps its length needs per step (base and reach linear, turning the shortest way at a constant rate)", "0 pairs"),
+    ("interp", f"interpolation (`interpolate`, default `spacing=\"geodesic\"`: bent latent path at equal fingertip arc length), every pair of registered hands ({STEPS} hands): largest fingertip move of a step keeping joints and handedness; time per pair (one thread)", "<= 20 mm"),
+    ("interp_arc", "... straight latent line at equal fingertip arc length (`spacing=\"arc\"`, before)", "<= 20 mm"),
+    ("interp_even", "... straight latent line, even alphas (`spacing=\"even\"`)", "<= 20 mm"),
+    ("interp_fixed", "pairs with a step > 20 mm on the straight line (arc): largest move straight -> geodesic, and the least a thumb that keeps its length needs per step (base and reach linear, turning the shortest way at a constant rate)", ""),
+    ("interp_bound", "pairs with a step > 20 mm (geodesic, the default)", "0 pairs"),
     ("random", "random latents: finger base inside palm / thumb into palm / fingers intersecting at q=0 (Coal)", "0 / 0 / 0"),
     ("steps", "interpolation steps: finger base inside palm / thumb into palm / fingers intersecting at q=0 (Coal)", "0 / 0 / 0"),
     ("train", "training time (wall, shared 2-core machine)", "<= 30 min"),
@@ -227,16 +250,39 @@ def main() -> None:
     ap.add_argument("--heldout", type=int, default=16384)
     ap.add_argument("--latents", type=int, default=10000, help="random latents for the plausibility check")
     ap.add_argument("--no-reference", action="store_true", help="skip the reference model column")
+    ap.add_argument("--interpolation-only", action="store_true",
+                    help="re-run only the interpolation part, keeping the rest of benchmarks/results/vae.json "
+                    "(the models it was run on must be the ones given); written after each model")
     args = ap.parse_args()
     torch.set_num_threads(1)
     hands = base_hands()
     models = {"new": load_vae(args.model)}
     if not args.no_reference:
         models = {"reference66": load_vae(reference_model_dir()), **models}
+    if args.interpolation_only:
+        _rerun_interpolation(models, hands)
+        return
     data = {name: evaluate(vae, hands, args.heldout, args.latents) for name, vae in models.items()}
     data["sample_65536_s"] = best_of(lambda: sample_vectors(65536, 0), 3)
     data["bench_peak_rss_mib"] = peak_rss_mib()
     write_results("vae", data, tables(data, list(models)))
+
+
+def _rerun_interpolation(models: dict, hands: dict[str, BaseParams]) -> None:
+    """Replace the interpolation part of each model in the stored results (newest model first, so
+    that a run cut short still updates the shipped one); the other parts stay as they were."""
+    import json
+
+    from _common import RESULTS
+
+    data = json.loads((RESULTS / "vae.json").read_text())
+    data.pop("machine", None)
+    for name in sorted(models, key=lambda k: k != "new"):
+        stored = Path(data.get(name, {}).get("model", "none"))
+        if stored.parts[-2:] != Path(models[name].path).parts[-2:]:  # run in another checkout: same model folder
+            raise SystemExit(f"vae.json holds {stored} as {name!r}, not {models[name].path}: run the whole bench")
+        data[name].update(interpolation_part(models[name], hands))
+        write_results("vae", data, tables(data, [m for m in ("reference66", "new") if m in data]))
 
 
 def tables(data: dict, models: list[str]) -> str:

@@ -271,7 +271,7 @@ def test_interpolation_steps_share_the_fingertip_arc_length_evenly(vae):
     a, b = ohra.get_hand("barrett_hand", "base"), ohra.get_hand("shadow_hand_right", "base")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        it = vae.interpolate(a, b, 16)
+        it = vae.interpolate(a, b, 16, spacing="arc")
         (mu_a, _), (mu_b, _) = vae.encode(a), vae.encode(b)
     assert np.all(np.diff(it.alphas) > 0) and it.alphas[0] == 0.0 and it.alphas[-1] == 1.0
     assert np.allclose(it.z, (1 - it.alphas)[:, None] * mu_a + it.alphas[:, None] * mu_b)

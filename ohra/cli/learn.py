@@ -52,13 +52,15 @@ def register(sub) -> None:
     p.add_argument("--model", help=model_help)
     p.set_defaults(func=_cmd_decode)
 
-    p = vae.add_parser("interpolate", help="hands along the latent line between two hands: URDFs, PNG strip "
+    p = vae.add_parser("interpolate", help="hands along a latent path between two hands: URDFs, PNG strip "
                        "(the two original hands beside the decoded ends), meshcat HTML")
     p.add_argument("hand_a")
     p.add_argument("hand_b")
     p.add_argument("-n", "--steps", type=int, default=8, help="number of hands, endpoints included (default 8)")
-    p.add_argument("--spacing", choices=("arc", "even"), default="arc",
-                   help="hands at equal fingertip arc length along the latent line (arc, default) or at even latent steps")
+    p.add_argument("--spacing", choices=("geodesic", "arc", "even"), default="geodesic",
+                   help="geodesic (default): a bent latent path of short fingertip travel, at equal fingertip arc "
+                   "length (~1-2 s); arc: the straight latent line at equal fingertip arc length; even: the straight "
+                   "line at even latent steps")
     p.add_argument("-o", "--output", required=True, help="output directory")
     p.add_argument("--model", help=model_help)
     p.add_argument("--no-png", action="store_true", help="skip the PNG strip")

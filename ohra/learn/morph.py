@@ -6,8 +6,9 @@ through ``importlib.resources``, no network); ``load_vae(DIR)`` reads a run dire
 
 Encoding is deterministic: the encoder runs in eval mode (BatchNorm running statistics) and
 ``encode`` returns the mean and log-variance; interpolation uses the means (the reference sampled
-``z``, which makes the endpoints noisy) and places its hands at equal fingertip arc length along
-the latent line (:func:`arc_length_alphas`). Decoding always yields valid :class:`BaseParams`
+``z``, which makes the endpoints noisy) and places its hands at equal fingertip arc length along a
+latent path bent to shorten the fingertips' way, or along the straight line
+(:mod:`ohra.learn.latent_path`). Decoding always yields valid :class:`BaseParams`
 (see :func:`ohra.learn.encoding.project_vectors`), for any finite or infinite latent.
 """
 
@@ -28,7 +29,7 @@ from ohra.canonical.params import BaseParams, ExtendedParams
 from ohra.canonical.urdfgen import render
 from ohra.learn.encoding import LatentError, Standardizer, as_base
 from ohra.learn.encodings import Encoding, get_encoding
-from ohra.learn.sampler import LOWERS, UPPERS
+from ohra.learn.latent_path import ARC_DENSITY, arc_length_alphas, geodesic_latents, tip_moves  # noqa: F401 (re-exported)
 from ohra.learn.train_vae import CHECKPOINT_FORMAT, MODEL_FORMAT, load_torch_file
 from ohra.learn.vae import MorphologyVAE, VAEConfig
 
@@ -149,21 +150,26 @@ class VAEBundle:
         return self.decode(mu, limits=p if keep_limits else None)  # type: ignore[return-value]
 
     # -- interpolation ------------------------------------------------------------------------
-    def interpolate(self, a: HandLike, b: HandLike, n: int = 8, spacing: str = "arc") -> "Interpolation":
-        """``n`` hands on the straight line between the mean latents of ``a`` and ``b`` (endpoints
-        included), decoded with default limits [0, pi/2] for present joints.
+    def interpolate(self, a: HandLike, b: HandLike, n: int = 8, spacing: str = "geodesic") -> "Interpolation":
+        """``n`` hands from the mean latent of ``a`` to that of ``b`` (endpoints included), decoded with
+        default limits [0, pi/2] for present joints (see :mod:`ohra.learn.latent_path`).
 
-        ``spacing="arc"`` (default) places them at equal fingertip arc length along the line
-        (:func:`arc_length_alphas`), so that no step moves a fingertip much more than another;
-        ``"even"`` at equal steps of the latent line (``alphas = linspace(0, 1, n)``)."""
+        ``spacing="geodesic"`` (default): a bent latent path of short fingertip travel, at equal
+        fingertip arc length (:func:`geodesic_latents`; never a larger step than ``"arc"``, ~0.5-2 s);
+        ``"arc"``: the straight latent line at equal fingertip arc length (:func:`arc_length_alphas`);
+        ``"even"``: the straight line at even steps (``alphas = linspace(0, 1, n)``). ``alphas`` are
+        the hands' parameters along the path (for the geodesic, the fraction of the bent path)."""
         if int(n) < 2:
             raise LatentError(f"interpolation needs at least 2 steps, got {n}")
         if spacing not in SPACINGS:
             raise LatentError(f"interpolation spacing must be one of {SPACINGS}, got {spacing!r}")
         n = int(n)
         (mu_a, _), (mu_b, _) = self.encode(a), self.encode(b)
-        alphas = arc_length_alphas(self, mu_a, mu_b, n) if spacing == "arc" else np.linspace(0.0, 1.0, n)
-        z = (1.0 - alphas)[:, None] * mu_a + alphas[:, None] * mu_b
+        if spacing == "geodesic":
+            z, alphas = geodesic_latents(self, mu_a, mu_b, n)
+        else:
+            alphas = arc_length_alphas(self, mu_a, mu_b, n) if spacing == "arc" else np.linspace(0.0, 1.0, n)
+            z = (1.0 - alphas)[:, None] * mu_a + alphas[:, None] * mu_b
         params = self.decode(z)
         assert isinstance(params, list)
         names = [str(a) if isinstance(a, (str, Path)) else "hand_a", str(b) if isinstance(b, (str, Path)) else "hand_b"]
@@ -171,59 +177,14 @@ class VAEBundle:
                              tuple(Path(x).stem for x in names), (resolve_hand(a), resolve_hand(b)))
 
 
-SPACINGS = ("arc", "even")
-ARC_DENSITY = 16  # dense samples of the latent line per interpolation step, for arc_length_alphas
-
-
-def tip_moves(v82: np.ndarray) -> np.ndarray:
-    """(N - 1,) largest q = 0 fingertip move [m] between consecutive hands (N, 82) over the fingers
-    present in both, or 0 where a joint appears or vanishes or the hand turns from left to right:
-    such a step is a jump of the decoded structure (a segment gains its length, the thumb is
-    mirrored) that no spacing of the latent line can make smaller."""
-    from ohra.learn.encoding_rot6d import is_left
-    from ohra.learn.geometry import tips_q0
-
-    v = np.atleast_2d(v82)
-    T = tips_q0(v)
-    present = (v[:, LOWERS] != 0) | (v[:, UPPERS] != 0)
-    left = is_left(v)
-    same = np.all(present[1:] == present[:-1], axis=1) & (left[1:] == left[:-1])
-    d = np.linalg.norm(T[1:] - T[:-1], axis=-1)  # NaN where a finger is absent at either end
-    return np.where(same, np.where(np.isnan(d), 0.0, d).max(axis=1), 0.0)
-
-
-def arc_length_alphas(vae: VAEBundle, mu_a: np.ndarray, mu_b: np.ndarray, n: int, density: int = ARC_DENSITY) -> np.ndarray:
-    """(n,) increasing alphas in [0, 1] (0 and 1 included) that split the latent line from ``mu_a``
-    to ``mu_b`` into ``n - 1`` steps of equal fingertip arc length.
-
-    The line is decoded at ``density * (n - 1) + 1`` even points; the arc length is the running sum
-    of :func:`tip_moves` (the largest fingertip move of each dense step, so that the arc length
-    bounds every fingertip's path), and the alphas are its inverse at ``n`` equal lengths (linear
-    within a dense step). A step then moves every fingertip by about ``total / (n - 1)`` at most,
-    where even alphas put the decoder's fast stretches into one or two steps (measured: a 34.8 mm step
-    on a path that allows 21 mm). A change of structure costs nothing (see :func:`tip_moves`): it
-    stays inside one dense step, and were it counted, steps would crowd round it and be lost to
-    the rest of the path (measured: 63 mm steps). Deterministic: the same hands and model give the
-    same alphas.
-    """
-    m = max(int(density), 1) * (n - 1) + 1
-    t = np.linspace(0.0, 1.0, m)
-    V = vae.decode_vectors((1.0 - t)[:, None] * mu_a + t[:, None] * mu_b)
-    cost = tip_moves(V)
-    total = float(cost.sum())
-    if not np.isfinite(total) or total <= 0.0:
-        return np.linspace(0.0, 1.0, n)
-    cost = cost + 1e-6 * total / len(cost)  # strictly increasing arc length, for the inverse
-    s = np.concatenate([[0.0], np.cumsum(cost)])
-    alphas = np.interp(np.linspace(0.0, s[-1], n), s, t)
-    alphas[0], alphas[-1] = 0.0, 1.0
-    return alphas
+SPACINGS = ("geodesic", "arc", "even")
 
 
 @dataclass
 class Interpolation:
-    """A latent interpolation: ``alphas`` (n,), latents ``z`` (n, d), decoded ``params`` and their
-    ``urdfs``; ``originals`` are the two hands it was made from (base form), for pictures."""
+    """A latent interpolation: ``alphas`` (n,) (where each hand sits on the path, 0 to 1), latents
+    ``z`` (n, d), decoded ``params`` and their ``urdfs``; ``originals`` are the two hands it was made
+    from (base form), for pictures."""
 
     alphas: np.ndarray
     z: np.ndarray

@@ -1,0 +1,91 @@
+"""Latent paths of the morphology VAE: the geodesic interpolation against the straight line."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+import ohra  # noqa: E402
+from ohra.canonical.kinematics import HandModel  # noqa: E402
+from ohra.canonical.params import BaseParams  # noqa: E402
+from ohra.learn import geometry as geo  # noqa: E402
+from ohra.learn.fk_torch import tips  # noqa: E402
+from ohra.learn.latent_path import _tips_q0, arc_length_resample, structure_changes, tip_moves  # noqa: E402
+from ohra.learn.morph import load_vae  # noqa: E402
+from ohra.learn.vae import GeometryLoss  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def vae():
+    return load_vae()
+
+
+def _vectors(it) -> np.ndarray:
+    return np.stack([p.to_vector() for p in it.params])
+
+
+def test_geodesic_beats_the_straight_line_where_a_thumb_turns_130_degrees(vae):
+    """Barrett's thumb points to the wrist, Shadow's across the palm: on the straight latent line a
+    step moves the thumb tip 22 mm; the bent path lets the thumb shorten on the way and must do
+    clearly better, from the same two mean latents, with no new jumps and every hand plausible."""
+    a, b = ohra.get_hand("barrett_hand", "base"), ohra.get_hand("shadow_hand_right", "base")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        geo_path = vae.interpolate(a, b, 16)  # the default
+        arc_path = vae.interpolate(a, b, 16, spacing="arc")
+        (mu_a, _), (mu_b, _) = vae.encode(a), vae.encode(b)
+    assert np.array_equal(geo_path.z[0], mu_a) and np.array_equal(geo_path.z[-1], mu_b)  # endpoints fixed
+    ends = vae.decode_vectors(np.stack([mu_a, mu_b]))  # float32 decoding: batch size may change the last bits
+    assert np.allclose(_vectors(geo_path)[[0, -1]], ends, atol=1e-6)
+    assert geo_path.alphas[0] == 0.0 and geo_path.alphas[-1] == 1.0 and np.all(np.diff(geo_path.alphas) > 0)
+    V, V_arc = _vectors(geo_path), _vectors(arc_path)
+    worst, worst_arc = tip_moves(V).max(), tip_moves(V_arc).max()
+    assert worst <= worst_arc - 0.001, (1e3 * worst, 1e3 * worst_arc)  # at least 1 mm better
+    assert worst <= 0.02, 1e3 * worst
+    # the path is bent: its interior latents leave the straight line between the endpoints
+    u = (mu_b - mu_a) / np.linalg.norm(mu_b - mu_a)
+    off = geo_path.z - mu_a - np.outer((geo_path.z - mu_a) @ u, u)
+    assert np.linalg.norm(off, axis=1).max() > 0.1
+    assert structure_changes(V).sum() <= structure_changes(V_arc).sum()
+    assert not geo.knuckles_inside_palm(V).any() and not geo.thumb_into_palm(V).any()
+    assert not any(HandModel.from_params(BaseParams.from_vector(v)).self_collision(np.zeros(22)) for v in V)
+
+
+def test_geodesic_is_deterministic(vae):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        one = vae.interpolate("dex3_right", "shadow_hand_right", 6)
+        two = vae.interpolate("dex3_right", "shadow_hand_right", 6)
+    assert np.array_equal(one.z, two.z) and np.array_equal(one.alphas, two.alphas)
+    assert all(p.isclose(q) for p, q in zip(one.params, two.params))
+
+
+def test_the_energy_tips_equal_the_torch_fk_at_q0(vae):
+    """The geodesic's closed-form q = 0 tips (base + reach along the finger) are the FK's tips."""
+    geom = GeometryLoss(vae.model.config, vae.standardizer.mean, vae.standardizer.std)
+    z = torch.randn(64, vae.latent_dim, generator=torch.Generator().manual_seed(3)) * 2.0
+    with torch.no_grad():
+        out = vae.model.decode(z)
+        present = out["presence"][:, :22] > 0
+        raw = out["cont"] * geom.std + geom.mean
+        R = geom.thumb_rotation(raw)
+        fk = tips(raw[:, 8:23].reshape(-1, 5, 3), raw[:, 2:8].reshape(-1, 2, 3), R, torch.zeros(64, 2, 3), raw[:, 23:29], present)
+        closed = _tips_q0(raw, R[:, :, 2], present)
+    assert torch.allclose(closed, fk, atol=1e-6)
+
+
+def test_arc_length_resample_splits_a_polyline_evenly(vae):
+    """Through three knots (a bend in latent space) the resampled hands move the fingertips by equal
+    amounts, measured on a dense decoding of the same polyline; endpoints are the first and last knot."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        mu, _ = vae.encode(["allegro_hand_right", "leap_hand_right", "inspire_hand_right"])
+    z, s = arc_length_resample(vae, mu, 9)
+    assert np.array_equal(z[0], mu[0]) and np.array_equal(z[-1], mu[-1]) and s[0] == 0 and s[-1] == 1
+    steps = tip_moves(vae.decode_vectors(z))
+    kept = steps[steps > 0]
+    assert len(kept) >= 4 and kept.max() <= 1.3 * np.median(kept), 1e3 * steps
