@@ -282,3 +282,22 @@ def test_cli_train_sample_and_errors(cli, dataset, tmp_path, capsys):
     assert cli(["grasp", "eval", "--model", str(run), "--hands", "barrett_hand", "--objects", "builtin:box", "-n", "1"]) == 2
     assert "training set" in capsys.readouterr().err
     assert cli(["train", "grasp", "--data", str(tmp_path / "none"), "-o", str(tmp_path / "r2"), "--quiet"]) == 2
+
+
+def test_a_dataset_made_on_another_machine_finds_its_mesh_under_this_object_root(tmp_path, monkeypatch):
+    """Manifests store absolute mesh paths; moved to another machine, the same trailing path under
+    OHRA_OBJECTS_ROOT is used (the mesh hash still has to match)."""
+    import shutil
+
+    from ohra.learn.grasp.data import _resolve_object
+
+    here = tmp_path / "objects" / "ycb" / "Ball"
+    here.mkdir(parents=True)
+    ObjectModel.builtin("sphere").mesh.export(here / "mesh.stl")
+    obj = ObjectModel.load(here / "mesh.stl", name="Ball")
+    info = {"source": "/elsewhere/shared/objects/ycb/Ball/mesh.stl", "mesh_hash": obj.mesh_hash}
+    monkeypatch.setenv("OHRA_OBJECTS_ROOT", str(tmp_path / "objects"))
+    assert _resolve_object(tmp_path, "Ball", info, {}).mesh_hash == obj.mesh_hash
+    shutil.rmtree(tmp_path / "objects")
+    with pytest.raises(DatasetError, match="cannot load training object 'Ball'"):
+        _resolve_object(tmp_path, "Ball", info, {})

@@ -60,6 +60,25 @@ def _procedural_name(name: str) -> tuple[str, str] | None:
     return (family, seed) if family in FAMILIES and seed.isdigit() else None
 
 
+def _locate(root: Path, src: str) -> Path:
+    """The object file a manifest names: as written, relative to the dataset, or, for a dataset made
+    on another machine, the same trailing path under this machine's object root (``OHRA_OBJECTS_ROOT``;
+    the caller checks the mesh hash, so a wrong match cannot pass)."""
+    from ohra.paths import objects_root
+
+    p = Path(src)
+    if p.exists():
+        return p
+    if (root / src).exists():
+        return root / src
+    parts = p.parts[1:] if p.is_absolute() else p.parts
+    for i in range(len(parts)):
+        cand = objects_root().joinpath(*parts[i:])
+        if cand.exists():
+            return cand
+    return p
+
+
 def _resolve_object(root: Path, name: str, info: dict, given: Mapping[str, ObjectModel]) -> ObjectModel:
     want = str(info.get("mesh_hash", ""))
     if name in given:
@@ -74,8 +93,7 @@ def _resolve_object(root: Path, name: str, info: dict, given: Mapping[str, Objec
             elif src == "builtin":
                 obj = ObjectModel.builtin(name)
             elif src:
-                path = Path(src) if Path(src).exists() else root / src
-                obj = ObjectModel.load(path, name=name)
+                obj = ObjectModel.load(_locate(root, src), name=name)
             else:
                 raise ObjectError("the manifest gives no source")
         except OhraError as exc:
