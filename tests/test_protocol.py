@@ -152,3 +152,38 @@ def test_isaac_drive_closes_fingers_at_isaacs_rate():
     assert _drive_speed(Protocol()) == pytest.approx(0.3 * 240.0, rel=0.05)
     assert Protocol.preset("isaac-drive") == Protocol.isaac_drive()
     assert Protocol.isaac_drive(dt=0.01).position_gain == pytest.approx(0.01 * 5.0)
+
+
+def _sag(protocol: Protocol, seconds: float = 0.06) -> float:
+    """Largest joint motion [rad] of a LEAP hand whose fingers hang sideways under gravity while
+    weak motors (the protocol's motor_force) try to hold them at their start."""
+    import pybullet as pb
+
+    from ohra.hands import get_hand
+    from ohra.sim import SimHand
+
+    ev = GraspEvaluator(SimHand.from_params(get_hand("leap_3333"), "leap_3333"), cube(), protocol)
+    w = ev.world
+    T = np.eye(4)
+    T[:3, 3] = (0.5, 0.5, 0.5)
+    T[:3, :3] = [[0, 0, 1], [0, 1, 0], [-1, 0, 0]]
+    q = np.clip(np.zeros(len(w.jidx)), w.hand.lower, w.hand.upper)
+    w.reset_hand(T, q)
+    w.new_object()
+    w.drive_joints(q)
+    pb.setGravity(0, 0, -9.81, physicsClientId=w.client)
+    for _ in range(int(round(seconds / protocol.dt))):
+        pb.stepSimulation(physicsClientId=w.client)
+    sag = float(np.abs(w.joint_values() - q).max())
+    ev.close()
+    return sag
+
+
+def test_substeps_keep_the_motor_torque_limit():
+    """PyBullet applies a motor's impulse cap in every substep; 2 substeps of 1/200 s must hold a
+    finger exactly like 1/200 s steps with the same torque limit (not like a limit twice as large)."""
+    one = _sag(Protocol(dt=1 / 200, motor_force=0.004))
+    two = _sag(Protocol(dt=1 / 100, substeps=2, motor_force=0.004))
+    assert one > 0.1  # the limit binds: the fingers sag
+    assert _sag(Protocol(dt=1 / 200, motor_force=0.002)) > 1.04 * one  # and the sag depends on it
+    assert two == pytest.approx(one, rel=0.01)

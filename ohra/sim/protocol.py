@@ -7,7 +7,9 @@ step lets a squeezed object slip out of grasps that hold at 240 Hz with 100 solv
 PyBullet recipe of survey §5.5). Measured on the same 45 solver grasps of leap_3333 on three YCB
 objects: pass rate 7 / 36 / 6 % at 100 Hz x 2 substeps, 47 / 50 / 69 % at 240 Hz with 100
 iterations (the survey's PyBullet prototype measured 64-73 %). The defaults are therefore 240 Hz,
-100 iterations; ``Protocol.preset("isaac-step")`` keeps Isaac's literal step for comparison.
+100 iterations; ``Protocol.preset("isaac-step")`` keeps Isaac's literal step for comparison. (Those
+100 Hz numbers were measured while PyBullet's substeps doubled every motor's torque limit, fixed
+since in :meth:`ohra.sim.world.World.drive_joints`; they were not re-measured.)
 """
 
 from __future__ import annotations
