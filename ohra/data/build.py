@@ -48,12 +48,13 @@ def summary(path: str | Path) -> dict:
             row[k] = sum(s.get(f"n_{k}", 0) for s in sh.values())
         row["grasps_test"] = sum(s.get("n_grasps", 0) for key, s in sh.items() if key in test)
         row["core_s"] = sum(s.get("timing", {}).get("total_s", 0.0) for s in sh.values())
+        row["cpu_s"] = sum(s.get("timing", {}).get("cpu_s", 0.0) for s in sh.values())
         row["no_convergence"] = sorted(k for k, s in sh.items() if s.get("diagnosis"))
         rows.append(row)
-    total = {k: sum(r[k] for r in rows) for k in ("pairs", "candidates", "solved", "sim_passed", "grasps", "grasps_test", "core_s")}
+    total = {k: sum(r[k] for r in rows) for k in ("pairs", "candidates", "solved", "sim_passed", "grasps", "grasps_test", "core_s", "cpu_s")}
     return {"path": str(path), "format": man.get("format"), "ohra_version": man.get("ohra_version"),
             "settings_digest": man.get("settings_digest"), "recipe": (man.get("recipe") or {}).get("name"),
-            "core_hours": man.get("core_hours", total["core_s"] / 3600.0), "split": {"train": len(split.get("train", [])), "test": len(test)},
+            "core_hours": man.get("core_hours", total["core_s"] / 3600.0), "cpu_hours": total["cpu_s"] / 3600.0, "split": {"train": len(split.get("train", [])), "test": len(test)},
             "rows": rows, "total": total}
 
 
@@ -61,14 +62,15 @@ def format_summary(s: dict) -> str:
     """The table ``ohra data info`` prints."""
     lines = [f"{s['path']}: {s['format']}, ohra {s['ohra_version']}, settings {s['settings_digest']}"
              + (f", recipe {s['recipe']}" if s["recipe"] else "")
-             + f", {s['core_hours']:.3f} core-hours, objects {s['split']['train']} train / {s['split']['test']} test"]
-    head = f"{'hand':22s} {'pairs':>5s} {'solves':>7s} {'converged':>9s} {'sim pass':>8s} {'kept':>6s} {'kept/conv':>9s} {'test kept':>9s} {'kept/core-h':>11s}"
+             + f", {s['core_hours']:.3f} core-hours (wall per shard; {s['cpu_hours']:.3f} CPU-hours), objects {s['split']['train']} train / {s['split']['test']} test"]
+    head = f"{'hand':22s} {'pairs':>5s} {'solves':>7s} {'converged':>9s} {'sim pass':>8s} {'kept':>6s} {'kept/conv':>9s} {'test kept':>9s} {'kept/core-h':>11s} {'kept/CPU-h':>10s}"
     lines += [head, "-" * len(head)]
     for r in s["rows"] + [{"hand": "total", **s["total"], "no_convergence": []}]:
         rate = f"{r['grasps'] / r['solved']:.0%}" if r["solved"] else "-"
         per_h = f"{r['grasps'] / (r['core_s'] / 3600):.0f}" if r["core_s"] > 0 else "-"
+        per_cpu = f"{r['grasps'] / (r['cpu_s'] / 3600):.0f}" if r.get("cpu_s", 0) > 0 else "-"
         lines.append(f"{r['hand']:22s} {r['pairs']:5d} {r['candidates']:7d} {r['solved']:9d} {r['sim_passed']:8d} {r['grasps']:6d} "
-                     f"{rate:>9s} {r['grasps_test']:9d} {per_h:>11s}")
+                     f"{rate:>9s} {r['grasps_test']:9d} {per_h:>11s} {per_cpu:>10s}")
         if r["no_convergence"]:
             lines.append(f"  nothing converged on: {', '.join(r['no_convergence'])}")
     return "\n".join(lines)
