@@ -94,3 +94,16 @@ def test_the_example_recipe_resolves(objects_dir):
     r = Recipe.load(Path(__file__).parents[1] / "recipes" / "leap_small.yaml")
     assert len(r.resolve_hands()) == 5
     assert len(r.resolve_objects()) == 21
+
+
+def test_a_build_can_top_up_some_hands_and_resume_completes_the_rest(tmp_path):
+    path = tmp_path / "two.yaml"
+    path.write_text(TINY.replace("hands: [leap_2200]", "hands: [leap_2200, leap_0202]"))
+    man = build(path, tmp_path / "ds", progress=False, hands=["leap_0202"])
+    assert list(man["hands"]) == ["leap_0202"] and len(man["hands"]["leap_0202"]["shards"]) == 3
+    first = {k: s["sha256"] for k, s in man["hands"]["leap_0202"]["shards"].items()}
+    full = build(path, tmp_path / "ds", progress=False, resume=True)
+    assert sorted(full["hands"]) == ["leap_0202", "leap_2200"] and len(full["hands"]["leap_2200"]["shards"]) == 3
+    assert {k: s["sha256"] for k, s in full["hands"]["leap_0202"]["shards"].items()} == first  # kept, not rebuilt
+    with pytest.raises(RecipeError, match="leap_3333 not in the recipe.*leap_2200, leap_0202"):
+        build(path, tmp_path / "ds2", progress=False, hands=["leap_3333"])

@@ -28,6 +28,8 @@ def register(sub: Any) -> None:
     p.add_argument("--overwrite", action="store_true", help="replace a dataset made with other settings (deletes its shards)")
     p.add_argument("--backend", choices=("process", "ray"), default="process", help="process pool (default) or Ray")
     p.add_argument("--address", default=None, help="Ray cluster address (with --backend ray; default: a local cluster)")
+    p.add_argument("--hands", nargs="+", default=None, metavar="NAME",
+                   help="build only these of the recipe's hands (top up one hand; resume completes the rest later)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_build)
 
@@ -47,7 +49,7 @@ def _build(args: argparse.Namespace) -> int:
         recipe = recipe.with_seed(args.seed)
     out = args.out or (f"out/{recipe.name}" if args.seed is None else f"out/{recipe.name}_s{recipe.seed}")
     man = build(recipe, out, workers=args.workers, resume=args.resume, overwrite=args.overwrite, backend=args.backend,
-                address=args.address, progress=not args.quiet)
+                address=args.address, progress=not args.quiet, hands=args.hands)
     print_summary(man, Path(out), filtered=recipe.filter)
     split = man.get("split", {})
     print(f"objects: {len(split.get('train', []))} train / {len(split.get('test', []))} test; {man['core_hours']:.3f} core-hours")
