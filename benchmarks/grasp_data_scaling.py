@@ -1,0 +1,77 @@
+"""How the unified grasp model's success on unseen objects grows with its training data (issue 13).
+
+The same model, steps, batch and seed trained on the first 1, 2, ... dataset folders given (in
+order: each folder is one more seed of the same recipe), each evaluated with the same sampled
+grasps per (hand, object) on a fixed subset of the evaluation objects, with the protocol the data
+was filtered with. It answers "is data the limit?" before the full study is run: if success still
+rises with each seed, more seeds are the lever; if it is flat, the model or the budget is.
+
+Resumable: every training run and evaluation is cached under ``--runs`` (see ``grasp_study.py``).
+
+Run: python benchmarks/grasp_data_scaling.py --data datasets/grasp_unified_s0 datasets/grasp_unified_s1 [...]
+       [--steps 3000] [-n 40] [--objects procedural:box:500 procedural:cylinder:500 @objects/ycb/PottedMeatCan]
+  -> benchmarks/results/grasp_data_scaling.{json,md}
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import write_results  # noqa: E402
+from grasp_study import ROOT, data_protocol, evaluated, trained  # noqa: E402
+
+from ohra.data.recipe import Recipe  # noqa: E402
+
+DEFAULT_OBJECTS = ["procedural:box:500", "procedural:cylinder:500", "@objects/ycb/PottedMeatCan"]
+
+
+def objects(specs: list[str]) -> list:
+    """Evaluation objects from specs (``@objects/`` = the shared object root), resolved as a recipe would."""
+    return Recipe.from_dict({"hands": ["leap_3333"], "objects": specs}, ROOT / "recipes" / "scaling.yaml").resolve_objects()
+
+
+def table(res: dict) -> str:
+    hands = res["hands"]
+    lines = [f"Unified grasp model vs training data: {res['steps']} steps each (same batch, seed), {res['n']} sampled grasps "
+             f"per (hand, object) on {len(res['objects'])} unseen objects ({', '.join(res['objects'])}), protocol {res['protocol_note']}.",
+             "", "| data folders | " + " | ".join(f"{h}: grasps / success" for h in hands) + " | all hands |",
+             "|---|" + "---|" * (len(hands) + 1)]
+    for row in res["rows"]:
+        cells = [f"{row['counts'].get(h, 0)} / {100 * row['per_hand'][h]['success_rate']:.1f} %" for h in hands]
+        tot = sum(row["per_hand"][h]["success_rate"] * row["per_hand"][h]["n"] for h in hands) / sum(row["per_hand"][h]["n"] for h in hands)
+        lines.append(f"| {row['k']} ({sum(row['counts'].values())} grasps) | " + " | ".join(cells) + f" | {100 * tot:.1f} % |")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--data", nargs="+", required=True, help="dataset folders, in the order they are added")
+    ap.add_argument("--hands", nargs="+", default=["allegro_hand_left", "barrett_hand", "shadow_hand_right"])
+    ap.add_argument("--objects", nargs="+", default=DEFAULT_OBJECTS)
+    ap.add_argument("--steps", type=int, default=3000)
+    ap.add_argument("-n", type=int, default=40)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--workers", type=int, default=1, help="simulation processes")
+    ap.add_argument("--runs", default=str(ROOT / "runs" / "grasp_scaling"))
+    ap.add_argument("--quiet", action="store_true")
+    args = ap.parse_args()
+    objs = objects(args.objects)
+    protocol = data_protocol(args.data)
+    res = {"hands": args.hands, "steps": args.steps, "n": args.n, "objects": [o.name for o in objs], "data": args.data,
+           "protocol_note": "isaac-drive" if protocol.position_gain < 0.1 else "see the data's manifest", "rows": []}
+    for k in range(1, len(args.data) + 1):
+        model = trained(f"unified-k{k}", args.data[:k], args.hands, args)
+        ev = evaluated(model, f"unified-k{k}", args.hands, objs, False, protocol, args)
+        counts = json.loads((Path(args.runs) / f"unified-k{k}" / "metrics.json").read_text())["data"]["per_hand"]
+        res["rows"].append({"k": k, "data": args.data[:k], "counts": counts, "per_hand": ev["per_hand"]})
+    write_results("grasp_data_scaling", res, table(res))
+    print(table(res))
+
+
+if __name__ == "__main__":
+    main()
