@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
-from ohra.errors import OhraError
+from ohra.errors import OhraError, reject_unknown
 
 ENCODERS = ("pointnet", "dgcnn")
 CONDITIONS = ("vae", "params")
@@ -22,10 +22,7 @@ class GraspConfigError(OhraError, ValueError):
 def _from_dict(cls, d: dict[str, Any]):
     if not isinstance(d, dict):
         raise GraspConfigError(f"{cls.__name__}: expected a mapping, got {type(d).__name__}")
-    names = {f.name for f in fields(cls)}
-    unknown = sorted(set(d) - names)
-    if unknown:
-        raise GraspConfigError(f"{cls.__name__}: unknown setting(s) {unknown}")
+    reject_unknown(d, (f.name for f in fields(cls)), GraspConfigError, cls.__name__, "setting(s)")
     kw = {k: (tuple(v) if isinstance(v, list) else v) for k, v in d.items()}
     return cls(**kw)
 
