@@ -274,6 +274,16 @@ def _redraw_touching_thumbs(rng: np.random.Generator, out: np.ndarray, c: Sample
     raise ParamsError(f"sampler: {bad.size} thumbs still touch a finger after {c.max_redraws} redraws; widen the thumb ranges")
 
 
+def _start(n: int, seed: int) -> tuple[int, np.random.Generator, np.ndarray]:
+    """The checked sample count, the seeded generator and its first draw, the handedness (n,) (True:
+    right hand, probability 1/2)."""
+    if int(n) < 0:
+        raise ParamsError(f"number of samples must be >= 0, got {n}")
+    n = int(n)
+    rng = np.random.default_rng(seed)
+    return n, rng, rng.random(n) < 0.5
+
+
 def sample_vectors(n: int, seed: int, config: SamplerConfig = DEFAULT_CONFIG, return_handedness: bool = False):
     """``n`` random hands as an (n, 82) array of base vectors (canonical key order).
 
@@ -282,12 +292,8 @@ def sample_vectors(n: int, seed: int, config: SamplerConfig = DEFAULT_CONFIG, re
     """
     from ohra.transforms import matrix_to_rpy
 
-    if int(n) < 0:
-        raise ParamsError(f"number of samples must be >= 0, got {n}")
-    n = int(n)
+    n, rng, right = _start(n, seed)
     c = config
-    rng = np.random.default_rng(seed)
-    right = rng.random(n) < 0.5
     present, use, finger_pat = _patterns(rng, n, c)
 
     R = rng.uniform(*c.palm_radius, n)

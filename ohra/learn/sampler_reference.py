@@ -6,7 +6,7 @@ Same joint patterns as :mod:`ohra.learn.sampler` minus Barrett's thumb; the rang
 the Euler cube ``[-pi, pi]^3``. Units: metres and radians, canonical palm frame.
 
 :func:`sample_reference_vectors` is the previous ``sample_vectors``: the steps it shares with
-:mod:`ohra.learn.sampler` (finger use, joint presence, Dirichlet gaps, thumb axes, segment mask,
+:mod:`ohra.learn.sampler` (count check and handedness draw, finger use, joint presence, Dirichlet gaps, thumb axes, segment mask,
 vector assembly) are that module's helpers, called in the same order with the same random draws, so
 its draws stay bit-identical, seed for seed, to the code the reference model's training data came from.
 """
@@ -18,10 +18,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ohra.errors import ParamsError
 from ohra.learn.sampler import (
     FINGER_PATTERNS, THUMB_PATTERNS, _base_vectors, _dirichlet_gaps, _finger_use, _joint_presence, _segment_mask,
-    _thumb_axes,
+    _start, _thumb_axes,
 )
 
 REFERENCE_THUMB_PATTERNS = THUMB_PATTERNS[:6]  # the reference never draws a thumb without joint 1
@@ -60,12 +59,8 @@ def sample_reference_vectors(n: int, seed: int, config: ReferenceSamplerConfig =
     Deterministic given ``seed``. With ``return_handedness`` also returns an (n,) bool array, True
     for right hands. Every row is a valid :class:`BaseParams` vector.
     """
-    if int(n) < 0:
-        raise ParamsError(f"number of samples must be >= 0, got {n}")
-    n = int(n)
+    n, rng, right = _start(n, seed)
     c = config
-    rng = np.random.default_rng(seed)
-    right = rng.random(n) < 0.5
     side = np.where(right, 1.0, -1.0)  # +1: thumb at +y
 
     # -- fingers: thumb always; >= 2 of the 4 non-thumb fingers --------------------------------
