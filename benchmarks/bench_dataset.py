@@ -23,7 +23,7 @@ import numpy as np  # noqa: E402
 from ohra.canonical.kinematics import HandModel  # noqa: E402
 from ohra.canonical.params import load_params  # noqa: E402
 from ohra.data.dataset import GraspDataset  # noqa: E402
-from ohra.learn.grasp.data import _resolve_object  # noqa: E402
+from ohra.learn.grasp.data import load_dataset_object  # noqa: E402
 from ohra.sim import GraspEvaluator, Protocol, SimHand  # noqa: E402
 from ohra.synth.robust import RobustnessSettings, perturb  # noqa: E402
 
@@ -54,7 +54,7 @@ def main() -> None:
                 g = GraspDataset(args.data, hands=[hand], objects=[key]).grasps().astype(float)
                 if not len(g):
                     continue
-                obj = _resolve_object(args.data, key, info["object"], {})
+                obj = load_dataset_object(args.data, key, info["object"], {})
                 with GraspEvaluator(SimHand.from_params(params, hand), obj, protocol) as ev:
                     exact += int(ev.evaluate(g, mode="filter").success.sum())
                     rng = np.random.default_rng(12345)

@@ -32,10 +32,9 @@ from _common import best_of, peak_rss_mib, write_results  # noqa: E402
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
-import ohra  # noqa: E402
 from ohra.canonical.kinematics import HandModel  # noqa: E402
 from ohra.canonical.params import BaseParams  # noqa: E402
-from ohra.errors import OhraError  # noqa: E402
+from ohra.hands import hands_in_form  # noqa: E402
 from ohra.learn import geometry as geo  # noqa: E402
 from ohra.learn.encoding_rot6d import is_left  # noqa: E402
 from ohra.learn.morph import load_vae, reference_model_dir  # noqa: E402
@@ -47,16 +46,6 @@ HELDOUT_SEED = 2_000_003  # neither the training seed (0) nor the training run's
 LATENT_SEED = 5
 STEPS = 16
 MOVE_LIMIT_M = 0.02
-
-
-def base_hands() -> dict[str, BaseParams]:
-    out = {}
-    for n in ohra.list_hands():
-        try:
-            out[n] = ohra.get_hand(n, "base")
-        except OhraError:
-            pass
-    return out
 
 
 def own_sampler(vae):
@@ -255,7 +244,7 @@ def main() -> None:
                     "(the models it was run on must be the ones given); written after each model")
     args = ap.parse_args()
     torch.set_num_threads(1)
-    hands = base_hands()
+    hands = hands_in_form("base")
     models = {"new": load_vae(args.model)}
     if not args.no_reference:
         models = {"reference66": load_vae(reference_model_dir()), **models}

@@ -6,6 +6,8 @@ one type. Messages name the offending file, key or index and what was expected.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 
 class OhraError(Exception):
     """Base class of all ohra errors."""
@@ -56,3 +58,13 @@ class DatasetError(OhraError, ValueError):
 
 class ObjectWarning(UserWarning):
     """Something about an object was estimated or approximated (mass properties, its simulated body)."""
+
+
+def reject_unknown(keys: Iterable[str], known: Iterable[str], error: type[OhraError], source: str, what: str) -> None:
+    """Raise ``error`` naming ``source`` and the keys not in ``known`` (sorted, with the known ones)
+    when there are any; ``what`` names the kind of key, e.g. ``"PPO setting(s)"``. Shared by the
+    ``from_dict`` constructors of the settings dataclasses."""
+    names = set(known)
+    unknown = sorted(set(keys) - names)
+    if unknown:
+        raise error(f"{source}: unknown {what} {unknown}; known: {sorted(names)}")

@@ -57,26 +57,32 @@ def add_hand(vis: Any, hand: HandModel, q: np.ndarray, T_world_palm: np.ndarray 
     half = np.array([palm["depth"] / 2, palm["radius"], palm["radius"]])
     _grow_bounds(vis, _box_corners(Tp[:3, 3] - half, Tp[:3, 3] + half) @ T0[:3, :3].T + T0[:3, 3])
     _grow_bounds(vis, _capsule_corners(caps) @ T0[:3, :3].T + T0[:3, 3])
-    for k, link in enumerate(caps.link):
-        a, b, r = caps.p0[k], caps.p1[k], float(caps.radius[k])
+    _draw_capsules(vis[path], caps, T0, mat)
+
+
+def _draw_capsules(node: Any, capsules: Any, T0: np.ndarray, mat: Any) -> None:
+    """Draw each capsule of :class:`ohra.Capsules` under ``node[link]``: a cylinder ``body`` (omitted
+    for a zero-length capsule) and spheres ``end0``/``end1``, in world pose ``T0 @ (palm-frame pose)``."""
+    import meshcat.geometry as g
+
+    for k, link in enumerate(capsules.link):
+        a, b, r = capsules.p0[k], capsules.p1[k], float(capsules.radius[k])
         d = b - a
         length = float(np.linalg.norm(d))
         z = d / length if length > 1e-12 else np.array([0.0, 0.0, 1.0])
         x = np.cross([0.0, 1.0, 0.0], z) if abs(z[1]) < 0.9 else np.cross([1.0, 0.0, 0.0], z)
         x /= np.linalg.norm(x)
-        R = np.column_stack([x, np.cross(z, x), z])
         Tc = np.eye(4)
-        Tc[:3, :3] = R
+        Tc[:3, :3] = np.column_stack([x, np.cross(z, x), z])
         Tc[:3, 3] = (a + b) / 2
-        node = vis[path][link]
         if length > 1e-9:
-            node["body"].set_object(g.Cylinder(length, r), mat)
-            node["body"].set_transform(T0 @ Tc @ _Y_TO_Z)
+            node[link]["body"].set_object(g.Cylinder(length, r), mat)
+            node[link]["body"].set_transform(T0 @ Tc @ _Y_TO_Z)
         for end, p in (("end0", a), ("end1", b)):
             Ts = np.eye(4)
             Ts[:3, 3] = p
-            node[end].set_object(g.Sphere(r), mat)
-            node[end].set_transform(T0 @ Ts)
+            node[link][end].set_object(g.Sphere(r), mat)
+            node[link][end].set_transform(T0 @ Ts)
 
 
 def add_mesh(vis: Any, vertices: np.ndarray, faces: np.ndarray, T: np.ndarray | None = None,
@@ -238,29 +244,10 @@ def save_html(vis: Any, path: str | Path) -> Path:
 def add_capsules(vis: Any, capsules: Any, T_world_palm: np.ndarray | None = None, path: str = "capsules",
                  color: int = HAND_COLOR, opacity: float = 0.8) -> None:
     """Draw :class:`ohra.Capsules` (one configuration) as cylinders + end spheres."""
-    import meshcat.geometry as g
-
     T0 = np.eye(4) if T_world_palm is None else np.asarray(T_world_palm, dtype=float)
     mat = _material(color, opacity)
     _grow_bounds(vis, _capsule_corners(capsules) @ T0[:3, :3].T + T0[:3, 3])
-    for k, link in enumerate(capsules.link):
-        a, b, r = capsules.p0[k], capsules.p1[k], float(capsules.radius[k])
-        d = b - a
-        length = float(np.linalg.norm(d))
-        z = d / length if length > 1e-12 else np.array([0.0, 0.0, 1.0])
-        x = np.cross([0.0, 1.0, 0.0], z) if abs(z[1]) < 0.9 else np.cross([1.0, 0.0, 0.0], z)
-        x /= np.linalg.norm(x)
-        Tc = np.eye(4)
-        Tc[:3, :3] = np.column_stack([x, np.cross(z, x), z])
-        Tc[:3, 3] = (a + b) / 2
-        if length > 1e-9:
-            vis[path][link]["body"].set_object(g.Cylinder(length, r), mat)
-            vis[path][link]["body"].set_transform(T0 @ Tc @ _Y_TO_Z)
-        for end, p in (("end0", a), ("end1", b)):
-            Ts = np.eye(4)
-            Ts[:3, 3] = p
-            vis[path][link][end].set_object(g.Sphere(r), mat)
-            vis[path][link][end].set_transform(T0 @ Ts)
+    _draw_capsules(vis[path], capsules, T0, mat)
 
 
 def add_original(vis: Any, hand: Any, q_orig: np.ndarray, T_world_root: np.ndarray | None = None,

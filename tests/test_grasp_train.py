@@ -289,7 +289,7 @@ def test_a_dataset_made_on_another_machine_finds_its_mesh_under_this_object_root
     OHRA_OBJECTS_ROOT is used (the mesh hash still has to match)."""
     import shutil
 
-    from ohra.learn.grasp.data import _resolve_object
+    from ohra.learn.grasp.data import load_dataset_object
 
     here = tmp_path / "objects" / "ycb" / "Ball"
     here.mkdir(parents=True)
@@ -297,7 +297,7 @@ def test_a_dataset_made_on_another_machine_finds_its_mesh_under_this_object_root
     obj = ObjectModel.load(here / "mesh.stl", name="Ball")
     info = {"source": "/elsewhere/shared/objects/ycb/Ball/mesh.stl", "mesh_hash": obj.mesh_hash}
     monkeypatch.setenv("OHRA_OBJECTS_ROOT", str(tmp_path / "objects"))
-    assert _resolve_object(tmp_path, "Ball", info, {}).mesh_hash == obj.mesh_hash
+    assert load_dataset_object(tmp_path, "Ball", info, {}).mesh_hash == obj.mesh_hash
     shutil.rmtree(tmp_path / "objects")
     with pytest.raises(DatasetError, match="cannot load training object 'Ball'"):
-        _resolve_object(tmp_path, "Ball", info, {})
+        load_dataset_object(tmp_path, "Ball", info, {})

@@ -11,22 +11,13 @@ import ohra
 from ohra.canonical.kinematics import HandModel
 from ohra.canonical.params import BaseParams
 from ohra.errors import OhraError
+from ohra.hands import hands_in_form
 from ohra.learn import encoding_rot6d as E
 from ohra.learn import geometry as geo
 from ohra.learn.encoding import LatentError, project_vectors
 from ohra.learn.encodings import ENCODINGS, get_encoding
 from ohra.learn.sampler import EXTRA, LENGTHS, LOWERS, THUMB_RPY, UPPERS, XYZ, mirror_vectors, sample_vectors
 from ohra.transforms import rpy_to_matrix
-
-
-def _registered() -> list[BaseParams]:
-    out = []
-    for n in ohra.list_hands():
-        try:
-            out.append(ohra.get_hand(n, "base"))
-        except OhraError:
-            pass
-    return out
 
 
 def _limits(v):
@@ -54,7 +45,7 @@ def test_layout_of_sampled_right_and_left_hands():
 
 
 def test_handedness_follows_base_params():
-    hands = _registered() + [BaseParams.from_vector(r) for r in sample_vectors(30, 12)]
+    hands = list(hands_in_form("base").values()) + [BaseParams.from_vector(r) for r in sample_vectors(30, 12)]
     v = np.stack([p.to_vector() for p in hands])
     assert E.is_left(v).tolist() == [p.handedness == "left" for p in hands]
 
@@ -66,7 +57,7 @@ def test_round_trip_is_exact_for_sampled_hands_with_their_limits():
 
 
 def test_registered_hands_round_trip_up_to_equivalent_rpy_and_snapped_axes():
-    for p in _registered():
+    for p in hands_in_form("base").values():
         v = p.to_vector()[None]
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")

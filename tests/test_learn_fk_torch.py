@@ -7,10 +7,9 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-import ohra  # noqa: E402
 from ohra.canonical.kinematics import HandModel  # noqa: E402
 from ohra.canonical.params import FINGERS, BaseParams  # noqa: E402
-from ohra.errors import OhraError  # noqa: E402
+from ohra.hands import hands_in_form  # noqa: E402
 from ohra.learn.fk_torch import FRAMES, base_fk, finger_presence, tips  # noqa: E402
 from ohra.learn.geometry import tips_q0  # noqa: E402
 from ohra.learn.sampler import EXTRA, LENGTHS, LOWERS, THUMB_AXES, THUMB_RPY, UPPERS, XYZ, sample_vectors  # noqa: E402
@@ -23,16 +22,6 @@ def _inputs(v: np.ndarray, q: np.ndarray):
     present = (v[:, LOWERS] != 0) | (v[:, UPPERS] != 0)
     return (t(v[:, XYZ].reshape(n, 5, 3)), t(v[:, LENGTHS].reshape(n, 2, 3)), t(rpy_to_matrix(v[:, THUMB_RPY])),
             t(v[:, THUMB_AXES].reshape(n, 2, 3)), t(v[:, EXTRA]), torch.from_numpy(present), t(q))
-
-
-def _registered() -> list[BaseParams]:
-    out = []
-    for n in ohra.list_hands():
-        try:
-            out.append(ohra.get_hand(n, "base"))
-        except OhraError:
-            pass
-    return out
 
 
 def _check(v: np.ndarray, q: np.ndarray) -> float:
@@ -61,7 +50,7 @@ def test_frames_match_pinocchio_for_sampled_hands_at_random_configurations():
 
 
 def test_frames_match_pinocchio_for_registered_hands():
-    hands = _registered()
+    hands = list(hands_in_form("base").values())
     if not hands:
         pytest.skip("no registered base-form hands in this checkout")
     v = np.stack([p.to_vector() for p in hands])

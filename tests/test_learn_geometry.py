@@ -5,10 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import ohra
 from ohra.canonical.kinematics import HandModel
 from ohra.canonical.params import BaseParams
-from ohra.errors import OhraError
+from ohra.hands import hands_in_form
 from ohra.learn import geometry as geo
 from ohra.learn.encoding import decode_vectors as decode66
 from ohra.learn.sampler import PALM, THUMB_RPY, XYZ, sample_vectors
@@ -16,13 +15,7 @@ from ohra.transforms import matrix_to_rpy
 
 
 def _registered() -> np.ndarray:
-    out = []
-    for n in ohra.list_hands():
-        try:
-            out.append(ohra.get_hand(n, "base").to_vector())
-        except OhraError:
-            pass
-    return np.array(out)
+    return np.array([p.to_vector() for p in hands_in_form("base").values()])
 
 
 def _random_rotations(n: int, seed: int) -> np.ndarray:

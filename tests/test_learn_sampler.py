@@ -6,9 +6,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-import ohra
 from ohra.canonical.kinematics import HandModel
-from ohra.errors import OhraError
+from ohra.hands import hands_in_form
 from ohra.learn import geometry as geo
 from ohra.learn.encoding import segment_presence
 from ohra.learn.sampler import (
@@ -99,23 +98,13 @@ def test_finger_and_joint_patterns_follow_the_reference(samples):
     assert 0.47 < right.mean() < 0.53
 
 
-def _registered():
-    out = {}
-    for n in ohra.list_hands():
-        try:
-            out[n] = ohra.get_hand(n, "base")
-        except OhraError:
-            pass
-    return out
-
-
 # Hands the sampler cannot draw, each with its reason; none since the support was widened for the Inspire
 # hands (thumb 6 cm up the palm, a 23 mm thumb link, knuckles spread 4.6 mm in x).
 OUTSIDE_SUPPORT: set[str] = set()
 
 
 def test_every_registered_base_hand_is_inside_the_support():
-    hands = _registered()
+    hands = hands_in_form("base")
     assert hands, "no registered base-form hands"
     assert {p.handedness for p in hands.values()} == {"left", "right"}
     bad = {n: support_violations(p) for n, p in hands.items() if support_violations(p)}

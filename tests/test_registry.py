@@ -9,7 +9,7 @@ import pytest
 import ohra
 from ohra.cli.main import main
 from ohra.errors import SpecError
-from ohra.hands import list_hands, registry
+from ohra.hands import hands_in_form, list_hands, registry
 from ohra.resources import specs_dir
 
 
@@ -47,3 +47,12 @@ def test_cli_reports_a_broken_spec_in_one_line(spec_folder, capsys):
     assert main(["hand", "list"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "broken_hand.yaml" in err[0] and err[0].startswith("ohra: error:"), err
+
+
+def test_hands_in_form_has_exactly_the_hands_registered_in_that_form():
+    base, ext = hands_in_form("base"), hands_in_form("extended")
+    assert list(base) == [n for n in list_hands() if "base" in registry.registered_forms(n)]
+    assert set(base) < set(list_hands()) and set(ext) <= set(list_hands())
+    assert set(list_hands()) - set(base), "expected an extended-only hand (none left out: the filter is untested)"
+    assert all(p.form == "base" for p in base.values()) and all(p.form == "extended" for p in ext.values())
+    assert base["shadow_hand_right"].isclose(ohra.get_hand("shadow_hand_right", "base"))

@@ -213,8 +213,45 @@ class _ParamsMixin:
 
     form: ClassVar[str]
     SIZE: ClassVar[int]
+    KEYS: ClassVar[tuple[tuple[str, tuple[int, ...]], ...]]  # (key, shape) in canonical key order
+    RAGGED: ClassVar[Mapping[str, tuple[int, ...]]]  # key -> rows per finger of its per-finger JSON lists
     joint_lowers: np.ndarray
     joint_uppers: np.ndarray
+
+    # -- conversion --------------------------------------------------------------------------
+    def _coerce(self) -> None:
+        """Turn every key's value into a float (shape ``()``) or a float array of its shape, in key
+        order (so the first bad key is the one named); per-finger lists are accepted for the keys
+        of ``RAGGED``."""
+        d = {k: getattr(self, k) for k, _ in self.KEYS}
+        for key, shape in self.KEYS:
+            setattr(self, key, _as_float(d, key) if shape == () else _as_array(d, key, shape, self.RAGGED.get(key)))
+
+    @classmethod
+    def _key_values(cls, d: Mapping[str, Any], also: frozenset[str] = frozenset()) -> dict[str, Any]:
+        """The values of ``cls.KEYS`` in mapping ``d``; a key that is neither one of them nor in
+        ``also`` (handled by the caller), or a missing one, raises :class:`ParamsError`."""
+        if not isinstance(d, Mapping):
+            raise ParamsError(f"expected a mapping of parameter keys, got {type(d).__name__}")
+        extra = sorted(set(d) - {k for k, _ in cls.KEYS} - also)
+        if extra:
+            raise ParamsError(f"unknown key(s) for {cls.form} params: {extra}")
+        missing = [k for k, _ in cls.KEYS if k not in d]
+        if missing:
+            raise ParamsError(f"missing key {missing[0]!r}")
+        return {k: d[k] for k, _ in cls.KEYS}
+
+    def _key_dict(self) -> dict[str, Any]:
+        """Every key as plain JSON values in key order (per-finger lists for the ``RAGGED`` keys)."""
+        out: dict[str, Any] = {}
+        for key, shape in self.KEYS:
+            v = getattr(self, key)
+            out[key] = _clean(v if shape == () else _split(v, self.RAGGED[key]) if key in self.RAGGED else v.tolist())
+        return out
+
+    def to_vector(self) -> np.ndarray:
+        """Flat (SIZE,) vector in canonical key order (an extended hand's template flavour is not part of it)."""
+        return np.concatenate([np.atleast_1d(np.asarray(getattr(self, k), dtype=float)).reshape(-1) for k, _ in self.KEYS])
 
     # -- masks -------------------------------------------------------------------------------
     @property
@@ -263,13 +300,7 @@ class _ParamsMixin:
     @classmethod
     def from_json(cls, source: str | Path):
         """Read from a JSON file path or JSON text."""
-        text, where = _read_json_source(source)
-        try:
-            d = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise ParamsError(f"{where}: malformed JSON ({exc})") from None
-        if not isinstance(d, dict):
-            raise ParamsError(f"{where}: expected a JSON object, got {type(d).__name__}")
+        d, where = _read_json_object(source)
         try:
             return cls.from_dict(_without_couplings(d, where))
         except ParamsError as exc:
@@ -292,13 +323,23 @@ class _ParamsMixin:
         return type(self).from_dict(self.to_dict())
 
 
-def _read_json_source(source: str | Path) -> tuple[str, str]:
+def _read_json_object(source: str | Path) -> tuple[dict[str, Any], str]:
+    """The JSON object in a file (a path, or a string not starting with ``{``) or in JSON text, and
+    where it came from (the path or ``"<json text>"``, for messages)."""
     if isinstance(source, Path) or (isinstance(source, str) and not source.lstrip().startswith("{")):
         p = Path(source)
         if not p.is_file():
             raise ParamsError(f"params file not found: {p}")
-        return p.read_text(), str(p)
-    return str(source), "<json text>"
+        text, where = p.read_text(), str(p)
+    else:
+        text, where = str(source), "<json text>"
+    try:
+        d = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ParamsError(f"{where}: malformed JSON ({exc})") from None
+    if not isinstance(d, dict):
+        raise ParamsError(f"{where}: expected a JSON object, got {type(d).__name__}")
+    return d, where
 
 
 @dataclass(eq=False)
@@ -339,46 +380,19 @@ class BaseParams(_ParamsMixin):
         ("joint_lowers", (22,)),
         ("joint_uppers", (22,)),
     )
+    RAGGED: ClassVar[Mapping[str, tuple[int, ...]]] = {"joint_lowers": JOINTS_PER_FINGER, "joint_uppers": JOINTS_PER_FINGER}
 
     def __post_init__(self) -> None:
-        d = {k: getattr(self, k) for k, _ in self.KEYS}
-        self.palm_radius = _as_float(d, "palm_radius")
-        self.finger_radius = _as_float(d, "finger_radius")
-        for key, shape in self.KEYS[2:]:
-            ragged = JOINTS_PER_FINGER if key.startswith("joint_") else None
-            setattr(self, key, _as_array(d, key, shape, ragged))
+        self._coerce()
         self.validate()
 
     # -- conversion --------------------------------------------------------------------------
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "BaseParams":
-        if not isinstance(d, Mapping):
-            raise ParamsError(f"expected a mapping of parameter keys, got {type(d).__name__}")
-        known = {k for k, _ in cls.KEYS}
-        extra = sorted(set(d) - known)
-        if extra:
-            raise ParamsError(f"unknown key(s) for base params: {extra}")
-        missing = [k for k, _ in cls.KEYS if k not in d]
-        if missing:
-            raise ParamsError(f"missing key {missing[0]!r}")
-        return cls(**{k: d[k] for k, _ in cls.KEYS})
+        return cls(**cls._key_values(d))
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "palm_radius": _clean(self.palm_radius),
-            "finger_radius": _clean(self.finger_radius),
-            "finger_lengths": _clean(self.finger_lengths.tolist()),
-            "finger_xyz": _clean(self.finger_xyz.tolist()),
-            "little_extra_origin": _clean(self.little_extra_origin.tolist()),
-            "thumb_rpy": _clean(self.thumb_rpy.tolist()),
-            "thumb_axes": _clean(self.thumb_axes.tolist()),
-            "joint_lowers": _clean(_split(self.joint_lowers, JOINTS_PER_FINGER)),
-            "joint_uppers": _clean(_split(self.joint_uppers, JOINTS_PER_FINGER)),
-        }
-
-    def to_vector(self) -> np.ndarray:
-        """Flat (82,) vector in canonical key order."""
-        return np.concatenate([np.atleast_1d(np.asarray(getattr(self, k), dtype=float)).reshape(-1) for k, _ in self.KEYS])
+        return self._key_dict()
 
     @classmethod
     def from_vector(cls, v: Any) -> "BaseParams":
@@ -503,50 +517,26 @@ class ExtendedParams(_ParamsMixin):
         ("joint_lowers", (22,)),
         ("joint_uppers", (22,)),
     )
+    RAGGED: ClassVar[Mapping[str, tuple[int, ...]]] = {
+        "joint_origins": EXT_ROWS_PER_FINGER, "joint_axes": EXT_ROWS_PER_FINGER,
+        "joint_lowers": JOINTS_PER_FINGER, "joint_uppers": JOINTS_PER_FINGER,
+    }
 
     def __post_init__(self) -> None:
-        d = {k: getattr(self, k) for k, _ in self.KEYS}
-        self.palm_radius = _as_float(d, "palm_radius")
-        self.finger_radii = _as_array(d, "finger_radii", (5,))
-        self.finger_lengths = _as_array(d, "finger_lengths", (5, 3))
-        self.joint_origins = _as_array(d, "joint_origins", (12, 6), EXT_ROWS_PER_FINGER)
-        self.joint_axes = _as_array(d, "joint_axes", (12, 3), EXT_ROWS_PER_FINGER)
-        self.joint_lowers = _as_array(d, "joint_lowers", (22,), JOINTS_PER_FINGER)
-        self.joint_uppers = _as_array(d, "joint_uppers", (22,), JOINTS_PER_FINGER)
+        self._coerce()
         if self.template not in self.TEMPLATES:
             raise ParamsError(f"'template': expected one of {list(self.TEMPLATES)}, got {self.template!r}")
         self.validate()
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "ExtendedParams":
-        if not isinstance(d, Mapping):
-            raise ParamsError(f"expected a mapping of parameter keys, got {type(d).__name__}")
-        known = {k for k, _ in cls.KEYS} | {"template"}
-        extra = sorted(set(d) - known)
-        if extra:
-            raise ParamsError(f"unknown key(s) for extended params: {extra}")
-        missing = [k for k, _ in cls.KEYS if k not in d]
-        if missing:
-            raise ParamsError(f"missing key {missing[0]!r}")
-        return cls(**{k: d[k] for k, _ in cls.KEYS}, template=str(d.get("template", "extended")))
+        return cls(**cls._key_values(d, also=frozenset({"template"})), template=str(d.get("template", "extended")))
 
     def to_dict(self) -> dict[str, Any]:
-        d: dict[str, Any] = {
-            "palm_radius": _clean(self.palm_radius),
-            "finger_radii": _clean(self.finger_radii.tolist()),
-            "finger_lengths": _clean(self.finger_lengths.tolist()),
-            "joint_origins": _clean(_split(self.joint_origins, EXT_ROWS_PER_FINGER)),
-            "joint_axes": _clean(_split(self.joint_axes, EXT_ROWS_PER_FINGER)),
-            "joint_lowers": _clean(_split(self.joint_lowers, JOINTS_PER_FINGER)),
-            "joint_uppers": _clean(_split(self.joint_uppers, JOINTS_PER_FINGER)),
-        }
+        d = self._key_dict()
         if self.template != "extended":
             d["template"] = self.template
         return d
-
-    def to_vector(self) -> np.ndarray:
-        """Flat (173,) vector in canonical key order (the template flavour is not part of it)."""
-        return np.concatenate([np.atleast_1d(np.asarray(getattr(self, k), dtype=float)).reshape(-1) for k, _ in self.KEYS])
 
     @classmethod
     def from_vector(cls, v: Any, template: str = "extended") -> "ExtendedParams":
@@ -696,13 +686,7 @@ def load_params(source: str | Path | Mapping[str, Any]) -> BaseParams | Extended
     if isinstance(source, Mapping):
         d, where = dict(source), "<dict>"
     else:
-        text, where = _read_json_source(source)
-        try:
-            d = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise ParamsError(f"{where}: malformed JSON ({exc})") from None
-        if not isinstance(d, dict):
-            raise ParamsError(f"{where}: expected a JSON object, got {type(d).__name__}")
+        d, where = _read_json_object(source)
     d = _without_couplings(d, where)
     cls: type[BaseParams] | type[ExtendedParams]
     if "finger_radii" in d or "joint_origins" in d:

@@ -14,6 +14,8 @@ from typing import Any, Sequence
 
 
 def register(sub: Any) -> None:
+    from ohra.cli.synth import add_backend_options
+
     data = sub.add_parser("data", help="grasp datasets: build from a recipe, summarise")
     dsub = data.add_subparsers(dest="data_command", metavar="ACTION", parser_class=type(data))
     dsub.required = True
@@ -26,11 +28,9 @@ def register(sub: Any) -> None:
     p.add_argument("--workers", type=int, default=1, help="processes, or local Ray CPUs (default 1)")
     p.add_argument("--resume", action="store_true", help="keep pairs whose shards are complete (sha256 checked)")
     p.add_argument("--overwrite", action="store_true", help="replace a dataset made with other settings (deletes its shards)")
-    p.add_argument("--backend", choices=("process", "ray"), default="process", help="process pool (default) or Ray")
-    p.add_argument("--address", default=None, help="Ray cluster address (with --backend ray; default: a local cluster)")
     p.add_argument("--hands", nargs="+", default=None, metavar="NAME",
                    help="build only these of the recipe's hands (top up one hand; resume completes the rest later)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_backend_options(p)
     p.set_defaults(func=_build)
 
     p = dsub.add_parser("info", help="summary table of a dataset directory")

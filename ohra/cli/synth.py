@@ -37,11 +37,17 @@ def configure(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--no-filter", action="store_true", help="skip the PyBullet filter")
     p.add_argument("--resume", action="store_true", help="skip shards that are complete (sha256 checked)")
     p.add_argument("--overwrite", action="store_true", help="replace a dataset in --out made with other settings (deletes its shards)")
+    add_backend_options(p)
+    p.set_defaults(func=run)
+    return p
+
+
+def add_backend_options(p: argparse.ArgumentParser) -> None:
+    """The options that pick how a grasp build runs (``--backend``, ``--address``, ``--quiet``), shared
+    by ``ohra synth`` and ``ohra data build``."""
     p.add_argument("--backend", choices=("process", "ray"), default="process", help="process pool (default) or Ray")
     p.add_argument("--address", default=None, help="Ray cluster address (with --backend ray; default: a local cluster)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(func=run)
-    return p
 
 
 def register(sub) -> None:

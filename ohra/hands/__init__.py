@@ -45,9 +45,18 @@ def get_hand(name: str | Path, form: str | None = None) -> Params:
     return resolve_hand(name, form).params
 
 
+def hands_in_form(form: str = "base") -> dict[str, Params]:
+    """Params of every registered hand that has ``form`` (``"base"`` or ``"extended"``), by name in
+    :func:`list_hands` order; hands not registered in that form (e.g. extended-only hands for
+    ``"base"``) are left out, while a broken spec or params file of a hand that has it still raises.
+    LEAP variants are not included."""
+    reg = _registry()
+    return {name: get_hand(name, form) for name in list_hands() if form in reg.registered_forms(name)}
+
+
 def get_couplings(name: str | Path, form: str | None = None) -> tuple[Coupling, ...]:
     """Canonical couplings (``slot = multiplier * driver + offset``) of any hand :func:`get_hand` accepts."""
     return resolve_hand(name, form).couplings
 
 
-__all__ = ["get_hand", "get_couplings", "resolve_hand", "HandRef", "list_hands", "variant_names", "leap_variant", "FORMS"]
+__all__ = ["get_hand", "get_couplings", "hands_in_form", "resolve_hand", "HandRef", "list_hands", "variant_names", "leap_variant", "FORMS"]

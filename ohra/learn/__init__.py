@@ -12,6 +12,7 @@ use; without torch those names raise :class:`MissingDependencyError` telling you
 from __future__ import annotations
 
 import importlib
+from collections.abc import Callable, Collection, Mapping
 from typing import Any
 
 from ohra.errors import OhraError
@@ -66,11 +67,24 @@ _LAZY = {
 }
 
 
-def __getattr__(name: str) -> Any:
-    if name in _LAZY:
-        require_torch()
-        return getattr(importlib.import_module(f"{__name__}.{_LAZY[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+def lazy_getattr(package: str, lazy: Mapping[str, str], require: Callable[[], object],
+                 exempt: Collection[str] = ()) -> Callable[[str], Any]:
+    """A module-level ``__getattr__`` for ``package`` (PEP 562) that imports each name of ``lazy``
+    from its submodule (``lazy[name]``, relative to ``package``) on first use, after ``require()``
+    has checked the optional dependency (raising :class:`MissingDependencyError`); submodules in
+    ``exempt`` need no check. Keeps torch out of ``import ohra.learn`` and its subpackages."""
+
+    def __getattr__(name: str) -> Any:
+        if name in lazy:
+            if lazy[name] not in exempt:
+                require()
+            return getattr(importlib.import_module(f"{package}.{lazy[name]}"), name)
+        raise AttributeError(f"module {package!r} has no attribute {name!r}")
+
+    return __getattr__
+
+
+__getattr__ = lazy_getattr(__name__, _LAZY, require_torch)
 
 
 __all__ = [

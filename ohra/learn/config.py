@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
-from ohra.errors import ParamsError
+from ohra.errors import ParamsError, reject_unknown
 
 # What a configuration written before a key existed meant (the paper's reference setup).
 LEGACY_DEFAULTS: dict[str, Any] = {
@@ -65,10 +65,7 @@ class TrainConfig:
     def from_dict(cls, d: dict[str, Any], source: str = "training config") -> "TrainConfig":
         """From a dict (e.g. a run's config.json); unknown keys raise :class:`ParamsError` naming
         ``source`` and the key; keys missing from an older file take their :data:`LEGACY_DEFAULTS`."""
-        names = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - names)
-        if unknown:
-            raise ParamsError(f"{source}: unknown key(s) {unknown}; known: {sorted(names)}")
+        reject_unknown(d, (f.name for f in fields(cls)), ParamsError, source, "key(s)")
         kw = {**{k: v for k, v in LEGACY_DEFAULTS.items() if k not in d}, **d}
         if "betas" in kw:
             kw["betas"] = tuple(float(b) for b in kw["betas"])

@@ -103,12 +103,14 @@ def _as_batch(v: Any, width: int, what: str) -> tuple[np.ndarray, bool]:
     return arr, single
 
 
-def axis_categories(axes: np.ndarray, warn: bool = True, names: Sequence[str] | None = None) -> np.ndarray:
+def axis_categories(axes: np.ndarray, warn: bool = True, names: Sequence[str] | None = None,
+                    stacklevel: int = 3) -> np.ndarray:
     """Category index (0..5 for +x, -x, +y, -y, +z, -z) of each axis in ``axes`` (..., 3).
 
     A zero axis (absent joint) is category 0 (+x, as in the reference). Any other axis goes to the
     signed basis axis closest in angle; if it was not already one, an :class:`AxisSnapWarning`
-    names it (``names[i]`` labels the i-th axis in the message).
+    names it (``names[i]`` labels the i-th axis in the message), attributed ``stacklevel`` frames up
+    (as in :func:`warnings.warn`; the default names the caller of this function's caller).
     """
     a = np.asarray(axes, dtype=float)
     flat = a.reshape(-1, 3)
@@ -127,8 +129,22 @@ def axis_categories(axes: np.ndarray, warn: bool = True, names: Sequence[str] | 
                               for i, g in zip(idx[:4], ang[:4]))
             more = f" (and {idx.size - 4} more)" if idx.size > 4 else ""
             warnings.warn(f"thumb axes that are not signed basis axes snapped to the nearest one: {shown}{more}",
-                          AxisSnapWarning, stacklevel=3)
+                          AxisSnapWarning, stacklevel=stacklevel)
     return cat.reshape(a.shape[:-1])
+
+
+def _encode_discrete(out: np.ndarray, v: np.ndarray, axis1: slice, axis2: slice, flags: slice, warn: bool) -> None:
+    """In place: the one-hot thumb axis categories and the joint flags of base vectors ``v`` (N, 82)
+    into the ``axis1``, ``axis2`` and ``flags`` columns of the encodings ``out`` (N, D) (shared by
+    the 66-D encoding and :mod:`ohra.learn.encoding_rot6d`, whose blocks sit at other columns)."""
+    n = len(v)
+    axes = v[:, THUMB_AXES].reshape(n, 2, 3)
+    names = [f"thumb_axes[{k}] of hand {i}" if n > 1 else f"thumb_axes[{k}]" for i in range(n) for k in range(2)]
+    cat = axis_categories(axes, warn=warn, names=names, stacklevel=4)  # the warning names encode_vectors' caller
+    rows = np.arange(n)
+    out[rows, axis1.start + cat[:, 0]] = 1.0
+    out[rows, axis2.start + cat[:, 1]] = 1.0
+    out[:, flags] = (v[:, LOWERS] != v[:, UPPERS]).astype(float)
 
 
 def encode_vectors(v82: Any, warn: bool = True) -> np.ndarray:
@@ -137,13 +153,7 @@ def encode_vectors(v82: Any, warn: bool = True) -> np.ndarray:
     n = v.shape[0]
     out = np.zeros((n, ENCODING_DIM))
     out[:, CONT] = v[:, :CONT_DIM]
-    axes = v[:, THUMB_AXES].reshape(n, 2, 3)
-    names = [f"thumb_axes[{k}] of hand {i}" if n > 1 else f"thumb_axes[{k}]" for i in range(n) for k in range(2)]
-    cat = axis_categories(axes, warn=warn, names=names)
-    rows = np.arange(n)
-    out[rows, AXIS1.start + cat[:, 0]] = 1.0
-    out[rows, AXIS2.start + cat[:, 1]] = 1.0
-    out[:, FLAGS] = (v[:, LOWERS] != v[:, UPPERS]).astype(float)
+    _encode_discrete(out, v, AXIS1, AXIS2, FLAGS, warn)
     return out[0] if single else out
 
 
@@ -193,6 +203,16 @@ def _limits(limits: Any, flags: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return lo, up
 
 
+def _decode_discrete(x: np.ndarray, axis1: slice, axis2: slice, flags: slice,
+                     limits: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Thumb axes (N, 6) and joint (lowers, uppers) (N, 22) each [rad] from the ``axis1``, ``axis2``
+    (argmax) and ``flags`` (> 0.5) columns of encodings ``x`` (N, D), ``limits`` as in
+    :func:`decode_vectors` (the inverse of :func:`_encode_discrete`)."""
+    lo, up = _limits(limits, x[:, flags] > 0.5)
+    cats = np.stack([np.argmax(x[:, axis1], axis=1), np.argmax(x[:, axis2], axis=1)], axis=1)
+    return BASIS_AXES[cats].reshape(len(x), 6), lo, up
+
+
 def decode_vectors(x66: Any, limits: Any = None) -> np.ndarray:
     """Encodings (66,) or (N, 66) -> valid base vectors (82,) or (N, 82).
 
@@ -205,11 +225,10 @@ def decode_vectors(x66: Any, limits: Any = None) -> np.ndarray:
     if not np.all(np.isfinite(x)):
         raise LatentError("encoding has non-finite values")
     n = x.shape[0]
-    lo, up = _limits(limits, x[:, FLAGS] > 0.5)
+    axes, lo, up = _decode_discrete(x, AXIS1, AXIS2, FLAGS, limits)
     v = np.zeros((n, 82))
     v[:, :CONT_DIM] = x[:, CONT]
-    cats = np.stack([np.argmax(x[:, AXIS1], axis=1), np.argmax(x[:, AXIS2], axis=1)], axis=1)
-    v[:, THUMB_AXES] = BASIS_AXES[cats].reshape(n, 6)
+    v[:, THUMB_AXES] = axes
     v[:, LOWERS] = lo
     v[:, UPPERS] = up
     v = project_vectors(v)

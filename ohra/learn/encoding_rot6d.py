@@ -47,15 +47,15 @@ from typing import Any
 import numpy as np
 
 from ohra.learn.encoding import (
-    AXIS_CATEGORIES, DECODE_LOWER, DECODE_UPPER, LatentError, _as_batch, _limits, _spread_knuckles, axis_categories,
-    project_vectors,
+    AXIS_CATEGORIES, DECODE_LOWER, DECODE_UPPER, LatentError, _as_batch, _decode_discrete, _encode_discrete,
+    _spread_knuckles, project_vectors,
 )
 from ohra.learn.geometry import (
     FINGER_ROWS, KNUCKLE_MIN_Z, finger_cores, finger_reach, matrix_from_rot6d, palm_centre, rot6d_from_matrix,
     rotation_about, segment_distance, thumb_clearance, thumb_inwardness,
 )
 from ohra.learn.sampler import (
-    BASIS_AXES, DEFAULT_CONFIG, EXTRA, FINGER_RADIUS, LENGTHS, LOWERS, PALM, THUMB_AXES, THUMB_RPY, UPPERS, XYZ,
+    DEFAULT_CONFIG, EXTRA, FINGER_RADIUS, LENGTHS, LOWERS, PALM, THUMB_AXES, THUMB_RPY, UPPERS, XYZ,
     mirror_vectors,
 )
 from ohra.transforms import matrix_to_rpy, rpy_to_matrix
@@ -179,13 +179,7 @@ def encode_vectors(v82: Any, warn: bool = True) -> np.ndarray:
     out = np.zeros((n, ENCODING_DIM))
     out[:, 0:29] = f[:, 0:29]
     out[:, ROT6D] = rot6d_from_matrix(rpy_to_matrix(v[:, THUMB_RPY]), "zx")
-    axes = v[:, THUMB_AXES].reshape(n, 2, 3)
-    names = [f"thumb_axes[{k}] of hand {i}" if n > 1 else f"thumb_axes[{k}]" for i in range(n) for k in range(2)]
-    cat = axis_categories(axes, warn=warn, names=names)
-    rows = np.arange(n)
-    out[rows, AXIS1.start + cat[:, 0]] = 1.0
-    out[rows, AXIS2.start + cat[:, 1]] = 1.0
-    out[:, FLAGS] = (v[:, LOWERS] != v[:, UPPERS]).astype(float)
+    _encode_discrete(out, v, AXIS1, AXIS2, FLAGS, warn)
     out[:, LEFT.start] = left.astype(float)
     return out[0] if single else out
 
@@ -202,12 +196,11 @@ def decode_vectors(x70: Any, limits: Any = None) -> np.ndarray:
     if not np.all(np.isfinite(x)):
         raise LatentError("encoding has non-finite values")
     n = len(x)
-    lo, up = _limits(limits, x[:, FLAGS] > 0.5)
+    axes, lo, up = _decode_discrete(x, AXIS1, AXIS2, FLAGS, limits)
     v = np.zeros((n, 82))
     v[:, 0:29] = x[:, 0:29]
     v[:, THUMB_RPY] = matrix_to_rpy(matrix_from_rot6d(x[:, ROT6D], "zx"))
-    cats = np.stack([np.argmax(x[:, AXIS1], axis=1), np.argmax(x[:, AXIS2], axis=1)], axis=1)
-    v[:, THUMB_AXES] = BASIS_AXES[cats].reshape(n, 6)
+    v[:, THUMB_AXES] = axes
     v[:, LOWERS] = lo
     v[:, UPPERS] = up
     v = project_vectors(v)

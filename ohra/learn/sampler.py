@@ -115,23 +115,88 @@ def _pattern_odds(patterns: np.ndarray, c: SamplerConfig) -> np.ndarray:
     return w / w.sum()
 
 
-def _patterns(rng: np.random.Generator, n: int, c: SamplerConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Joint presence (n, 22), non-thumb fingers used (n, 4) and the shared finger pattern (n, 4)."""
-    use = rng.random((n, 4)) < c.p_finger  # thumb always; >= 2 of the 4 non-thumb fingers
+def _finger_use(rng: np.random.Generator, n: int, p_finger: float) -> np.ndarray:
+    """Which non-thumb fingers (n, 4) are used: each with ``p_finger``, then random ones forced on
+    until every hand has at least 2 (the thumb is always present)."""
+    use = rng.random((n, 4)) < p_finger
     while True:
         short = np.flatnonzero(use.sum(axis=1) < 2)
         if short.size == 0:
-            break
+            return use
         use[short, rng.integers(0, 4, short.size)] = True
-    thumb_pat = THUMB_PATTERNS[rng.choice(len(THUMB_PATTERNS), n, p=_pattern_odds(THUMB_PATTERNS, c))]
-    finger_pat = FINGER_PATTERNS[rng.choice(len(FINGER_PATTERNS), n, p=_pattern_odds(FINGER_PATTERNS, c))]
+
+
+def _joint_presence(rng: np.random.Generator, thumb_pat: np.ndarray, finger_pat: np.ndarray, use: np.ndarray,
+                    p_little_joint0: float) -> np.ndarray:
+    """Joint presence (n, 22) from the thumb pattern (n, 5), the shared finger pattern (n, 4) and the
+    fingers used (n, 4); the little metacarpal joint drawn with ``p_little_joint0`` in hands with
+    >= 20 other joints."""
+    n = len(use)
     present = np.zeros((n, 22), dtype=bool)
     present[:, 0:5] = thumb_pat
     for fi, start in enumerate((5, 9, 13, 18)):  # index, middle, ring, little (joint1..4)
         present[:, start : start + 4] = finger_pat & use[:, fi : fi + 1]
     full = present.sum(axis=1) >= 20
-    present[:, 17] = full & (rng.random(n) < c.p_little_joint0)
-    return present, use, finger_pat
+    present[:, 17] = full & (rng.random(n) < p_little_joint0)
+    return present
+
+
+def _patterns(rng: np.random.Generator, n: int, c: SamplerConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Joint presence (n, 22), non-thumb fingers used (n, 4) and the shared finger pattern (n, 4)."""
+    use = _finger_use(rng, n, c.p_finger)
+    thumb_pat = THUMB_PATTERNS[rng.choice(len(THUMB_PATTERNS), n, p=_pattern_odds(THUMB_PATTERNS, c))]
+    finger_pat = FINGER_PATTERNS[rng.choice(len(FINGER_PATTERNS), n, p=_pattern_odds(FINGER_PATTERNS, c))]
+    return _joint_presence(rng, thumb_pat, finger_pat, use, c.p_little_joint0), use, finger_pat
+
+
+def _dirichlet_gaps(rng: np.random.Generator, k: np.ndarray) -> np.ndarray:
+    """Cumulative Dirichlet(1, ..., 1) shares (n, 5) of the free space over the k + 1 gaps before,
+    between and after k = 2..4 knuckles: column i is the share of the first i + 1 gaps."""
+    w = np.zeros((len(k), 5))
+    for kk in (2, 3, 4):
+        rows = np.flatnonzero(k == kk)
+        if rows.size:
+            w[rows, : kk + 1] = rng.dirichlet(np.ones(kk + 1), rows.size)
+    return np.cumsum(w, axis=1)
+
+
+def _thumb_axes(rng: np.random.Generator, present: np.ndarray) -> np.ndarray:
+    """Axes (n, 2, 3) of thumb joints 1 and 2: two different signed basis axes (axis2 == -axis1 is
+    allowed), zero where the joint is absent."""
+    n = len(present)
+    a1 = rng.integers(0, 6, n)
+    a2 = rng.integers(0, 5, n)
+    a2 = a2 + (a2 >= a1)  # uniform over the 5 categories != a1
+    axes = np.stack([BASIS_AXES[a1], BASIS_AXES[a2]], axis=1)
+    axes[~present[:, 0], 0] = 0.0
+    axes[~present[:, 1], 1] = 0.0
+    return axes
+
+
+def _segment_mask(present: np.ndarray, finger_pat: np.ndarray) -> np.ndarray:
+    """Which of the 6 length segments (thumb p, m, d | finger p, m, d) have geometry (n, 6): segments
+    without geometry have no length (link rules of the base template)."""
+    t = present[:, 0:5]
+    seg_t = np.stack([t[:, 0] | t[:, 1], t[:, 2] | t[:, 3], t[:, 4]], axis=1)
+    seg_f = np.stack([finger_pat[:, 0] | finger_pat[:, 1], finger_pat[:, 2], finger_pat[:, 3]], axis=1)
+    return np.concatenate([seg_t, seg_f], axis=1)
+
+
+def _base_vectors(R: np.ndarray, r: np.ndarray, lengths: np.ndarray, xyz: np.ndarray, extra: np.ndarray,
+                  thumb_rpy: np.ndarray, axes: np.ndarray, present: np.ndarray, joint_upper: float) -> np.ndarray:
+    """The (n, 82) base vectors (canonical key order) from their parts; lower limits 0, upper limits
+    ``joint_upper`` for present joints [rad]."""
+    n = len(R)
+    out = np.zeros((n, 82))
+    out[:, PALM] = R
+    out[:, FINGER_RADIUS] = r
+    out[:, LENGTHS] = lengths
+    out[:, XYZ] = xyz.reshape(n, 15)
+    out[:, EXTRA] = extra
+    out[:, THUMB_RPY] = thumb_rpy
+    out[:, THUMB_AXES] = axes.reshape(n, 6)
+    out[:, UPPERS] = np.where(present, joint_upper, 0.0)
+    return out
 
 
 def _knuckles(rng: np.random.Generator, R: np.ndarray, r: np.ndarray, use: np.ndarray, c: SamplerConfig) -> np.ndarray:
@@ -146,12 +211,7 @@ def _knuckles(rng: np.random.Generator, R: np.ndarray, r: np.ndarray, use: np.nd
     W = (R - r) * rng.uniform(*c.knuckle_span, n)
     d = 2.0 * r + c.finger_gap
     space = np.maximum(2.0 * W - (k - 1) * d, 0.0)
-    w = np.zeros((n, 5))
-    for kk in (2, 3, 4):
-        rows = np.flatnonzero(k == kk)
-        if rows.size:
-            w[rows, : kk + 1] = rng.dirichlet(np.ones(kk + 1), rows.size)
-    cum = np.cumsum(w, axis=1)  # cum[:, i] = sum of the first i + 1 gaps
+    cum = _dirichlet_gaps(rng, k)
     rank = np.clip(np.cumsum(use, axis=1) - 1, 0, 3)  # rank of each used finger, index -> little
     xyz = np.zeros((n, 4, 3))
     xyz[:, :, 1] = W[:, None] - np.take_along_axis(cum, rank, axis=1) * space[:, None] - rank * d[:, None]
@@ -214,6 +274,16 @@ def _redraw_touching_thumbs(rng: np.random.Generator, out: np.ndarray, c: Sample
     raise ParamsError(f"sampler: {bad.size} thumbs still touch a finger after {c.max_redraws} redraws; widen the thumb ranges")
 
 
+def _start(n: int, seed: int) -> tuple[int, np.random.Generator, np.ndarray]:
+    """The checked sample count, the seeded generator and its first draw, the handedness (n,) (True:
+    right hand, probability 1/2)."""
+    if int(n) < 0:
+        raise ParamsError(f"number of samples must be >= 0, got {n}")
+    n = int(n)
+    rng = np.random.default_rng(seed)
+    return n, rng, rng.random(n) < 0.5
+
+
 def sample_vectors(n: int, seed: int, config: SamplerConfig = DEFAULT_CONFIG, return_handedness: bool = False):
     """``n`` random hands as an (n, 82) array of base vectors (canonical key order).
 
@@ -222,46 +292,25 @@ def sample_vectors(n: int, seed: int, config: SamplerConfig = DEFAULT_CONFIG, re
     """
     from ohra.transforms import matrix_to_rpy
 
-    if int(n) < 0:
-        raise ParamsError(f"number of samples must be >= 0, got {n}")
-    n = int(n)
+    n, rng, right = _start(n, seed)
     c = config
-    rng = np.random.default_rng(seed)
-    right = rng.random(n) < 0.5
     present, use, finger_pat = _patterns(rng, n, c)
 
     R = rng.uniform(*c.palm_radius, n)
     r = rng.uniform(c.finger_radius[0], np.minimum(c.finger_radius[1], c.max_radius_ratio * R))
     lo = np.maximum(np.array([c.thumb_lengths[0]] * 3 + [c.finger_lengths[0]] * 3), 2.0 * r[:, None])  # capsule >= diameter
     hi = np.array([c.thumb_lengths[1]] * 3 + [c.finger_lengths[1]] * 3)
-    lengths = rng.uniform(lo, hi)
-    t = present[:, 0:5]  # segments without geometry have no length (link rules of the base template)
-    seg_t = np.stack([t[:, 0] | t[:, 1], t[:, 2] | t[:, 3], t[:, 4]], axis=1)
-    seg_f = np.stack([finger_pat[:, 0] | finger_pat[:, 1], finger_pat[:, 2], finger_pat[:, 3]], axis=1)
-    lengths *= np.concatenate([seg_t, seg_f], axis=1)
+    lengths = rng.uniform(lo, hi) * _segment_mask(present, finger_pat)
 
     xyz = np.zeros((n, 5, 3))
     xyz[:, 1:] = _knuckles(rng, R, r, use, c)
     xyz[:, 0], thumb_rot = _thumbs(rng, R, c)
 
-    a1 = rng.integers(0, 6, n)
-    a2 = rng.integers(0, 5, n)
-    a2 = a2 + (a2 >= a1)  # uniform over the 5 categories != a1 (axis2 == -axis1 is allowed)
-    axes = np.stack([BASIS_AXES[a1], BASIS_AXES[a2]], axis=1)
-    axes[~present[:, 0], 0] = 0.0
-    axes[~present[:, 1], 1] = 0.0
+    axes = _thumb_axes(rng, present)
     extra = _little_extra(rng, n, c)
     extra[~present[:, 17]] = 0.0
 
-    out = np.zeros((n, 82))
-    out[:, PALM] = R
-    out[:, FINGER_RADIUS] = r
-    out[:, LENGTHS] = lengths
-    out[:, XYZ] = xyz.reshape(n, 15)
-    out[:, EXTRA] = extra
-    out[:, THUMB_RPY] = matrix_to_rpy(thumb_rot)
-    out[:, THUMB_AXES] = axes.reshape(n, 6)
-    out[:, UPPERS] = np.where(present, c.joint_upper, 0.0)
+    out = _base_vectors(R, r, lengths, xyz, extra, matrix_to_rpy(thumb_rot), axes, present, c.joint_upper)
     _redraw_touching_thumbs(rng, out, c)
     out[~right] = mirror_vectors(out[~right])
     if return_handedness:

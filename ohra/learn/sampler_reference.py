@@ -5,9 +5,10 @@ Same joint patterns as :mod:`ohra.learn.sampler` minus Barrett's thumb; the rang
 (``ohra_reference.md`` §7.1, quirks fixed as DESIGN decision 4); the thumb mounting rotation uniform in
 the Euler cube ``[-pi, pi]^3``. Units: metres and radians, canonical palm frame.
 
-:func:`sample_reference_vectors` is the previous ``sample_vectors`` unchanged (one long function, so
-that it stays line for line the code the reference model's training data came from; its draws are
-bit-identical, seed for seed).
+:func:`sample_reference_vectors` is the previous ``sample_vectors``: the steps it shares with
+:mod:`ohra.learn.sampler` (count check and handedness draw, finger use, joint presence, Dirichlet gaps, thumb axes, segment mask,
+vector assembly) are that module's helpers, called in the same order with the same random draws, so
+its draws stay bit-identical, seed for seed, to the code the reference model's training data came from.
 """
 
 from __future__ import annotations
@@ -17,9 +18,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ohra.errors import ParamsError
 from ohra.learn.sampler import (
-    BASIS_AXES, EXTRA, FINGER_PATTERNS, FINGER_RADIUS, LENGTHS, PALM, THUMB_AXES, THUMB_PATTERNS, THUMB_RPY, UPPERS, XYZ,
+    FINGER_PATTERNS, THUMB_PATTERNS, _base_vectors, _dirichlet_gaps, _finger_use, _joint_presence, _segment_mask,
+    _start, _thumb_axes,
 )
 
 REFERENCE_THUMB_PATTERNS = THUMB_PATTERNS[:6]  # the reference never draws a thumb without joint 1
@@ -58,32 +59,18 @@ def sample_reference_vectors(n: int, seed: int, config: ReferenceSamplerConfig =
     Deterministic given ``seed``. With ``return_handedness`` also returns an (n,) bool array, True
     for right hands. Every row is a valid :class:`BaseParams` vector.
     """
-    if int(n) < 0:
-        raise ParamsError(f"number of samples must be >= 0, got {n}")
-    n = int(n)
+    n, rng, right = _start(n, seed)
     c = config
-    rng = np.random.default_rng(seed)
-    right = rng.random(n) < 0.5
     side = np.where(right, 1.0, -1.0)  # +1: thumb at +y
 
     # -- fingers: thumb always; >= 2 of the 4 non-thumb fingers --------------------------------
-    use = rng.random((n, 4)) < c.p_finger
-    while True:
-        short = np.flatnonzero(use.sum(axis=1) < 2)
-        if short.size == 0:
-            break
-        use[short, rng.integers(0, 4, short.size)] = True
+    use = _finger_use(rng, n, c.p_finger)
     k = use.sum(axis=1)  # active non-thumb fingers, 2..4
 
-    # -- joint patterns ------------------------------------------------------------------------
+    # -- joint patterns (uniform, unlike the sampler's odds) -----------------------------------
     thumb_pat = REFERENCE_THUMB_PATTERNS[rng.integers(0, len(REFERENCE_THUMB_PATTERNS), n)]
     finger_pat = FINGER_PATTERNS[rng.integers(0, len(FINGER_PATTERNS), n)]
-    present = np.zeros((n, 22), dtype=bool)
-    present[:, 0:5] = thumb_pat
-    for fi, start in enumerate((5, 9, 13, 18)):  # index, middle, ring, little (joint1..4)
-        present[:, start : start + 4] = finger_pat & use[:, fi : fi + 1]
-    full = present.sum(axis=1) >= 20
-    present[:, 17] = full & (rng.random(n) < c.p_little_joint0)
+    present = _joint_presence(rng, thumb_pat, finger_pat, use, c.p_little_joint0)
 
     # -- sizes -----------------------------------------------------------------------------------
     R = rng.uniform(*c.palm_radius, n)
@@ -101,13 +88,7 @@ def sample_reference_vectors(n: int, seed: int, config: ReferenceSamplerConfig =
     # [r - R, R - r] with Dirichlet-distributed free space between them, index first (thumb side).
     d = 2.0 * r
     space = np.maximum(2.0 * (R - r) - (k - 1) * d, 0.0)
-    # Dirichlet(1, ..., 1) over the k + 1 gaps (before, between and after the k fingers).
-    w = np.zeros((n, 5))
-    for kk in (2, 3, 4):
-        rows = np.flatnonzero(k == kk)
-        if rows.size:
-            w[rows, : kk + 1] = rng.dirichlet(np.ones(kk + 1), rows.size)
-    cum = np.cumsum(w, axis=1)  # cum[:, i] = sum of the first i + 1 gaps
+    cum = _dirichlet_gaps(rng, k)  # cum[:, i] = share of the first i + 1 of the k + 1 gaps
     order = np.cumsum(use, axis=1) - 1  # rank of each active finger, index -> little
     rank = np.clip(order, 0, 3)
     y_mag = (r - R)[:, None] + np.take_along_axis(cum, rank, axis=1) * space[:, None] + rank * d[:, None]
@@ -118,12 +99,7 @@ def sample_reference_vectors(n: int, seed: int, config: ReferenceSamplerConfig =
 
     # -- thumb orientation and axes --------------------------------------------------------------
     thumb_rpy = rng.uniform(-math.pi, math.pi, (n, 3))
-    a1 = rng.integers(0, 6, n)
-    a2 = rng.integers(0, 5, n)
-    a2 = a2 + (a2 >= a1)  # uniform over the 5 categories != a1 (axis2 == -axis1 is allowed)
-    axes = np.stack([BASIS_AXES[a1], BASIS_AXES[a2]], axis=1)
-    axes[~present[:, 0], 0] = 0.0
-    axes[~present[:, 1], 1] = 0.0
+    axes = _thumb_axes(rng, present)
 
     # -- little finger metacarpal frame, on the little finger's side (-y for a right hand) -------
     extra = np.zeros((n, 6))
@@ -133,22 +109,8 @@ def sample_reference_vectors(n: int, seed: int, config: ReferenceSamplerConfig =
     extra[:, 3] = side * rng.uniform(*c.extra_roll, n)
     extra[~present[:, 17]] = 0.0
 
-    # -- segments without geometry have no length (link rules of the base template) --------------
-    t = present[:, 0:5]
-    seg_t = np.stack([t[:, 0] | t[:, 1], t[:, 2] | t[:, 3], t[:, 4]], axis=1)
-    f = finger_pat
-    seg_f = np.stack([f[:, 0] | f[:, 1], f[:, 2], f[:, 3]], axis=1)
-    lengths *= np.concatenate([seg_t, seg_f], axis=1)
-
-    out = np.zeros((n, 82))
-    out[:, PALM] = R
-    out[:, FINGER_RADIUS] = r
-    out[:, LENGTHS] = lengths
-    out[:, XYZ] = xyz.reshape(n, 15)
-    out[:, EXTRA] = extra
-    out[:, THUMB_RPY] = thumb_rpy
-    out[:, THUMB_AXES] = axes.reshape(n, 6)
-    out[:, UPPERS] = np.where(present, c.joint_upper, 0.0)
+    lengths *= _segment_mask(present, finger_pat)
+    out = _base_vectors(R, r, lengths, xyz, extra, thumb_rpy, axes, present, c.joint_upper)
     if return_handedness:
         return out, right
     return out

@@ -1,14 +1,21 @@
-"""Small PyBullet helpers: load URDF text, and capture what the C++ side prints (warnings)."""
+"""Small PyBullet helpers: load URDF text, capture what the C++ side prints (warnings), and load a
+simulator hand with its joint table."""
 
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import tempfile
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
+from typing import TYPE_CHECKING, Iterator
 
 import pybullet as pb
+
+if TYPE_CHECKING:
+    from ohra.sim.hands import SimHand
 
 
 @contextlib.contextmanager
@@ -42,3 +49,51 @@ def load_urdf_text(text: str, client: int, **kwargs) -> int:
         return pb.loadURDF(path, physicsClientId=client, **kwargs)
     finally:
         Path(path).unlink(missing_ok=True)
+
+
+@dataclass(frozen=True)
+class LoadedHand:
+    """A :class:`~ohra.sim.hands.SimHand` loaded into PyBullet, with its URDF names resolved.
+
+    Attributes:
+        body: PyBullet body id.
+        links: (PyBullet link index, URDF link name) of every link, the root link first as -1.
+        jidx: PyBullet joint index of each driven joint, in ``hand.joints`` order.
+        mimic: (PyBullet joint index, index of its driver in ``hand.joints``, multiplier, offset) of
+            each loaded mimic joint.
+        link_finger: PyBullet link index -> finger index (0 thumb .. 4 little; -1 palm and others).
+    """
+
+    body: int
+    links: list[tuple[int, str]]
+    jidx: list[int]
+    mimic: list[tuple[int, int, float, float]]
+    link_finger: dict[int, int]
+
+
+def load_hand(hand: "SimHand", urdf: str, flags: int, friction: float, client: int) -> LoadedHand:
+    """Load ``urdf`` (``hand.urdf`` or a variant of it with the same joints) fixed-base with
+    ``flags``, resolve the hand's joint and link names, and give every link lateral friction
+    ``sqrt(friction)`` (PyBullet multiplies the two bodies' coefficients, so a contact with an
+    object of the same coefficient gets ``friction``), no spinning/rolling friction, no restitution.
+
+    Raises ``RuntimeError`` when PyBullet did not load a driven joint (e.g. merged away).
+    """
+    with captured_c_output():  # the fixed-link merge prints its progress on stdout
+        b = load_urdf_text(urdf, client, useFixedBase=True, flags=flags)
+    by_name: dict[str, int] = {}
+    links: list[tuple[int, str]] = [(-1, ET.fromstring(hand.urdf).find("link").get("name"))]
+    for j in range(pb.getNumJoints(b, physicsClientId=client)):
+        info = pb.getJointInfo(b, j, physicsClientId=client)
+        by_name[info[1].decode()] = j
+        links.append((j, info[12].decode()))
+    missing = [n for n in hand.joints if n not in by_name]
+    if missing:
+        raise RuntimeError(f"PyBullet did not load driven joints {missing}")
+    mimic = [(by_name[n], hand.joints.index(m), mul, off) for n, (m, mul, off) in hand.mimic.items() if n in by_name]
+    mu = math.sqrt(friction)
+    for j, _ in links:
+        pb.changeDynamics(b, j, lateralFriction=mu, spinningFriction=0.0, rollingFriction=0.0, restitution=0.0,
+                          physicsClientId=client)
+    return LoadedHand(b, links, [by_name[n] for n in hand.joints], mimic,
+                      {j: hand.link_finger.get(name, -1) for j, name in links})

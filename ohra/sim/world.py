@@ -16,7 +16,6 @@ other fingers, never with its own finger or the palm; the palm collides with the
 from __future__ import annotations
 
 import math
-import os
 import tempfile
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -24,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import pybullet as pb
 
-from ohra.sim.bullet import captured_c_output
+from ohra.sim.bullet import load_hand
 from ohra.objects.model import ObjectModel
 from ohra.rotations import matrix_to_quat, quat_to_matrix
 from ohra.sim.hands import SimHand
@@ -64,32 +63,12 @@ class World:
         flags = pb.URDF_USE_SELF_COLLISION | pb.URDF_IGNORE_VISUAL_SHAPES | pb.URDF_USE_INERTIA_FROM_FILE
         if prot.merge_fixed_links:
             flags |= pb.URDF_MERGE_FIXED_LINKS
-        fd, path = tempfile.mkstemp(suffix=".urdf")
-        try:
-            with os.fdopen(fd, "w") as fh:
-                fh.write(h.urdf)
-            with captured_c_output():  # the fixed-link merge prints its progress on stdout
-                self.body = pb.loadURDF(path, useFixedBase=True, flags=flags, physicsClientId=c)
-        finally:
-            Path(path).unlink(missing_ok=True)
-        b = self.body
-        self.root_link = ET.fromstring(h.urdf).find("link").get("name")
-        by_name: dict[str, int] = {}
-        self.links: list[tuple[int, str]] = [(-1, self.root_link)]
-        for j in range(pb.getNumJoints(b, physicsClientId=c)):
-            info = pb.getJointInfo(b, j, physicsClientId=c)
-            by_name[info[1].decode()] = j
-            self.links.append((j, info[12].decode()))
-        missing = [n for n in h.joints if n not in by_name]
-        if missing:
-            raise RuntimeError(f"PyBullet did not load driven joints {missing}")
-        self.jidx = np.array([by_name[n] for n in h.joints], dtype=int)
-        self.mimic = [(by_name[n], h.joints.index(m), mul, off) for n, (m, mul, off) in h.mimic.items() if n in by_name]
-        self.link_finger = {j: h.link_finger.get(name, -1) for j, name in self.links}
-        mu = math.sqrt(prot.friction)
-        for j, _ in self.links:
-            pb.changeDynamics(b, j, lateralFriction=mu, spinningFriction=0.0, rollingFriction=0.0,
-                              restitution=0.0, physicsClientId=c)
+        loaded = load_hand(h, h.urdf, flags, prot.friction, c)
+        self.body = b = loaded.body
+        self.links: list[tuple[int, str]] = loaded.links
+        self.root_link = self.links[0][1]
+        self.jidx = np.array(loaded.jidx, dtype=int)
+        self.mimic, self.link_finger = loaded.mimic, loaded.link_finger
         # axes of the driven joints in their child link frames (PyBullet: joint frame == child link frame)
         self.axes = np.array([pb.getJointInfo(b, int(j), physicsClientId=c)[13] for j in self.jidx], dtype=float)
         self.base_inertial = self._local_inertial(b, -1)

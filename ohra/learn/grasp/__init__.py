@@ -12,9 +12,7 @@ Settings import without torch; everything else imports torch on first use.
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
-
+from ohra.learn import lazy_getattr, require_torch
 from ohra.learn.grasp.config import CONDITIONS, ENCODERS, GraspConfigError, GraspModelConfig, GraspTrainConfig
 
 _LAZY = {
@@ -31,13 +29,7 @@ _LAZY = {
 }
 
 
-def __getattr__(name: str) -> Any:
-    if name in _LAZY:
-        from ohra.learn import require_torch
-
-        require_torch()
-        return getattr(importlib.import_module(f"{__name__}.{_LAZY[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = lazy_getattr(__name__, _LAZY, require_torch)
 
 
 __all__ = ["GraspModelConfig", "GraspTrainConfig", "GraspConfigError", "ENCODERS", "CONDITIONS", *_LAZY]

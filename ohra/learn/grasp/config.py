@@ -7,9 +7,9 @@ so a run directory says exactly what made it.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field, fields
-from typing import Any
+from typing import Any, TypeVar
 
-from ohra.errors import OhraError
+from ohra.errors import OhraError, reject_unknown
 
 ENCODERS = ("pointnet", "dgcnn")
 CONDITIONS = ("vae", "params")
@@ -19,19 +19,30 @@ class GraspConfigError(OhraError, ValueError):
     """A grasp-model or training setting is out of range or unknown."""
 
 
-def _from_dict(cls, d: dict[str, Any]):
-    if not isinstance(d, dict):
-        raise GraspConfigError(f"{cls.__name__}: expected a mapping, got {type(d).__name__}")
-    names = {f.name for f in fields(cls)}
-    unknown = sorted(set(d) - names)
-    if unknown:
-        raise GraspConfigError(f"{cls.__name__}: unknown setting(s) {unknown}")
-    kw = {k: (tuple(v) if isinstance(v, list) else v) for k, v in d.items()}
-    return cls(**kw)
+_S = TypeVar("_S", bound="_JSONSettings")
+
+
+class _JSONSettings:
+    """``to_dict``/``from_dict`` of a settings dataclass whose tuples are JSON lists (in a run's
+    ``config.json``)."""
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in d.items()}
+
+    @classmethod
+    def from_dict(cls: type[_S], d: dict[str, Any]) -> _S:
+        """From a plain dict (lists become tuples); anything but a dict, or an unknown key, raises
+        :class:`GraspConfigError`."""
+        if not isinstance(d, dict):
+            raise GraspConfigError(f"{cls.__name__}: expected a mapping, got {type(d).__name__}")
+        reject_unknown(d, (f.name for f in fields(cls)), GraspConfigError, cls.__name__, "setting(s)")
+        kw = {k: (tuple(v) if isinstance(v, list) else v) for k, v in d.items()}
+        return cls(**kw)
 
 
 @dataclass(frozen=True)
-class GraspModelConfig:
+class GraspModelConfig(_JSONSettings):
     """Architecture of :class:`ohra.learn.grasp.model.GraspNet`.
 
     ``encoder``: ``"pointnet"`` (shared MLP + max-pool; ~200 clouds/s forward+backward with 512 points
@@ -75,17 +86,10 @@ class GraspModelConfig:
         if not self.clip_sample > 0:
             raise GraspConfigError(f"clip_sample must be positive, got {self.clip_sample}")
 
-    def to_dict(self) -> dict[str, Any]:
-        d = asdict(self)
-        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in d.items()}
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "GraspModelConfig":
-        return _from_dict(cls, d)
 
 
 @dataclass(frozen=True)
-class GraspTrainConfig:
+class GraspTrainConfig(_JSONSettings):
     """Training settings. One step = one robot-balanced batch of ``batch_size`` grasps.
 
     Every distinct object of a batch is encoded ``rotated_copies`` times (each copy under its own
@@ -129,13 +133,6 @@ class GraspTrainConfig:
         if not (self.lr > 0 and self.lr_min >= 0 and self.point_noise >= 0 and self.joint_loss_weight >= 0):
             raise GraspConfigError("lr must be positive; lr_min, point_noise and joint_loss_weight non-negative")
 
-    def to_dict(self) -> dict[str, Any]:
-        d = asdict(self)
-        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in d.items()}
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "GraspTrainConfig":
-        return _from_dict(cls, d)
 
 
 @dataclass

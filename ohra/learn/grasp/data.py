@@ -79,7 +79,15 @@ def _locate(root: Path, src: str) -> Path:
     return p
 
 
-def _resolve_object(root: Path, name: str, info: dict, given: Mapping[str, ObjectModel]) -> ObjectModel:
+def load_dataset_object(root: Path, name: str, info: dict, given: Mapping[str, ObjectModel]) -> ObjectModel:
+    """The object ``name`` of the grasp dataset in ``root``, as its manifest entry ``info`` describes it.
+
+    ``given[name]`` is used when present; otherwise the model is rebuilt from ``info["source"]``
+    (``procedural:FAMILY:SEED``, ``builtin``, or a mesh/URDF path, relative paths looked up beside
+    the dataset and under :func:`ohra.paths.objects_root`). Raises :class:`DatasetError` naming
+    ``root`` and the object when it cannot be loaded, or when its mesh hash differs from
+    ``info["mesh_hash"]`` (the object the grasps were made for has changed).
+    """
     want = str(info.get("mesh_hash", ""))
     if name in given:
         obj = given[name]
@@ -205,7 +213,7 @@ class TrainingData:
             key = object_key(o, mesh_hash)
             if key not in obj_keys:
                 obj_keys.append(key)
-                objs.append(_resolve_object(root, o, sh.get("object", {}), objects or {}))
+                objs.append(load_dataset_object(root, o, sh.get("object", {}), objects or {}))
             rows.append(g)
             h_idx.append(np.full(len(g), hands.index(h)))
             o_idx.append(np.full(len(g), obj_keys.index(key)))
@@ -220,7 +228,7 @@ class TrainingData:
         test_models = {}
         for o, (root, info) in held_src.items():
             try:
-                test_models[o] = _resolve_object(root, o, info, objects or {})
+                test_models[o] = load_dataset_object(root, o, info, objects or {})
             except DatasetError:
                 pass  # only the held-out losses need it
         return cls(g[:, :3], g[:, 3:9], g[:, 9:], np.concatenate(h_idx), np.concatenate(o_idx), hands, params,
@@ -305,4 +313,4 @@ def make_batch(data: TrainingData, cfg: GraspTrainConfig, n_points: int, step: i
                  f32(data.q[rows]), present_table[hi], gen)
 
 
-__all__ = ["TrainingData", "Batch", "make_batch", "check_disjoint", "object_key"]
+__all__ = ["TrainingData", "Batch", "make_batch", "check_disjoint", "object_key", "load_dataset_object"]

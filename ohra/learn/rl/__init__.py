@@ -7,9 +7,7 @@ Needs the ``rl`` extra (gymnasium, stable-baselines3; torch comes from the ``lea
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
-
+from ohra.learn import lazy_getattr
 from ohra.learn.rl.config import PPOSettings, RLConfigError
 
 _LAZY = {
@@ -34,12 +32,7 @@ def require_rl():
             "`pip install ohra[learn,rl]` (on a CPU-only machine install the CPU wheel of torch first)") from None
 
 
-def __getattr__(name: str) -> Any:
-    if name in _LAZY:
-        if _LAZY[name] != "plots":
-            require_rl()
-        return getattr(importlib.import_module(f"{__name__}.{_LAZY[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = lazy_getattr(__name__, _LAZY, require_rl, exempt=("plots",))  # plots need only matplotlib
 
 
 __all__ = ["PPOSettings", "RLConfigError", "require_rl", *_LAZY]

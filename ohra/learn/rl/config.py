@@ -19,7 +19,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, fields
 from typing import Any, Mapping
 
-from ohra.errors import OhraError
+from ohra.errors import OhraError, reject_unknown
 
 
 class RLConfigError(OhraError, ValueError):
@@ -76,10 +76,7 @@ class PPOSettings:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], source: str = "ppo settings") -> "PPOSettings":
-        names = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - names)
-        if unknown:
-            raise RLConfigError(f"{source}: unknown PPO setting(s) {unknown}; known: {sorted(names)}")
+        reject_unknown(d, (f.name for f in fields(cls)), RLConfigError, source, "PPO setting(s)")
         kw = dict(d)
         for key in ("lr_bounds", "net_arch"):
             if key in kw:

@@ -21,7 +21,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any, Mapping
 
-from ohra.errors import OhraError
+from ohra.errors import OhraError, reject_unknown
 
 
 class RotationConfigError(OhraError, ValueError):
@@ -151,10 +151,7 @@ class RotationConfig:
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], source: str = "config") -> "RotationConfig":
         """Build from a plain mapping; an unknown key raises :class:`RotationConfigError` naming it."""
-        names = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - names)
-        if unknown:
-            raise RotationConfigError(f"{source}: unknown rotation setting(s) {unknown}; known: {sorted(names)}")
+        reject_unknown(d, (f.name for f in fields(cls)), RotationConfigError, source, "rotation setting(s)")
         kw = dict(d)
         if "weights" in kw:
             kw["weights"] = _weights(kw["weights"], f"{source}: weights")
@@ -168,8 +165,5 @@ class RotationConfig:
 def _weights(w: Any, source: str) -> RewardWeights:
     if isinstance(w, RewardWeights):
         return w
-    names = {f.name for f in fields(RewardWeights)}
-    unknown = sorted(set(w) - names)
-    if unknown:
-        raise RotationConfigError(f"{source}: unknown reward term(s) {unknown}; known: {sorted(names)}")
+    reject_unknown(w, (f.name for f in fields(RewardWeights)), RotationConfigError, source, "reward term(s)")
     return replace(RewardWeights(), **{k: float(v) for k, v in w.items()})

@@ -17,16 +17,13 @@ state evolves the same whatever ran before it (see ``ohra.sim.world``).
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import pybullet as pb
 
-from ohra.sim.bullet import captured_c_output
+from ohra.sim.bullet import load_hand
 from ohra.sim.hands import SimHand
 from ohra.sim.rotation.config import RotationConfig
 from ohra.sim.rotation.objects import ObjectShape
@@ -95,15 +92,10 @@ class RotationScene:
         if not self.visual:
             flags |= pb.URDF_IGNORE_VISUAL_SHAPES
         self.T_world_root = T_WORLD_PALM @ h.T_palm_root
-        fd, path = tempfile.mkstemp(suffix=".urdf")
-        try:
-            with os.fdopen(fd, "w") as fh:
-                fh.write(fill_inertials(h.urdf))
-            with captured_c_output():  # the fixed-link merge prints its progress on stdout
-                self.body = pb.loadURDF(path, useFixedBase=True, flags=flags, physicsClientId=c)
-        finally:
-            Path(path).unlink(missing_ok=True)
-        b = self.body
+        loaded = load_hand(h, fill_inertials(h.urdf), flags, cfg.friction, c)
+        self.body = b = loaded.body
+        self.links, self.mimic, self.link_finger = loaded.links, loaded.mimic, loaded.link_finger
+        self.jidx = loaded.jidx
         # loadURDF places the base by its inertial frame's origin only when no pose is given; set the link frame
         d = pb.getDynamicsInfo(b, -1, physicsClientId=c)
         Ti = np.eye(4)
@@ -111,21 +103,6 @@ class RotationScene:
         Ti[:3, 3] = d[3]
         T = self.T_world_root @ Ti
         pb.resetBasePositionAndOrientation(b, T[:3, 3].tolist(), _matrix_to_quat(T[:3, :3]), physicsClientId=c)
-        by_name, self.links = {}, [(-1, ET.fromstring(h.urdf).find("link").get("name"))]
-        for j in range(pb.getNumJoints(b, physicsClientId=c)):
-            info = pb.getJointInfo(b, j, physicsClientId=c)
-            by_name[info[1].decode()] = j
-            self.links.append((j, info[12].decode()))
-        missing = [n for n in h.joints if n not in by_name]
-        if missing:
-            raise RuntimeError(f"PyBullet did not load driven joints {missing}")
-        self.jidx = [by_name[n] for n in h.joints]
-        self.mimic = [(by_name[n], h.joints.index(m), mul, off) for n, (m, mul, off) in h.mimic.items() if n in by_name]
-        self.link_finger = {j: h.link_finger.get(name, -1) for j, name in self.links}
-        mu = math.sqrt(cfg.friction)
-        for j, _ in self.links:
-            pb.changeDynamics(b, j, lateralFriction=mu, spinningFriction=0.0, rollingFriction=0.0, restitution=0.0,
-                              physicsClientId=c)
         n = len(self.jidx)
         self._forces = [float(cfg.motor_force)] * n
         self._kp = [float(cfg.position_gain)] * n
