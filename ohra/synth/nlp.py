@@ -8,7 +8,8 @@ with fewer than three fingers, whose point contacts cannot resist every wrench).
 
 Constraints, one builder per family in :mod:`ohra.synth.constraints`, stacked in this order: contact
 spheres on the surface (``-0.5 mm <= sdf - r <= 1 mm``), every other capsule sample and palm sample
-at least 1 mm clear of the object, different fingers' samples apart, friction cones with the design
+at least 1 mm clear of the object, different fingers' capsules at least 1 mm apart (a separating
+plane per capsule pair, whose 4 variables follow the forces in ``x``), friction cones with the design
 friction ``mu`` (0.5, well below the simulator's 3.0) and a unit minimum normal force, and force and
 torque balance. Objective: small forces plus a posture prior. The object is a C2 cubic B-spline that
 interpolates its SDF grid (coefficients by scipy's prefilter, milliseconds). One solver per (hand,

@@ -1,11 +1,17 @@
-"""Finger pairs: spheres of different fingers keep apart, ``|pa - pb|^2 - (ra + rb + gap)^2 >= 0``.
+"""Finger pairs: different fingers keep apart, by one of two row families (``NLPSettings.finger_pairs``).
 
-Which pairs: the thumb against every finger, other fingers against their neighbours (non-neighbours
-cannot meet without passing through the finger between them). Skipped: two knuckle spheres (the
-first sphere of each finger's first segment, at fixed spacing), and pairs that never come within
-``margin`` of touching anywhere in the joint space (:func:`pair_reach`, about half of them). Long
-links add a middle sphere (end spheres alone let two closing fingertips cross: ~20 % of 4-finger
-solutions); the pipeline still re-checks every solution exactly with Coal.
+``"capsules"`` (default, exact): one separating plane per pair of capsules on different fingers, any
+two fingers (see the section comment above :func:`capsule_pairs`); pairs that never come within
+``margin`` of touching (:func:`capsule_reach`) are skipped.
+
+``"spheres"`` (the earlier rows): ``|pa - pb|^2 - (ra + rb + gap)^2 >= 0`` between the capsules' end
+spheres (and a middle sphere on long links), the thumb against every finger and other fingers against
+their neighbours only; skipped: two knuckle spheres (the first sphere of each finger's first
+segment, at fixed spacing) and pairs that never come within ``margin`` of touching (:func:`pair_reach`).
+The samples leave gaps: on ``recipes/grasp_unified.yaml`` 202 of Shadow's 720 starts converged to
+solutions whose capsules intersect (Coal), 84 of them two proximal links between their spheres and
+~50 non-neighbour fingers meeting over a curled one (``benchmarks/results/yield.md``). The pipeline
+re-checks every solution exactly with Coal either way.
 """
 
 from __future__ import annotations
