@@ -35,7 +35,7 @@ class ZeroForceStart(GraspNLP):
 
     def _initial_guess(self, p, t0, q0):
         x0 = super()._initial_guess(p, t0, q0)
-        x0[6 + self.nq :] = 0.0
+        x0[self.force_slice] = 0.0
         return x0
 
 

@@ -175,7 +175,7 @@ def test_forces_start_as_unit_pushes_toward_the_object_centre():
     st = initial_poses(hand, obj, 1, np.random.default_rng(0))[0]
     p = np.concatenate([st["R0"].reshape(-1, order="F"), st["q_pref"][nlp.movable]])
     x0 = nlp._initial_guess(p, st["t0"], st["q0"])
-    forces = x0[6 + nlp.nq :].reshape(-1, 3)
+    forces = x0[nlp.force_slice].reshape(-1, 3)
     _, points, _ = nlp._pose_fn(x0, p)
     toward = obj.center_mass - np.asarray(points)
     assert np.linalg.norm(forces, axis=1) == pytest.approx(np.ones(3))

@@ -96,8 +96,10 @@ class Protocol:
         links of negligible inertia move at ``qdot = (k / d) (q* - q)``, 5 rad/s per rad of error,
         and press with the effort limit once a contact stops them. PyBullet's position motor is a
         velocity constraint aiming at ``qdot = (position_gain / dt) (q* - q)`` under the same force
-        limit, so ``position_gain = dt k / d`` (0.0208 at 240 Hz) closes at Isaac's rate with the
-        same holding torque. The default gain 0.3 (the survey's PyBullet prototype) closes at
+        limit, so ``position_gain = dt k / d`` (0.0208 at 240 Hz) closes at Isaac's rate under the
+        same torque limit (a blocked joint, though, presses with only a fraction of it: the motor's
+        row is not solved to its limit within 100 solver iterations; ``benchmarks/results/yield.md``).
+        The default gain 0.3 (the survey's PyBullet prototype) closes at
         72 rad/s per rad: fingers hit the object within milliseconds and the impacts make verdicts
         chaotic (see the synthesis notes in the README for the measured effect on robust yields).
         """

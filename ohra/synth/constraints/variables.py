@@ -78,6 +78,9 @@ class GraspVariables:
     clearance_spheres: tuple[Sphere, ...]
     palm_spheres: tuple[Sphere, ...]
     pair_spheres: tuple[Sphere, ...]
+    # every finger capsule's core ends (start, end: 3x1 SX, object frame, m), radius [m] and finger
+    # index, in ``hand.capsule_specs`` order (the exact finger-pair rows separate these)
+    capsules: tuple[tuple[ca.SX, ca.SX, float, int], ...] = ()
 
     @property
     def x(self) -> ca.SX:
@@ -118,26 +121,30 @@ def grasp_variables(hand: HandModel, sdf: SdfQuery, palm_contact: bool = False, 
     for i, k in enumerate(movable):
         q_full[int(k)] = q[i]
     R = R0 @ rotvec_matrix(w)
-    clear, pairs, contacts = _finger_spheres(hand, q_full, R, t, sdf, tips, middle_spheres)
+    clear, pairs, contacts, capsules = _finger_spheres(hand, q_full, R, t, sdf, tips, middle_spheres)
     palm, palm_site = _palm_spheres(hand, R, t)
     if palm_contact:
         contacts.append((palm_site, 0.0, sdf.normal(palm_site)))
     forces = [f[3 * i : 3 * i + 3] for i in range(n_c)]
     sites = tuple(Contact(c, r, n, c - r * n if r else c, fi) for (c, r, n), fi in zip(contacts, forces))
-    return GraspVariables(t, w, q, f, R0, q_pref, R, movable, sdf, sites, tips, palm_contact, tuple(clear), tuple(palm), tuple(pairs))
+    return GraspVariables(t, w, q, f, R0, q_pref, R, movable, sdf, sites, tips, palm_contact, tuple(clear), tuple(palm), tuple(pairs),
+                          tuple(capsules))
 
 
 def _finger_spheres(hand: HandModel, q_full: ca.SX, R: ca.SX, t: ca.SX, sdf: SdfQuery, tips: tuple[str, ...], middle_spheres: str):
-    """(clearance spheres, pair spheres, contact (centre, radius, normal) list) of every finger capsule."""
+    """(clearance spheres, pair spheres, contact (centre, radius, normal) list, core ends) of every
+    finger capsule."""
     caps = hand.capsule_specs
     poses = dict(zip([c[0] for c in caps], frame_transforms(hand, q_full, [c[0] for c in caps]))) if caps else {}
     clear: list[Sphere] = []
     pairs: list[Sphere] = []
     contacts: list[tuple[ca.SX, float, ca.SX]] = []
+    capsules: list[tuple[ca.SX, ca.SX, float, int]] = []
     for link, fi, r, L in caps:
         Rl, pl = poses[link]
         a = R @ (pl + Rl @ ca.SX([0, 0, r])) + t
         b = R @ (pl + Rl @ ca.SX([0, 0, L - r])) + t
+        capsules.append((a, b, r, fi))
         long = L - 2 * r >= LONG_CORE
         mid = 0.5 * (a + b)
         ends = [(a, 0), (mid, 2), (b, 1)] if long else [(a, 0), (b, 1)]
@@ -148,7 +155,7 @@ def _finger_spheres(hand: HandModel, q_full: ca.SX, R: ca.SX, t: ca.SX, sdf: Sdf
         pairs += [Sphere(a, r, fi, link, 0), Sphere(b, r, fi, link, 1)]
         if long and (middle_spheres == "all" or (middle_spheres == "fingertips" and link in tips)):
             pairs.append(Sphere(mid, r, fi, link, 2))  # long links can cross mid-segment
-    return clear, pairs, contacts
+    return clear, pairs, contacts, capsules
 
 
 def _palm_spheres(hand: HandModel, R: ca.SX, t: ca.SX) -> tuple[list[Sphere], ca.SX]:
