@@ -57,19 +57,21 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--workers", type=int, default=1, help="simulation processes")
+    ap.add_argument("--ks", type=int, nargs="+", default=None, help="only these prefix lengths (default 1..len(--data))")
     ap.add_argument("--runs", default=str(ROOT / "runs" / "grasp_scaling"))
+    ap.add_argument("--name", default="grasp_data_scaling", help="results name")
     ap.add_argument("--quiet", action="store_true")
     args = ap.parse_args()
     objs = objects(args.objects)
     protocol = data_protocol(args.data)
     res = {"hands": args.hands, "steps": args.steps, "n": args.n, "objects": [o.name for o in objs], "data": args.data,
            "protocol_note": "isaac-drive" if protocol.position_gain < 0.1 else "see the data's manifest", "rows": []}
-    for k in range(1, len(args.data) + 1):
+    for k in args.ks or range(1, len(args.data) + 1):
         model = trained(f"unified-k{k}", args.data[:k], args.hands, args)
         ev = evaluated(model, f"unified-k{k}", args.hands, objs, False, protocol, args)
         counts = json.loads((Path(args.runs) / f"unified-k{k}" / "metrics.json").read_text())["data"]["per_hand"]
         res["rows"].append({"k": k, "data": args.data[:k], "counts": counts, "per_hand": ev["per_hand"]})
-    write_results("grasp_data_scaling", res, table(res))
+    write_results(args.name, res, table(res))
     print(table(res))
 
 
