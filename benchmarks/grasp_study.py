@@ -9,7 +9,7 @@ only). Evaluation: ``-n`` grasps per (hand, object) with random wrist rotations 
 test with the protocol the data was filtered with (read from the first dataset's manifest);
 the unified model's grasps are replayed on the original URDFs too.
 
-Run: python benchmarks/grasp_study.py --data out/grasp_unified [out/grasp_unified_s1 ...] [--steps 4000] [-n 100]
+Run: python benchmarks/grasp_study.py --data out/grasp_unified [out/grasp_unified_s1 ...] [--steps 12000] [-n 100]
        [--runs runs/grasp_study] [--hands ...] [--objects-file recipes/grasp_eval_objects.yaml]
   -> benchmarks/results/grasp_study.{json,md}
 """
@@ -116,7 +116,7 @@ def main() -> None:
     ap.add_argument("--data", nargs="+", required=True)
     ap.add_argument("--hands", nargs="+", default=list(PAPER))
     ap.add_argument("--objects-file", type=Path, default=ROOT / "recipes" / "grasp_eval_objects.yaml")
-    ap.add_argument("--steps", type=int, default=4000)
+    ap.add_argument("--steps", type=int, default=12000, help="training steps per model (3,000 underfit 1,634 grasps: benchmarks/results/grasp_data_scaling*.md)")
     ap.add_argument("-n", type=int, default=100)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--threads", type=int, default=1)

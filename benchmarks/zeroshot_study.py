@@ -13,7 +13,7 @@ trained on the >= 8 variants, so low-sum variants are unseen by it, as in the pa
 sampled with the conditions of other variants. Fig. 8: condition saliency per parameter group for
 ``leap_3333`` and ``leap_3033`` (``all`` model) -> benchmarks/results/zeroshot_saliency.png.
 
-Run: python benchmarks/zeroshot_study.py --data out/leap_zeroshot [...] [--steps 4000] [-n 100] [--runs runs/zeroshot_study]
+Run: python benchmarks/zeroshot_study.py --data out/leap_zeroshot [...] [--steps 12000] [-n 100] [--runs runs/zeroshot_study]
   -> benchmarks/results/zeroshot_study.{json,md}
 """
 
@@ -96,7 +96,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", nargs="+", required=True)
     ap.add_argument("--objects-file", type=Path, default=ROOT / "recipes" / "grasp_eval_objects.yaml")
-    ap.add_argument("--steps", type=int, default=4000)
+    ap.add_argument("--steps", type=int, default=12000, help="training steps per model (3,000 underfit 1,634 grasps: benchmarks/results/grasp_data_scaling*.md)")
     ap.add_argument("-n", type=int, default=100)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--threads", type=int, default=1)
