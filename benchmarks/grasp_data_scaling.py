@@ -22,7 +22,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import write_results  # noqa: E402
-from grasp_study import ROOT, data_protocol, evaluated, trained  # noqa: E402
+from grasp_study import ROOT, add_run_args, data_protocol, evaluated, protocol_note, trained  # noqa: E402
 
 from ohra.data.recipe import Recipe  # noqa: E402
 
@@ -52,20 +52,13 @@ def main() -> None:
     ap.add_argument("--data", nargs="+", required=True, help="dataset folders, in the order they are added")
     ap.add_argument("--hands", nargs="+", default=["allegro_hand_left", "barrett_hand", "shadow_hand_right"])
     ap.add_argument("--objects", nargs="+", default=DEFAULT_OBJECTS)
-    ap.add_argument("--steps", type=int, default=3000)
-    ap.add_argument("-n", type=int, default=40)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--threads", type=int, default=1)
-    ap.add_argument("--workers", type=int, default=1, help="simulation processes")
     ap.add_argument("--ks", type=int, nargs="+", default=None, help="only these prefix lengths (default 1..len(--data))")
-    ap.add_argument("--runs", default=str(ROOT / "runs" / "grasp_scaling"))
-    ap.add_argument("--name", default="grasp_data_scaling", help="results name")
-    ap.add_argument("--quiet", action="store_true")
+    add_run_args(ap, steps=3000, n=40, runs="grasp_scaling", name="grasp_data_scaling")
     args = ap.parse_args()
     objs = objects(args.objects)
     protocol = data_protocol(args.data)
     res = {"hands": args.hands, "steps": args.steps, "n": args.n, "objects": [o.name for o in objs], "data": args.data,
-           "protocol_note": "isaac-drive" if protocol.position_gain < 0.1 else "see the data's manifest", "rows": []}
+           "protocol_note": protocol_note(protocol), "rows": []}
     for k in args.ks or range(1, len(args.data) + 1):
         model = trained(f"unified-k{k}", args.data[:k], args.hands, args)
         ev = evaluated(model, f"unified-k{k}", args.hands, objs, False, protocol, args)

@@ -111,19 +111,32 @@ def tables(res: dict) -> str:
     return "\n".join(lines)
 
 
+def protocol_note(protocol: Protocol) -> str:
+    """The preset a protocol is, for table captions."""
+    if abs(protocol.position_gain - Protocol.isaac_drive().position_gain) < 1e-12:
+        return "isaac-drive"
+    return "reference" if protocol == Protocol() else "custom (see JSON)"
+
+
+def add_run_args(ap: argparse.ArgumentParser, steps: int, n: int, runs: str, name: str) -> None:
+    """The training / evaluation options every grasp-model study shares (same budget flags)."""
+    ap.add_argument("--steps", type=int, default=steps, help="training steps per model (3,000 underfit 1,634 grasps: "
+                    "benchmarks/results/grasp_data_scaling*.md)")
+    ap.add_argument("-n", type=int, default=n, help="sampled grasps per (hand, object)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--workers", type=int, default=1, help="simulation processes")
+    ap.add_argument("--runs", default=str(ROOT / "runs" / runs))
+    ap.add_argument("--name", default=name, help="results name")
+    ap.add_argument("--quiet", action="store_true")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", nargs="+", required=True)
     ap.add_argument("--hands", nargs="+", default=list(PAPER))
     ap.add_argument("--objects-file", type=Path, default=ROOT / "recipes" / "grasp_eval_objects.yaml")
-    ap.add_argument("--steps", type=int, default=12000, help="training steps per model (3,000 underfit 1,634 grasps: benchmarks/results/grasp_data_scaling*.md)")
-    ap.add_argument("-n", type=int, default=100)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--threads", type=int, default=1)
-    ap.add_argument("--workers", type=int, default=1, help="simulation processes")
-    ap.add_argument("--runs", default=str(ROOT / "runs" / "grasp_study"))
-    ap.add_argument("--name", default="grasp_study", help="results name")
-    ap.add_argument("--quiet", action="store_true")
+    add_run_args(ap, steps=12000, n=100, runs="grasp_study", name="grasp_study")
     args = ap.parse_args()
     objects = eval_objects(args.objects_file)
     protocol = data_protocol(args.data)
@@ -131,8 +144,7 @@ def main() -> None:
     res = {"hands": args.hands, "steps": args.steps, "n": args.n, "objects": [o.name for o in objects], "data": args.data,
            "train_counts": json.loads((Path(args.runs) / "unified" / "metrics.json").read_text())["data"]["per_hand"],
            "protocol": {k: getattr(protocol, k) for k in ("dt", "position_gain", "velocity_gain", "motor_force", "friction")},
-           "protocol_note": "isaac-drive" if abs(protocol.position_gain - Protocol.isaac_drive().position_gain) < 1e-12 else
-           ("reference" if protocol == Protocol() else "custom (see JSON)")}
+           "protocol_note": protocol_note(protocol)}
     res["unified"] = evaluated(unified, "unified", args.hands, objects, False, protocol, args)
     res["unified_original"] = evaluated(unified, "unified", args.hands, objects, True, protocol, args)
     res["specific"] = {}

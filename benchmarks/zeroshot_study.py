@@ -29,7 +29,7 @@ from _common import RESULTS, write_results  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from grasp_study import data_protocol, eval_objects  # noqa: E402
+from grasp_study import add_run_args, data_protocol, eval_objects  # noqa: E402
 from ohra.data.dataset import atomic_write_json  # noqa: E402
 from ohra.learn.grasp import GraspModelConfig, GraspTrainConfig  # noqa: E402
 from ohra.learn.grasp.evaluate import evaluate_model  # noqa: E402
@@ -96,14 +96,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", nargs="+", required=True)
     ap.add_argument("--objects-file", type=Path, default=ROOT / "recipes" / "grasp_eval_objects.yaml")
-    ap.add_argument("--steps", type=int, default=12000, help="training steps per model (3,000 underfit 1,634 grasps: benchmarks/results/grasp_data_scaling*.md)")
-    ap.add_argument("-n", type=int, default=100)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--threads", type=int, default=1)
-    ap.add_argument("--workers", type=int, default=1)
-    ap.add_argument("--runs", default=str(ROOT / "runs" / "zeroshot_study"))
-    ap.add_argument("--name", default="zeroshot_study")
-    ap.add_argument("--quiet", action="store_true")
+    add_run_args(ap, steps=12000, n=100, runs="zeroshot_study", name="zeroshot_study")
     args = ap.parse_args()
     objects = eval_objects(args.objects_file)
     protocol = data_protocol(args.data)
