@@ -107,3 +107,29 @@ def test_a_build_can_top_up_some_hands_and_resume_completes_the_rest(tmp_path):
     assert {k: s["sha256"] for k, s in full["hands"]["leap_0202"]["shards"].items()} == first  # kept, not rebuilt
     with pytest.raises(RecipeError, match="leap_3333 not in the recipe.*leap_2200, leap_0202"):
         build(path, tmp_path / "ds2", progress=False, hands=["leap_3333"])
+
+
+def _manifest(path, shards: dict, split: dict) -> None:
+    import json
+
+    path.mkdir()
+    hands = {h: {"shards": {k: {"n_candidates": 4, "n_solved": 3, "n_sim_passed": 2, "n_grasps": n,
+                                "timing": {"total_s": 36.0, "cpu_s": 18.0}} for k, n in per.items()}}
+             for h, per in shards.items()}
+    (path / "manifest.json").write_text(json.dumps({"format": "ohra-grasps/2", "hands": hands, "split": split}))
+
+
+def test_info_over_several_folders_adds_up_per_hand(tmp_path):
+    from ohra.data.build import combined_summary
+
+    _manifest(tmp_path / "s0", {"a": {"box": 2, "can": 1}, "b": {"box": 5}}, {"train": ["box", "can"], "test": []})
+    _manifest(tmp_path / "s1", {"a": {"box": 3}}, {"train": ["box", "mug"], "test": ["cup"]})
+    s = combined_summary([tmp_path / "s0", tmp_path / "s1"])
+    rows = {r["hand"]: r for r in s["rows"]}
+    assert rows["a"]["grasps"] == 6 and rows["a"]["pairs"] == 3 and rows["b"]["grasps"] == 5
+    assert s["total"]["grasps"] == 11 and abs(s["cpu_hours"] - 4 * 18.0 / 3600) < 1e-12
+    assert s["split"] == {"train": 3, "test": 1}  # distinct object keys, not a sum
+    proc = _data("info", str(tmp_path / "s0"), str(tmp_path / "s1"))
+    assert proc.returncode == 0, proc.stderr
+    total_table = proc.stdout.split("2 folders")[1]
+    assert [ln.split()[5] for ln in total_table.splitlines() if ln.startswith(("a ", "b ", "total"))] == ["6", "5", "11"]

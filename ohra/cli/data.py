@@ -33,8 +33,9 @@ def register(sub: Any) -> None:
     add_backend_options(p)
     p.set_defaults(func=_build)
 
-    p = dsub.add_parser("info", help="summary table of a dataset directory")
-    p.add_argument("dir", help="dataset directory (holds manifest.json)")
+    p = dsub.add_parser("info", help="summary table of dataset directories")
+    p.add_argument("dir", nargs="+", help="dataset directories (each holds manifest.json); with several, a table "
+                   "per directory and their per-hand totals")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=_info)
 
@@ -57,10 +58,15 @@ def _build(args: argparse.Namespace) -> int:
 
 
 def _info(args: argparse.Namespace) -> int:
-    from ohra.data.build import format_summary, summary
+    from ohra.data.build import combined_summary, format_summary, summary
 
-    s = summary(args.dir)
-    print(json.dumps(s, indent=1) if args.json else format_summary(s))
+    if args.json:
+        print(json.dumps(combined_summary(args.dir), indent=1))
+        return 0
+    parts = [format_summary(summary(d)) for d in args.dir]
+    if len(args.dir) > 1:
+        parts.append(format_summary(combined_summary(args.dir)))
+    print("\n\n".join(parts))
     return 0
 
 

@@ -9,6 +9,7 @@ the split, per-pair counts and core-hours. ``summary(out)`` / ``format_summary``
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Sequence
 
 from ohra.data.dataset import read_manifest
 from ohra.data.manifest import object_keys
@@ -70,11 +71,46 @@ def summary(path: str | Path) -> dict:
         row["cpu_s"] = sum(s.get("timing", {}).get("cpu_s", 0.0) for s in sh.values())
         row["no_convergence"] = sorted(k for k, s in sh.items() if s.get("diagnosis"))
         rows.append(row)
-    total = {k: sum(r[k] for r in rows) for k in ("pairs", "candidates", "solved", "sim_passed", "grasps", "grasps_test", "core_s", "cpu_s")}
+    total = {k: sum(r[k] for r in rows) for k in _COUNTS}
     return {"path": str(path), "format": man.get("format"), "ohra_version": man.get("ohra_version"),
             "settings_digest": man.get("settings_digest"), "recipe": (man.get("recipe") or {}).get("name"),
             "core_hours": man.get("core_hours", total["core_s"] / 3600.0), "cpu_hours": total["cpu_s"] / 3600.0, "split": {"train": len(split.get("train", [])), "test": len(test)},
             "rows": rows, "total": total}
+
+
+_COUNTS = ("pairs", "candidates", "solved", "sim_passed", "grasps", "grasps_test", "core_s", "cpu_s")
+
+
+def combined_summary(paths: Sequence[str | Path]) -> dict:
+    """Per-hand totals over several dataset directories (e.g. the seeds of one recipe), in the form of
+    :func:`summary`: counts and hours add up; ``split`` counts the distinct object keys of all of them."""
+    parts = [summary(p) for p in paths]
+    if len(parts) == 1:
+        return parts[0]
+    rows: dict[str, dict] = {}
+    for part in parts:
+        for r in part["rows"]:
+            acc = rows.setdefault(r["hand"], {"hand": r["hand"], **{k: 0 for k in _COUNTS}, "no_convergence": []})
+            for k in _COUNTS:
+                acc[k] += r[k]
+            acc["no_convergence"] += [f"{Path(part['path']).name}/{k}" for k in r["no_convergence"]]
+    split: dict[str, set] = {"train": set(), "test": set()}
+    for p in paths:
+        man_split = (read_manifest(Path(p) / "manifest.json") or {}).get("split") or {}
+        for side in split:
+            split[side].update(man_split.get(side, []))
+    total = {k: sum(r[k] for r in rows.values()) for k in _COUNTS}
+
+    def joined(key: str) -> str | None:
+        vals = sorted({str(x[key]) for x in parts if x[key] is not None})
+        return ", ".join(vals) if vals else None
+
+    return {"path": f"{len(parts)} folders ({', '.join(Path(x['path']).name for x in parts)})",
+            "format": joined("format"), "ohra_version": joined("ohra_version"), "settings_digest": joined("settings_digest"),
+            "recipe": joined("recipe"), "core_hours": sum(x["core_hours"] for x in parts),
+            "cpu_hours": sum(x["cpu_hours"] for x in parts),
+            "split": {k: len(v) for k, v in split.items()}, "rows": list(rows.values()), "total": total,
+            "folders": [x["path"] for x in parts]}
 
 
 def format_summary(s: dict) -> str:
