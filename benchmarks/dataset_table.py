@@ -1,0 +1,99 @@
+"""The table of committed datasets in ``datasets/README.md``, computed from their manifests.
+
+One row per dataset folder: the command that made it (recipe, seed, and ``--hands`` when only some
+of the recipe's hands were built), its status (pairs done of the recipe's, per selected hand),
+robust grasps per hand and CPU-hours; then per-recipe totals per hand. The table sits between the
+``<!-- dataset-table -->`` markers of the README and is replaced in place.
+
+Run: python benchmarks/dataset_table.py [--root datasets] [--check] [--exclude FOLDER ...]
+  --check: exit 1 when the README's table differs from the manifests (nothing written)
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+from ohra.data.build import summary
+from ohra.data.dataset import read_manifest
+from ohra.data.recipe import Recipe
+
+ROOT = Path(__file__).resolve().parents[1]
+START, END = "<!-- dataset-table -->", "<!-- /dataset-table -->"
+
+
+def _seed_key(path: Path) -> tuple:
+    m = re.search(r"_s(\d+)$", path.name)
+    return (path.name[: m.start()] if m else path.name, int(m.group(1)) if m else -1)
+
+
+def rows(root: Path, exclude: tuple[str, ...] = ()) -> tuple[list[str], list[str]]:
+    """(dataset rows, total rows) of the markdown table; ``exclude``: folder names left out."""
+    out, totals = [], defaultdict(lambda: defaultdict(int))
+    cpu = defaultdict(float)
+    for d in sorted((p for p in root.iterdir() if (p / "manifest.json").is_file() and p.name not in exclude), key=_seed_key):
+        man = read_manifest(d / "manifest.json")
+        s = summary(d)
+        name, seed = man["recipe"]["name"], man["settings"]["seed"]
+        recipe = Recipe.load(ROOT / "recipes" / f"{name}.yaml")
+        hands_all = [h for h, _ in recipe.resolve_hands()]
+        n_obj = len(recipe.resolve_objects())
+        built = list(man["hands"])
+        cmd = f"ohra data build recipes/{name}.yaml" + ("" if seed == recipe.seed else f" --seed {seed}") + \
+              f" --out {root.name}/{d.name} --resume"
+        if set(built) != set(hands_all):
+            cmd += " --hands " + " ".join(built) if len(built) <= 4 else f" (--hands: {len(built)} of {len(hands_all)} hands)"
+        per = {r["hand"]: r for r in s["rows"]}
+        done = sum(r["pairs"] for r in per.values())
+        want = n_obj * len(built)
+        status = "complete" if done == want else f"partial: {done} of {want} pairs"
+        if set(built) != set(hands_all):
+            status += f" ({len(built)} of {len(hands_all)} hands)"
+        if len(per) <= 4:
+            kept = ", ".join(f"{h} {per[h]['grasps']}" for h in per)
+        else:
+            kept = f"{s['total']['grasps']} over {len(per)} hands"
+        out.append(f"| `{d.name}` | `{cmd}` | {status} | {kept} | {s['cpu_hours']:.2f} |")
+        for h, r in per.items():
+            totals[name][h] += r["grasps"]
+        cpu[name] += s["cpu_hours"]
+    tot_rows = []
+    for name, per in totals.items():
+        if len(per) <= 4:
+            kept = ", ".join(f"{h} {n:,}" for h, n in per.items())
+        else:
+            kept = f"{sum(per.values()):,} over {len(per)} hands"
+        tot_rows.append(f"| **{name}, all folders** | `ohra data info {root.name}/{name}_s*` | | {kept} | {cpu[name]:.2f} |")
+    return out, tot_rows
+
+
+def table(root: Path, exclude: tuple[str, ...] = ()) -> str:
+    data, tot = rows(root, exclude)
+    head = ["| folder | made by | status | robust grasps | CPU-hours |", "|---|---|---|---|---|"]
+    return "\n".join([START, *head, *data, *tot, END])
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--root", type=Path, default=ROOT / "datasets")
+    ap.add_argument("--check", action="store_true")
+    ap.add_argument("--exclude", nargs="+", default=[], help="folders to leave out (e.g. one still being built)")
+    args = ap.parse_args()
+    readme = args.root / "README.md"
+    text = readme.read_text()
+    if START not in text or END not in text:
+        print(f"{readme}: no {START} ... {END} markers", file=sys.stderr)
+        return 2
+    new = text[: text.index(START)] + table(args.root, tuple(args.exclude)) + text[text.index(END) + len(END):]
+    if args.check:
+        return 0 if new == text else 1
+    readme.write_text(new)
+    print(table(args.root, tuple(args.exclude)))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
