@@ -46,3 +46,20 @@ def test_another_data_seed_keeps_the_object_split():
     s1 = r.with_seed(11)
     assert s1.seed == 11 and s1.synth_settings().seed == 11
     assert s1.split_objects(keys)["test"] == r.split_objects(keys)["test"]
+
+
+def test_no_committed_dataset_holds_an_evaluation_object(objects_dir):
+    """The committed training data itself, not only its recipes: no shard's object is an evaluation
+    object, by name or by mesh hash."""
+    import json
+
+    test = _eval_objects()
+    names, hashes = {o.name for o in test}, {o.mesh_hash for o in test}
+    manifests = sorted((RECIPES.parent / "datasets").glob("*/manifest.json"))
+    assert manifests
+    for path in manifests:
+        man = json.loads(path.read_text())
+        for hand, entry in man["hands"].items():
+            for key, shard in entry["shards"].items():
+                obj = shard["object"]
+                assert obj["name"] not in names and obj["mesh_hash"] not in hashes, f"{path.parent.name}: {hand}/{key}"
