@@ -1,6 +1,8 @@
 """The grasp-model study of issue 13 (paper Tables 4-6): unified vs hand-specific models, success on
 unseen objects, canonical -> original replay. Resumable: every training run and every evaluation
-is cached under ``--runs`` and reused (an interrupted study loses at most one unfinished step).
+is cached under ``--runs`` and reused when it was made with the same settings (``_study_cache.py``:
+a run of other data, hands or steps stops the study with one line; an evaluation of other objects,
+grasps per pair or protocol is redone); an interrupted study loses at most one unfinished step.
 
 Models, all with the same architecture, steps, batch size and seed (the same budget):
 ``unified`` (every hand of the data, VAE condition) and ``specific-<hand>`` (one hand's grasps
@@ -25,11 +27,11 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import write_results  # noqa: E402
+from _study_cache import cached, claim_run, eval_key, run_key, store, train_key  # noqa: E402
 
 import numpy as np  # noqa: E402
 import yaml  # noqa: E402
 
-from ohra.data.dataset import atomic_write_json  # noqa: E402
 from ohra.data.recipe import Recipe  # noqa: E402
 from ohra.learn.grasp import GraspModelConfig, GraspTrainConfig  # noqa: E402
 from ohra.learn.grasp.evaluate import evaluate_model  # noqa: E402
@@ -67,7 +69,7 @@ def eval_objects(path: Path) -> list:
 def trained(name: str, data: list[str], hands: list[str], args) -> object:
     """The model ``name`` trained on ``hands`` (resumed or reused when its run exists)."""
     run = Path(args.runs) / name
-    if (run / "model.pt").exists() and json.loads((run / "metrics.json").read_text()).get("steps") == args.steps:
+    if claim_run(run, train_key(data, hands, args.steps, args.seed, "vae")):
         return load_grasp_model(run)
     tcfg = GraspTrainConfig(steps=args.steps, seed=args.seed, threads=args.threads, hands=tuple(hands))
     res = train_grasp(data, GraspModelConfig(condition="vae"), tcfg, run, resume=(run / "checkpoints" / "last.pt").exists(),
@@ -77,16 +79,17 @@ def trained(name: str, data: list[str], hands: list[str], args) -> object:
 
 def evaluated(model, key: str, hands: list[str], objects: list, original: bool, protocol: Protocol, args) -> dict:
     path = Path(args.runs) / f"eval_{key}{'_original' if original else ''}.json"
-    if path.exists():
-        return json.loads(path.read_text())
+    ekey = eval_key(run_key(Path(args.runs) / key), hands=hands, objects=[o.name for o in objects], n=args.n, seed=0,
+                    original=original, protocol=protocol)
+    if (hit := cached(path, ekey)) is not None:
+        return hit
     t0 = time.perf_counter()
     rep = evaluate_model(model, hands, objects, n=args.n, seed=0, original=original, protocol=protocol, workers=args.workers)
     out = {"per_hand": rep.per_hand(), "pairs": [{"hand": p.hand, "object": p.object, "successes": int(p.success.sum()),
                                                   "n": int(len(p.success))} for p in rep.pairs],
            "success": {p.hand + "/" + p.object: p.success.astype(int).tolist() for p in rep.pairs},
            "seconds": time.perf_counter() - t0}
-    atomic_write_json(path, out)
-    return out
+    return store(path, ekey, out)
 
 
 def paired_change(a: dict, b: dict, hand: str) -> tuple[float, float]:

@@ -1,5 +1,6 @@
 """The zero-shot study of issue 14 (paper Tables 7-9, Fig. 8) on the LEAP variants. Resumable like
-``grasp_study.py``: training runs and evaluations are cached under ``--runs``.
+``grasp_study.py``: training runs and evaluations are cached under ``--runs``, keyed by their
+settings (``_study_cache.py``).
 
 Models (``params`` condition, same architecture, steps, batch and seed):
 * ``all``: every variant of the data with digit sum >= 8;
@@ -26,11 +27,11 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import RESULTS, write_results  # noqa: E402
+from _study_cache import cached, claim_run, eval_key, run_key, store, train_key  # noqa: E402
 
 import numpy as np  # noqa: E402
 
 from grasp_study import add_run_args, data_protocol, eval_objects  # noqa: E402
-from ohra.data.dataset import atomic_write_json  # noqa: E402
 from ohra.learn.grasp import GraspModelConfig, GraspTrainConfig  # noqa: E402
 from ohra.learn.grasp.evaluate import evaluate_model  # noqa: E402
 from ohra.learn.grasp.model import load_grasp_model  # noqa: E402
@@ -60,7 +61,7 @@ def data_hands(data: list[str]) -> list[str]:
 
 def trained(name: str, data: list[str], hands: list[str], test_hands: tuple, args):
     run = Path(args.runs) / name
-    if (run / "model.pt").exists() and json.loads((run / "metrics.json").read_text()).get("steps") == args.steps:
+    if claim_run(run, train_key(data, hands, args.steps, args.seed, "params", test_hands)):
         return load_grasp_model(run), json.loads((run / "metrics.json").read_text())["data"]["per_hand"]
     tcfg = GraspTrainConfig(steps=args.steps, seed=args.seed, threads=args.threads, hands=tuple(hands), test_hands=test_hands)
     res = train_grasp(data, GraspModelConfig(condition="params"), tcfg, run,
@@ -71,8 +72,10 @@ def trained(name: str, data: list[str], hands: list[str], test_hands: tuple, arg
 def success(model, key: str, hand: str, objects: list, protocol, args, condition_hand: str | None = None) -> dict:
     """Success of ``hand`` sampled by ``model`` (conditioned on ``condition_hand`` if given), cached."""
     path = Path(args.runs) / f"eval_{key}_{hand}{'_as_' + condition_hand if condition_hand else ''}.json"
-    if path.exists():
-        return json.loads(path.read_text())
+    ekey = eval_key(run_key(Path(args.runs) / key), hand=hand, condition_hand=condition_hand,
+                    objects=[o.name for o in objects], n=args.n, seed=0, protocol=protocol)
+    if (hit := cached(path, ekey)) is not None:
+        return hit
     if condition_hand is None:
         rep = evaluate_model(model, [hand], objects, n=args.n, seed=0, protocol=protocol, workers=args.workers)
         ok = np.concatenate([p.success for p in rep.pairs])
@@ -84,8 +87,7 @@ def success(model, key: str, hand: str, objects: list, protocol, args, condition
                 oks.append(ev.evaluate(g).success)
         ok = np.concatenate(oks)
     out = {"n": int(len(ok)), "successes": int(ok.sum()), "success_rate": float(ok.mean())}
-    atomic_write_json(path, out)
-    return out
+    return store(path, ekey, out)
 
 
 def pct(r: dict) -> str:

@@ -1,0 +1,85 @@
+"""Cache keys of the grasp-model studies: a cached training run or evaluation is reused only when it
+was made with the same settings.
+
+A training run directory holds ``study_key.json`` (data folders and their manifests' content hash,
+hands, held-out hands, steps, seed, condition); a run made with other settings, or by a script that
+wrote no key, stops the study with one line naming the difference instead of being reused. An
+evaluation JSON carries its key (the model's key, hands, objects, grasps per pair, seed, protocol,
+original or canonical); one with another key is recomputed.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import asdict, is_dataclass
+from pathlib import Path
+from typing import Any
+
+from ohra.data.dataset import atomic_write_json
+
+KEY_FILE = "study_key.json"
+
+
+def data_fingerprint(data: list[str]) -> list[str]:
+    """``<folder>:<sha256 of its manifest>`` per dataset folder: a grown or rebuilt dataset differs."""
+    out = []
+    for d in data:
+        digest = hashlib.sha256((Path(d) / "manifest.json").read_bytes()).hexdigest()[:16]
+        out.append(f"{Path(d).name}:{digest}")
+    return out
+
+
+def _jsonable(x: Any) -> Any:
+    return json.loads(json.dumps(asdict(x) if is_dataclass(x) else x, default=str))
+
+
+def train_key(data: list[str], hands: list[str], steps: int, seed: int, condition: str, test_hands: tuple = ()) -> dict:
+    return _jsonable({"data": data_fingerprint(data), "hands": list(hands), "test_hands": list(test_hands),
+                      "steps": int(steps), "seed": int(seed), "condition": condition})
+
+
+def _differences(old: dict, new: dict) -> str:
+    keys = [k for k in sorted(set(old) | set(new)) if old.get(k) != new.get(k)]
+    return ", ".join(f"{k}: {old.get(k)!r} -> {new.get(k)!r}"[:200] for k in keys)
+
+
+def claim_run(run: Path, key: dict) -> bool:
+    """Tie ``run`` to ``key``. True when the run is complete and may be reused; False when it must be
+    trained (new, or resumed from its checkpoint). Exits with one line when ``run`` belongs to other settings."""
+    f = run / KEY_FILE
+    if f.exists():
+        old = json.loads(f.read_text())
+        if old != key:
+            raise SystemExit(f"{run}: cached with other settings ({_differences(old, key)}); "
+                             "delete it or pass another --runs")
+        return (run / "model.pt").exists()
+    if run.exists() and any(run.iterdir()):
+        raise SystemExit(f"{run}: a run without {KEY_FILE} (made by an older script, settings unknown); "
+                         "delete it or pass another --runs")
+    run.mkdir(parents=True, exist_ok=True)
+    atomic_write_json(f, key)
+    return False
+
+
+def run_key(run: Path) -> dict:
+    """The key of a claimed run (for the keys of its evaluations)."""
+    return json.loads((run / KEY_FILE).read_text())
+
+
+def eval_key(model_key: dict, **settings: Any) -> dict:
+    return _jsonable({"model": model_key, **settings})
+
+
+def cached(path: Path, key: dict) -> dict | None:
+    """The cached result at ``path`` when it was made with ``key``, else None."""
+    if not path.exists():
+        return None
+    out = json.loads(path.read_text())
+    return out if out.get("key") == key else None
+
+
+def store(path: Path, key: dict, result: dict) -> dict:
+    out = {**result, "key": key}
+    atomic_write_json(path, out)
+    return out
