@@ -15,6 +15,7 @@ import argparse
 import re
 import sys
 from collections import defaultdict
+from functools import lru_cache
 from pathlib import Path
 
 from ohra.data.build import summary
@@ -30,6 +31,20 @@ def _seed_key(path: Path) -> tuple:
     return (path.name[: m.start()] if m else path.name, int(m.group(1)) if m else -1)
 
 
+def _kept(per_hand: dict[str, int]) -> str:
+    """Per-hand grasp counts, or their total when there are too many hands to list."""
+    if len(per_hand) <= 4:
+        return ", ".join(f"{h} {n:,}" for h, n in per_hand.items())
+    return f"{sum(per_hand.values()):,} over {len(per_hand)} hands"
+
+
+@lru_cache(maxsize=None)
+def _recipe(name: str) -> tuple[Recipe, tuple[str, ...], int]:
+    """(recipe, its hand names, its object count), resolved once per recipe."""
+    recipe = Recipe.load(ROOT / "recipes" / f"{name}.yaml")
+    return recipe, tuple(h for h, _ in recipe.resolve_hands()), len(recipe.resolve_objects())
+
+
 def rows(root: Path, exclude: tuple[str, ...] = ()) -> tuple[list[str], list[str]]:
     """(dataset rows, total rows) of the markdown table; ``exclude``: folder names left out."""
     out, totals = [], defaultdict(lambda: defaultdict(int))
@@ -38,35 +53,23 @@ def rows(root: Path, exclude: tuple[str, ...] = ()) -> tuple[list[str], list[str
         man = read_manifest(d / "manifest.json")
         s = summary(d)
         name, seed = man["recipe"]["name"], man["settings"]["seed"]
-        recipe = Recipe.load(ROOT / "recipes" / f"{name}.yaml")
-        hands_all = [h for h, _ in recipe.resolve_hands()]
-        n_obj = len(recipe.resolve_objects())
+        recipe, hands_all, n_obj = _recipe(name)
         built = list(man["hands"])
+        some_hands = set(built) != set(hands_all)
         cmd = f"ohra data build recipes/{name}.yaml" + ("" if seed == recipe.seed else f" --seed {seed}") + \
               f" --out {root.name}/{d.name} --resume"
-        if set(built) != set(hands_all):
-            cmd += " --hands " + " ".join(built) if len(built) <= 4 else f" (--hands: {len(built)} of {len(hands_all)} hands)"
-        per = {r["hand"]: r for r in s["rows"]}
-        done = sum(r["pairs"] for r in per.values())
-        want = n_obj * len(built)
+        per = {r["hand"]: r["grasps"] for r in s["rows"]}
+        done, want = s["total"]["pairs"], n_obj * len(built)
         status = "complete" if done == want else f"partial: {done} of {want} pairs"
-        if set(built) != set(hands_all):
+        if some_hands:
+            cmd += " --hands " + " ".join(built) if len(built) <= 4 else f" (--hands: {len(built)} of {len(hands_all)} hands)"
             status += f" ({len(built)} of {len(hands_all)} hands)"
-        if len(per) <= 4:
-            kept = ", ".join(f"{h} {per[h]['grasps']}" for h in per)
-        else:
-            kept = f"{s['total']['grasps']} over {len(per)} hands"
-        out.append(f"| `{d.name}` | `{cmd}` | {status} | {kept} | {s['cpu_hours']:.2f} |")
-        for h, r in per.items():
-            totals[name][h] += r["grasps"]
+        out.append(f"| `{d.name}` | `{cmd}` | {status} | {_kept(per)} | {s['cpu_hours']:.2f} |")
+        for h, n in per.items():
+            totals[name][h] += n
         cpu[name] += s["cpu_hours"]
-    tot_rows = []
-    for name, per in totals.items():
-        if len(per) <= 4:
-            kept = ", ".join(f"{h} {n:,}" for h, n in per.items())
-        else:
-            kept = f"{sum(per.values()):,} over {len(per)} hands"
-        tot_rows.append(f"| **{name}, all folders** | `ohra data info {root.name}/{name}_s*` | | {kept} | {cpu[name]:.2f} |")
+    tot_rows = [f"| **{name}, all folders** | `ohra data info {root.name}/{name}_s*` | | {_kept(per)} | {cpu[name]:.2f} |"
+                for name, per in totals.items()]
     return out, tot_rows
 
 
@@ -87,11 +90,12 @@ def main() -> int:
     if START not in text or END not in text:
         print(f"{readme}: no {START} ... {END} markers", file=sys.stderr)
         return 2
-    new = text[: text.index(START)] + table(args.root, tuple(args.exclude)) + text[text.index(END) + len(END):]
+    tab = table(args.root, tuple(args.exclude))
+    new = text[: text.index(START)] + tab + text[text.index(END) + len(END):]
     if args.check:
         return 0 if new == text else 1
     readme.write_text(new)
-    print(table(args.root, tuple(args.exclude)))
+    print(tab)
     return 0
 
 

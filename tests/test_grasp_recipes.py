@@ -51,15 +51,14 @@ def test_another_data_seed_keeps_the_object_split():
 def test_no_committed_dataset_holds_an_evaluation_object(objects_dir):
     """The committed training data itself, not only its recipes: no shard's object is an evaluation
     object, by name or by mesh hash."""
-    import json
+    from ohra.data.dataset import read_manifest
 
     test = _eval_objects()
     names, hashes = {o.name for o in test}, {o.mesh_hash for o in test}
     manifests = sorted((RECIPES.parent / "datasets").glob("*/manifest.json"))
     assert manifests
     for path in manifests:
-        man = json.loads(path.read_text())
-        for hand, entry in man["hands"].items():
+        for hand, entry in read_manifest(path)["hands"].items():
             for key, shard in entry["shards"].items():
                 obj = shard["object"]
                 assert obj["name"] not in names and obj["mesh_hash"] not in hashes, f"{path.parent.name}: {hand}/{key}"

@@ -52,12 +52,22 @@ def _select(resolved: list[tuple], names: list[str] | None, r: Recipe) -> list[t
     return [h for h in resolved if h[0] in set(names)]
 
 
-def summary(path: str | Path) -> dict:
-    """Per-hand and total counts of a dataset directory, with core-hours and the object split."""
-    path = Path(path)
+_COUNTS = ("pairs", "candidates", "solved", "sim_passed", "grasps", "grasps_test", "core_s", "cpu_s")
+
+
+def _manifest(path: Path) -> dict:
     man = read_manifest(path / "manifest.json")
     if man is None:
         raise DatasetError(f"{path}: no manifest.json (not an ohra grasp dataset)")
+    return man
+
+
+def summary(path: str | Path) -> dict:
+    """Per-hand and total counts of a dataset directory, with core-hours and the object split."""
+    return _summarise(Path(path), _manifest(Path(path)))
+
+
+def _summarise(path: Path, man: dict) -> dict:
     split = man.get("split") or {}
     test = set(split.get("test", []))
     rows = []
@@ -78,13 +88,11 @@ def summary(path: str | Path) -> dict:
             "rows": rows, "total": total}
 
 
-_COUNTS = ("pairs", "candidates", "solved", "sim_passed", "grasps", "grasps_test", "core_s", "cpu_s")
-
-
 def combined_summary(paths: Sequence[str | Path]) -> dict:
     """Per-hand totals over several dataset directories (e.g. the seeds of one recipe), in the form of
     :func:`summary`: counts and hours add up; ``split`` counts the distinct object keys of all of them."""
-    parts = [summary(p) for p in paths]
+    mans = [(Path(p), _manifest(Path(p))) for p in paths]
+    parts = [_summarise(p, man) for p, man in mans]
     if len(parts) == 1:
         return parts[0]
     rows: dict[str, dict] = {}
@@ -95,8 +103,8 @@ def combined_summary(paths: Sequence[str | Path]) -> dict:
                 acc[k] += r[k]
             acc["no_convergence"] += [f"{Path(part['path']).name}/{k}" for k in r["no_convergence"]]
     split: dict[str, set] = {"train": set(), "test": set()}
-    for p in paths:
-        man_split = (read_manifest(Path(p) / "manifest.json") or {}).get("split") or {}
+    for _, man in mans:
+        man_split = man.get("split") or {}
         for side in split:
             split[side].update(man_split.get(side, []))
     total = {k: sum(r[k] for r in rows.values()) for k in _COUNTS}
