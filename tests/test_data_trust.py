@@ -47,6 +47,24 @@ def test_resume_recomputes_a_truncated_shard(tmp_path):
     assert GraspDataset(tmp_path).grasps().shape[1] == 31
 
 
+def test_resume_keeps_a_procedural_shard_made_on_another_cpu_but_not_a_changed_mesh(tmp_path):
+    """Procedural vertices once differed in the last bit between CPUs (NumPy's AVX-512 power): a shard
+    whose procedural object has another hash but the same geometry is kept on resume; a real mesh with
+    another hash, or a procedural object of other geometry, is recomputed."""
+    from ohra.data.manifest import shard_complete
+
+    (tmp_path / "s.npz").write_bytes(b"grasps")
+    sh = lambda obj, **over: {"file": "s.npz", "sha256": file_digest(tmp_path / "s.npz"), "object": {**obj, **over}}
+    proc = ObjectModel.procedural("ellipsoid", 2).describe()
+    other_cpu = dict(mesh_hash="0" * 16, body_hash="1" * 16)
+    assert shard_complete(tmp_path, sh(proc), proc)
+    assert shard_complete(tmp_path, sh(proc, **other_cpu), proc)
+    assert not shard_complete(tmp_path, sh(proc, **other_cpu, volume_m3=proc["volume_m3"] * (1 + 1e-6)), proc)
+    real = ObjectModel.builtin("box").describe()
+    assert shard_complete(tmp_path, sh(real), real)
+    assert not shard_complete(tmp_path, sh(real, **other_cpu), real)
+
+
 def test_resume_with_other_settings_is_refused_and_overwrite_leaves_no_orphans(tmp_path):
     objs = [ObjectModel.builtin("box"), ObjectModel.builtin("sphere")]
     synthesize(HAND, objs, tmp_path, FAST, progress=False)

@@ -85,6 +85,29 @@ def test_procedural_training_objects_are_rebuilt_from_the_manifest(tmp_path, leg
                                                  ObjectModel.procedural("ellipsoid", 7).mesh_hash}
 
 
+def test_procedural_objects_made_on_another_cpu_load_by_geometry_not_by_last_bits(tmp_path):
+    """A procedural object's vertices once depended on the CPU's NumPy kernels in the last bit, so the
+    committed manifests carry hashes this machine may not reproduce: a procedural entry whose hash
+    differs but whose faces, extents and volume agree (1e-9 relative) is the same object; a real mesh
+    is still held to its hash, and a procedural entry of other geometry is refused."""
+    from ohra.learn.grasp.data import load_dataset_object
+
+    obj = ObjectModel.procedural("superquadric", 5)
+    desc = obj.describe()
+    info = {k: desc[k] for k in ("source", "faces", "extents_m", "volume_m3")} | {"mesh_hash": "0" * 16}
+    assert load_dataset_object(tmp_path, "superquadric-5", info, {}).mesh_hash == obj.mesh_hash
+    legacy = dict(info, source="builtin")  # datasets before sources named procedural shapes
+    assert load_dataset_object(tmp_path, "superquadric-5", legacy, {}).name == "superquadric-5"
+    for key, value in [("volume_m3", info["volume_m3"] * (1 + 1e-6)), ("faces", info["faces"] + 2),
+                       ("extents_m", [info["extents_m"][0] * (1 + 1e-6), *info["extents_m"][1:]])]:
+        with pytest.raises(DatasetError, match="has mesh hash"):
+            load_dataset_object(tmp_path, "superquadric-5", dict(info, **{key: value}), {})
+    sphere = ObjectModel.builtin("sphere").describe()
+    with pytest.raises(DatasetError, match="has mesh hash"):
+        load_dataset_object(tmp_path, "sphere", {k: sphere[k] for k in ("source", "faces", "extents_m", "volume_m3")}
+                            | {"mesh_hash": "0" * 16}, {})
+
+
 def test_check_disjoint_raises_on_overlap():
     check_disjoint({"box": "aa"}, {"sphere": "bb"})
     with pytest.raises(DatasetError, match="names \\['box'\\]"):

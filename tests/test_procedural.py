@@ -51,3 +51,25 @@ def test_procedural_objects_on_the_command_line():
                      ("procedural:box:x", "expected procedural:FAMILY:SEED")]:
         with pytest.raises(ObjectError, match=msg):
             resolve_objects([bad])
+
+
+
+def test_superquadric_powers_go_through_the_c_library_not_numpys_simd_kernels(monkeypatch):
+    """NumPy's ``power`` takes other kernels on AVX-512 CPUs (last-bit differences), so a procedural mesh,
+    and its hash in every dataset manifest, depended on the machine that made it. Every power of the
+    superquadric goes through ``_pow`` (libm's ``pow``, the same bits everywhere): an ulp planted there
+    must show in the vertices, and ``_pow`` must equal ``math.pow`` bit for bit."""
+    import itertools
+    import math
+
+    import ohra.objects.procedural as proc
+
+    x = np.random.default_rng(0).uniform(1e-3, 3.0, 500)
+    assert np.array_equal(proc._pow(x, 0.7361), np.array([math.pow(v, 0.7361) for v in x]))
+    args = (np.array([0.05, 0.04, 0.03]), 0.6, 1.3)
+    want = proc.superquadric_mesh(*args).vertices.copy()
+    real = proc._pow
+    for planted in range(5):  # one ulp on each of the five powers in turn
+        calls = itertools.count()
+        monkeypatch.setattr(proc, "_pow", lambda v, p: (lambda r, i: np.nextafter(r, np.inf) if i == planted else r)(real(v, p), next(calls)))
+        assert not np.array_equal(proc.superquadric_mesh(*args).vertices, want), planted

@@ -22,6 +22,7 @@ from pathlib import Path
 
 from ohra.data.dataset import file_digest, read_manifest
 from ohra.errors import DatasetError
+from ohra.objects.procedural import same_procedural_object
 
 FORMAT = "ohra-grasps/2"
 
@@ -103,11 +104,13 @@ def hand_entry(root: Path, manifest: dict, name: str, params_dict: dict, phash: 
 
 
 def shard_complete(root: Path, sh: dict | None, obj_desc: dict) -> bool:
-    """Whether a manifest shard entry can be kept on resume: same object, file present, same sha256."""
+    """Whether a manifest shard entry can be kept on resume: same object (same hashes, or the same
+    procedural object made on another CPU), file present, same sha256."""
     if not sh:
         return False
     o = sh.get("object", {})
-    if o.get("mesh_hash") != obj_desc["mesh_hash"] or o.get("body_hash") != obj_desc["body_hash"]:
+    same = o.get("mesh_hash") == obj_desc["mesh_hash"] and o.get("body_hash") == obj_desc["body_hash"]
+    if not (same or same_procedural_object(o, obj_desc)):
         return False
     f = root / sh.get("file", "")
     return f.is_file() and bool(sh.get("sha256")) and file_digest(f) == sh["sha256"]

@@ -21,6 +21,8 @@ have no closed-form distance and are simulated and grasped as the convex hull of
 from __future__ import annotations
 
 import hashlib
+import math
+from typing import Mapping
 
 import numpy as np
 import trimesh
@@ -42,6 +44,17 @@ def _prim(kind: str, size) -> dict:
     return {"type": kind, "size": tuple(float(x) for x in size), "pos": (0.0, 0.0, 0.0)}
 
 
+def _pow(x: np.ndarray, p: float) -> np.ndarray:
+    """``x ** p`` elementwise through the C library's ``pow``, the same bits on every x86-64 CPU.
+
+    NumPy dispatches ``power`` to SIMD kernels by CPU (AVX-512 machines use SVML, others libm), and
+    the two differ in the last bit: the superquadric's vertices, hence its mesh hash, depended on the
+    machine that made it (a dataset built on one could not be loaded on another). A few thousand
+    scalar calls cost well under a millisecond.
+    """
+    return np.fromiter((math.pow(float(v), p) for v in np.ravel(x)), dtype=np.float64, count=np.size(x)).reshape(np.shape(x))
+
+
 def superquadric_mesh(axes: np.ndarray, e1: float, e2: float, subdivisions: int = 3) -> trimesh.Trimesh:
     """Watertight mesh of the superquadric ``(|x/a|^(2/e2) + |y/b|^(2/e2))^(e2/e1) + |z/c|^(2/e1) = 1``:
     an icosphere's vertices pushed radially onto the surface (a superquadric is star-shaped, so the
@@ -49,9 +62,9 @@ def superquadric_mesh(axes: np.ndarray, e1: float, e2: float, subdivisions: int 
     ico = trimesh.creation.icosphere(subdivisions=subdivisions, radius=1.0)
     u = np.asarray(ico.vertices)
     a, b, c = axes
-    f = (np.abs(u[:, 0] / a) ** (2 / e2) + np.abs(u[:, 1] / b) ** (2 / e2)) ** (e2 / e1) + np.abs(u[:, 2] / c) ** (2 / e1)
+    f = _pow(_pow(np.abs(u[:, 0] / a), 2 / e2) + _pow(np.abs(u[:, 1] / b), 2 / e2), e2 / e1) + _pow(np.abs(u[:, 2] / c), 2 / e1)
     # the inside-outside function is homogeneous of degree 2/e1 along a ray: F(s u) = s^(2/e1) F(u)
-    v = u * (f ** (-e1 / 2))[:, None]
+    v = u * _pow(f, -e1 / 2)[:, None]
     return trimesh.Trimesh(v, ico.faces, process=False)
 
 
@@ -92,3 +105,26 @@ def procedural_objects(family: str, count: int, seed: int = 0, density: float | 
     from ohra.objects.model import DEFAULT_DENSITY, ObjectModel
 
     return [ObjectModel.procedural(family, s, density or DEFAULT_DENSITY) for s in range(int(seed), int(seed) + int(count))]
+
+
+def same_procedural_object(a: Mapping, b: Mapping, rtol: float = 1e-9) -> bool:
+    """Whether two object descriptions (manifest entries: ``source``, ``faces``, ``extents_m``,
+    ``volume_m3``) are the same procedural object: same ``procedural:FAMILY:SEED``, face count, and
+    extents and volume within relative ``rtol``.
+
+    A procedural object is defined by its family and seed. Its vertices' last bits depended on the
+    CPU that generated them before :func:`superquadric_mesh` used :func:`_pow`, so manifests made on
+    an AVX-512 machine carry mesh hashes others cannot reproduce; for these objects the geometry
+    decides. Real meshes are never matched this way (their hash is exact on every machine).
+    """
+    src = str(a.get("source", ""))
+    if not src.startswith("procedural:") or src != str(b.get("source", "")):
+        return False
+    try:
+        ea, eb = np.asarray(a["extents_m"], float), np.asarray(b["extents_m"], float)
+        va, vb = float(a["volume_m3"]), float(b["volume_m3"])
+        same_faces = int(a["faces"]) == int(b["faces"])
+    except (KeyError, TypeError, ValueError):
+        return False
+    return (same_faces and ea.shape == eb.shape == (3,) and bool(np.allclose(ea, eb, rtol=rtol, atol=0.0))
+            and abs(va - vb) <= rtol * abs(vb))

@@ -28,6 +28,7 @@ from ohra.data import GraspDataset
 from ohra.errors import DatasetError, ObjectError, OhraError
 from ohra.learn.grasp.config import GraspTrainConfig
 from ohra.objects.model import ObjectModel
+from ohra.objects.procedural import same_procedural_object
 
 SURFACE_SEED = 0
 
@@ -79,6 +80,12 @@ def _locate(root: Path, src: str) -> Path:
     return p
 
 
+def _procedural_entry(name: str, info: Mapping) -> Mapping:
+    """``info`` with a legacy ``builtin`` source of a procedural shape named ``procedural:FAMILY:SEED``."""
+    legacy = _procedural_name(name) if info.get("source") == "builtin" else None
+    return dict(info, source=f"procedural:{legacy[0]}:{legacy[1]}") if legacy else info
+
+
 def load_dataset_object(root: Path, name: str, info: dict, given: Mapping[str, ObjectModel]) -> ObjectModel:
     """The object ``name`` of the grasp dataset in ``root``, as its manifest entry ``info`` describes it.
 
@@ -86,7 +93,8 @@ def load_dataset_object(root: Path, name: str, info: dict, given: Mapping[str, O
     (``procedural:FAMILY:SEED``, ``builtin``, or a mesh/URDF path, relative paths looked up beside
     the dataset and under :func:`ohra.paths.objects_root`). Raises :class:`DatasetError` naming
     ``root`` and the object when it cannot be loaded, or when its mesh hash differs from
-    ``info["mesh_hash"]`` (the object the grasps were made for has changed).
+    ``info["mesh_hash"]`` (the object the grasps were made for has changed; for a procedural object
+    the recorded geometry decides, see :func:`~ohra.objects.procedural.same_procedural_object`).
     """
     want = str(info.get("mesh_hash", ""))
     if name in given:
@@ -106,7 +114,8 @@ def load_dataset_object(root: Path, name: str, info: dict, given: Mapping[str, O
                 raise ObjectError("the manifest gives no source")
         except OhraError as exc:
             raise DatasetError(f"{root}: cannot load training object {name!r} ({exc}); pass it in `objects`") from None
-    if want and obj.mesh_hash != want:
+    if want and obj.mesh_hash != want and not same_procedural_object(_procedural_entry(name, info), {
+            "source": obj._source_spec(), "faces": len(obj.mesh.faces), "extents_m": obj.extents, "volume_m3": obj.volume}):
         raise DatasetError(f"{root}: object {name!r} has mesh hash {obj.mesh_hash}, the dataset was made with {want}")
     return obj
 
