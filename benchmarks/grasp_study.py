@@ -13,7 +13,7 @@ the unified model's grasps are replayed on the original URDFs too.
 
 Run: python benchmarks/grasp_study.py --data out/grasp_unified [out/grasp_unified_s1 ...] [--steps 12000] [-n 100]
        [--runs runs/grasp_study] [--hands ...] [--objects-file recipes/grasp_eval_objects.yaml]
-  -> benchmarks/results/grasp_study.{json,md}
+  -> benchmarks/results/grasp_study.{json,md}, grasp_study_sheet.png (contact sheet), grasp_study_scene.html (meshcat)
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from dataclasses import replace
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import write_results  # noqa: E402
+from _common import RESULTS, write_results  # noqa: E402
 from _study_cache import cached, claim_run, eval_key, run_key, store, train_key  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -124,6 +124,8 @@ def tables(res: dict) -> str:
                      f"{c:+.1f} ± {s:.1f} | {PAPER_REPLAY.get(h, '-')} |")
     lines += ["", f"Budget: {res['steps']} steps per model; evaluation {res['n']} grasps per (hand, object) on "
               f"{len(res['objects'])} unseen objects; protocol {res['protocol_note']}."]
+    if "pictures" in res:
+        lines += ["", f"Pictures: `{res['pictures']['sheet']}` (contact sheet), `{res['pictures']['scene']}` (meshcat)."]
     return "\n".join(lines)
 
 
@@ -147,6 +149,52 @@ def add_run_args(ap: argparse.ArgumentParser, steps: int, n: int, runs: str, nam
     ap.add_argument("--quiet", action="store_true")
 
 
+def pictures(model, hands: list[str], objects: list, ev: dict, name: str, per_row: int = 8) -> dict:
+    """Contact sheet (hands x objects, the first grasp of each pair that passed, else the first grasp;
+    green / red frame = passed / failed) and a meshcat scene (each hand's first passing grasp on the
+    first object, side by side). Grasps are re-sampled with the evaluation's pair seeds (sampling is
+    deterministic), the verdicts are the evaluation's."""
+    from matplotlib.figure import Figure
+
+    from ohra.canonical.kinematics import HandModel
+    from ohra.hands import get_hand
+    from ohra.learn.grasp.evaluate import pair_seed
+    from ohra.rotations import grasp_to_pose
+    from ohra.sim import SimHand
+    from ohra.sim.render import contact_sheet, render_grasps
+    from ohra.viz import add_hand, add_mesh, new_visualizer, save_html
+
+    objs = objects[:per_row]
+    fig = Figure(figsize=(2.0 * len(objs), 2.1 * len(hands)), dpi=80)
+    vis = new_visualizer()
+    for r, h in enumerate(hands):
+        sim = SimHand.from_params(get_hand(h), name=h)
+        for c, o in enumerate(objs):
+            ok = np.asarray(ev["success"][f"{h}/{o.name}"], dtype=bool)
+            grasps = model.sample(h, o, len(ok), seed=pair_seed(0, h, o.mesh_hash))
+            i = int(np.argmax(ok)) if ok.any() else 0
+            tile = contact_sheet(render_grasps(sim, o, grasps[i:i + 1], size=160), ok[i:i + 1], columns=1)
+            ax = fig.add_subplot(len(hands), len(objs), r * len(objs) + c + 1)
+            ax.imshow(tile)
+            ax.set_xticks([]), ax.set_yticks([])
+            ax.set_title(f"{o.name}: {int(ok.sum())}/{len(ok)}", fontsize=8)
+            if c == 0:
+                ax.set_ylabel(h, fontsize=8)
+            if c == 0:
+                T, q = grasp_to_pose(grasps[i])
+                off = np.eye(4)
+                off[1, 3] = 0.35 * r
+                add_mesh(vis, np.asarray(o.mesh.vertices), np.asarray(o.mesh.faces), T=off, path=f"{h}/object")
+                add_hand(vis, HandModel.from_params(get_hand(h)), q, off @ T, path=f"{h}/hand")
+    fig.suptitle("unified model: first passing grasp per (hand, unseen object); red: none passed", fontsize=9)
+    fig.tight_layout()
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    sheet = RESULTS / f"{name}_sheet.png"
+    fig.savefig(sheet)
+    scene = save_html(vis, RESULTS / f"{name}_scene.html")
+    return {"sheet": sheet.name, "scene": scene.name}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", nargs="+", required=True)
@@ -167,6 +215,7 @@ def main() -> None:
     for h in args.hands:
         m = trained(f"specific-{h}", args.data, [h], args)
         res["specific"][h] = evaluated(m, f"specific-{h}", [h], objects, False, protocol, args)
+    res["pictures"] = pictures(unified, args.hands, objects, res["unified"], args.name)
     write_results(args.name, res, tables(res))
 
 
