@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 import time
 from dataclasses import replace
@@ -112,10 +113,12 @@ def tables(res: dict) -> str:
     lines += ["", "Reported columns: other protocol (Isaac Gym), other objects and hardware; DFC, GenDexGrasp and "
               "D(R,O) as reported by D(R,O) Grasp (arXiv 2410.01702, Table I), OHRA by its paper's Table 5.",
               "", "Table 6 analogue: unified vs hand-specific (same data, steps, batch, seed)", "",
-              "| hand | unified | specific | unified - specific [points] |", "|---|---|---|---|"]
+              "| hand | unified | specific | unified - specific ± SE [points] |", "|---|---|---|---|"]
     for h in res["hands"]:
-        a, b = u["per_hand"][h]["success_rate"], res["specific"][h]["per_hand"][h]["success_rate"]
-        lines.append(f"| {h} | {100 * a:.1f} % | {100 * b:.1f} % | {100 * (a - b):+.1f} |")
+        ru, rs = u["per_hand"][h], res["specific"][h]["per_hand"][h]
+        a, b = ru["success_rate"], rs["success_rate"]
+        se = np.sqrt(a * (1 - a) / ru["n"] + b * (1 - b) / rs["n"])  # two independent samples of grasps
+        lines.append(f"| {h} | {100 * a:.1f} % | {100 * b:.1f} % | {100 * (a - b):+.1f} ± {100 * se:.1f} |")
     lines += ["", "Table 4 analogue: the unified model's grasps replayed on the original URDFs", "",
               "| hand | canonical | original | change ± SE [points] | paper (reported) |", "|---|---|---|---|---|"]
     for h in res["hands"]:
@@ -202,6 +205,8 @@ def main() -> None:
     ap.add_argument("--objects-file", type=Path, default=ROOT / "recipes" / "grasp_eval_objects.yaml")
     add_run_args(ap, steps=12000, n=100, runs="grasp_study", name="grasp_study")
     args = ap.parse_args()
+    # natural order (s2 before s10) whatever the shell's glob gives: the data order is part of the runs' keys
+    args.data = sorted(args.data, key=lambda d: [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", str(d))])
     objects = eval_objects(args.objects_file)
     protocol = data_protocol(args.data)
     unified = trained("unified", args.data, args.hands, args)

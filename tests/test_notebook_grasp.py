@@ -18,8 +18,11 @@ def test_grasp_model_notebook_executes(tmp_path):
     if not (default_model_dir() / "model.pt").is_file():
         pytest.skip("shipped grasp model not present")
     nb, texts = execute("06_grasp_model.ipynb", tmp_path, timeout=600)
-    assert "hands: allegro_hand_left, barrett_hand, shadow_hand_right" in texts[0] and "pipeline check" in texts[0]
+    assert "hands: allegro_hand_left, barrett_hand, shadow_hand_right" in texts[0]
+    assert "unified model of the grasp-model study" in texts[0]
     assert texts[1].count("(100, 31)") == 5 and texts[1].count("same seed same grasps: True") == 5
     assert texts[2].count("succeeded") == 3
     assert "<png>" in texts[3]
     assert (tmp_path / "grasp_sheet.png").is_file() and (tmp_path / "grasp_scene.html").is_file()
+    # from a checkout the study's committed tables are shown: one line per hand, then the sheet
+    assert texts[5].count("hand-specific") == 3 and "<png>" in texts[5]
