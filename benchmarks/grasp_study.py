@@ -38,7 +38,8 @@ from ohra.learn.grasp import GraspModelConfig, GraspTrainConfig  # noqa: E402
 from ohra.learn.grasp.evaluate import evaluate_model  # noqa: E402
 from ohra.learn.grasp.model import load_grasp_model  # noqa: E402
 from ohra.learn.grasp.train import train_grasp  # noqa: E402
-from ohra.sim import Protocol  # noqa: E402
+from ohra.hands import get_hand  # noqa: E402
+from ohra.sim import Protocol, SimHand  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = {"allegro_hand_left": 84.2, "barrett_hand": 88.1, "shadow_hand_right": 62.9}  # OHRA Table 5, Isaac Gym
@@ -78,14 +79,18 @@ def trained(name: str, data: list[str], hands: list[str], args) -> object:
     return res.model
 
 
-def evaluated(model, key: str, hands: list[str], objects: list, original: bool, protocol: Protocol, args) -> dict:
-    path = Path(args.runs) / f"eval_{key}{'_original' if original else ''}.json"
+def evaluated(model, key: str, hands: list[str], objects: list, original: bool, protocol: Protocol, args,
+              inertials: str = "capsule") -> dict:
+    suffix = ("_original" if original else "") + ("_origmass" if inertials != "capsule" else "")
+    path = Path(args.runs) / f"eval_{key}{suffix}.json"
+    extra = {"inertials": inertials} if inertials != "capsule" else {}  # the capsule evaluations keep their keys
     ekey = eval_key(run_key(Path(args.runs) / key), hands=hands, objects=[o.name for o in objects], n=args.n, seed=0,
-                    original=original, protocol=protocol)
+                    original=original, protocol=protocol, **extra)
     if (hit := cached(path, ekey)) is not None:
         return hit
     t0 = time.perf_counter()
-    rep = evaluate_model(model, hands, objects, n=args.n, seed=0, original=original, protocol=protocol, workers=args.workers)
+    rep = evaluate_model(model, hands, objects, n=args.n, seed=0, original=original, protocol=protocol, workers=args.workers,
+                         inertials=inertials)
     out = {"per_hand": rep.per_hand(), "pairs": [{"hand": p.hand, "object": p.object, "successes": int(p.success.sum()),
                                                   "n": int(len(p.success))} for p in rep.pairs],
            "success": {p.hand + "/" + p.object: p.success.astype(int).tolist() for p in rep.pairs},
@@ -119,12 +124,30 @@ def tables(res: dict) -> str:
         a, b = ru["success_rate"], rs["success_rate"]
         se = np.sqrt(a * (1 - a) / ru["n"] + b * (1 - b) / rs["n"])  # two independent samples of grasps
         lines.append(f"| {h} | {100 * a:.1f} % | {100 * b:.1f} % | {100 * (a - b):+.1f} ± {100 * se:.1f} |")
-    lines += ["", "Table 4 analogue: the unified model's grasps replayed on the original URDFs", "",
-              "| hand | canonical | original | change ± SE [points] | paper (reported) |", "|---|---|---|---|---|"]
+    um = res.get("unified_origmass")
+    lines += ["", "Table 4 analogue: the unified model's grasps replayed on the original URDFs"
+              + (" (and on the canonical hand carrying the original URDF's finger masses)" if um else ""), ""]
+    if um:
+        lines += ["| hand | finger masses: canonical / original [kg] | canonical | canonical, original masses | original | "
+                  "original - canonical ± SE [points] | original - canonical (original masses) ± SE | paper (reported) |",
+                  "|---|---|---|---|---|---|---|---|"]
+    else:
+        lines += ["| hand | canonical | original | change ± SE [points] | paper (reported) |", "|---|---|---|---|---|"]
     for h in res["hands"]:
         c, s = paired_change(u, uo, h)
-        lines.append(f"| {h} | {100 * u['per_hand'][h]['success_rate']:.1f} % | {100 * uo['per_hand'][h]['success_rate']:.1f} % | "
-                     f"{c:+.1f} ± {s:.1f} | {PAPER_REPLAY.get(h, '-')} |")
+        if um:
+            cm, sm = paired_change(um, uo, h)
+            fm = res["finger_masses"][h]
+            lines.append(f"| {h} | {sum(fm['canonical']):.3f} / {sum(fm['original']):.3f} | {100 * u['per_hand'][h]['success_rate']:.1f} % | "
+                         f"{100 * um['per_hand'][h]['success_rate']:.1f} % | {100 * uo['per_hand'][h]['success_rate']:.1f} % | "
+                         f"{c:+.1f} ± {s:.1f} | {cm:+.1f} ± {sm:.1f} | {PAPER_REPLAY.get(h, '-')} |")
+        else:
+            lines.append(f"| {h} | {100 * u['per_hand'][h]['success_rate']:.1f} % | {100 * uo['per_hand'][h]['success_rate']:.1f} % | "
+                         f"{c:+.1f} ± {s:.1f} | {PAPER_REPLAY.get(h, '-')} |")
+    if um:
+        lines += ["", "Finger masses: the sum over fingers of the links' `<inertial>` masses; canonical = the template's "
+                  "capsules at 1000 kg/m^3, original = the original URDF's links moved by each finger "
+                  "(`SimHand.finger_masses`, `ohra grasp eval --inertials original`)."]
     lines += ["", f"Budget: {res['steps']} steps per model; evaluation {res['n']} grasps per (hand, object) on "
               f"{len(res['objects'])} unseen objects; protocol {res['protocol_note']}."]
     if "pictures" in res:
@@ -215,6 +238,9 @@ def main() -> None:
            "protocol_note": protocol_note(protocol)}
     res["unified"] = evaluated(unified, "unified", args.hands, objects, False, protocol, args)
     res["unified_original"] = evaluated(unified, "unified", args.hands, objects, True, protocol, args)
+    res["unified_origmass"] = evaluated(unified, "unified", args.hands, objects, False, protocol, args, inertials="original")
+    res["finger_masses"] = {h: {"canonical": SimHand.from_params(get_hand(h), name=h).finger_masses.tolist(),
+                                "original": SimHand.registered_original(h).finger_masses.tolist()} for h in args.hands}
     res["specific"] = {}
     for h in args.hands:
         m = trained(f"specific-{h}", args.data, [h], args)

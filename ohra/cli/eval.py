@@ -1,7 +1,7 @@
 """``ohra eval``: run the six-direction test on a grasp file and report the success rate.
 
     ohra eval GRASPS.npz --hand NAME --object MESH|builtin:NAME [--workers K] [--mode eval|filter]
-              [--strict] [--isaac-step] [--isaac-drive] [--original] [--form base|extended] [--render SHEET.png] [--meshcat SCENE.html] [-o report.json]
+              [--strict] [--isaac-step] [--isaac-drive] [--original | --inertials original] [--form base|extended] [--render SHEET.png] [--meshcat SCENE.html] [-o report.json]
 
 ``GRASPS`` is an ``.npz`` (key ``grasps``, or its only array) or ``.npy`` of shape (N, 31):
 ``[t, rot6d, q22]``, the canonical palm pose in the object's mesh frame and canonical joints. Bad
@@ -42,6 +42,9 @@ def register(subparsers) -> None:
     p.add_argument("--isaac-drive", action="store_true",
                    help="fingers close at Isaac's drive speed (position gain dt*1000/200) instead of gain 0.3")
     p.add_argument("--original", action="store_true", help="replay on the hand's original URDF (needs the hand assets)")
+    p.add_argument("--inertials", choices=("capsule", "original"), default="capsule",
+                   help="finger masses of the canonical hand: the template's 1000 kg/m^3 capsules (default) or the "
+                        "original URDF's (needs the hand assets; geometry stays canonical)")
     p.add_argument("--form", choices=("base", "extended"), default=None,
                    help="canonical form the grasps were made for (default: the hand's natural form); with --original it "
                         "picks the action map that carries them to the original joints")
@@ -54,15 +57,25 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-def eval_hand(name: str, original: bool = False, form: str | None = None):
+def eval_hand(name: str, original: bool = False, form: str | None = None, inertials: str = "capsule"):
     """The simulated hand ``ohra eval`` runs: the canonical hand of ``form`` (with its couplings), or
-    the original URDF driven through that form's action map."""
+    the original URDF driven through that form's action map; ``inertials="original"`` gives the
+    canonical hand the original URDF's finger masses."""
     from ohra.hands import get_couplings, get_hand
     from ohra.sim import SimHand
 
     if original:
         return SimHand.registered_original(name, form=form)
-    return SimHand.from_params(get_hand(name, form), name=name, couplings=get_couplings(name))
+    hand = SimHand.from_params(get_hand(name, form), name=name, couplings=get_couplings(name))
+    if inertials == "original":
+        from ohra.errors import HandNotFoundError
+        from ohra.hands.registry import registered_hands
+
+        if name not in registered_hands():
+            raise HandNotFoundError(f"--inertials original takes the finger masses of a registered hand's original URDF; "
+                                    f"{name!r} is not registered")
+        hand = hand.with_finger_masses(SimHand.registered_original(name, form=form).finger_masses)
+    return hand
 
 
 def load_grasp_file(path: str | Path, key: str | None = None) -> np.ndarray:
@@ -107,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
         protocol = replace(protocol, position_gain=protocol.dt * ISAAC_DRIVE["stiffness"] / ISAAC_DRIVE["damping"], velocity_gain=1.0)
     if args.no_early_exit:
         protocol = replace(protocol, early_exit=False)
-    hand = eval_hand(args.hand, args.original, args.form)
+    hand = eval_hand(args.hand, args.original, args.form, args.inertials)
     ev = GraspEvaluator(hand, obj, protocol)
     g, out_of_limits = ev.check(grasps)  # validates before any simulation or output
     if out_of_limits.any():
@@ -118,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
         rep = ev.evaluate(g, mode=args.mode, workers=args.workers, progress=not args.quiet, backend=args.backend, address=args.address)
     wall = time.perf_counter() - t0
     ev.close()
-    rep.meta.update({"grasp_file": str(args.grasps), "original_hand": bool(args.original), "wall_s": wall,
+    rep.meta.update({"grasp_file": str(args.grasps), "original_hand": bool(args.original), "inertials": args.inertials, "wall_s": wall,
                      "object_info": obj.describe()})
     if args.output:
         from ohra.io import write_json

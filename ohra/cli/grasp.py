@@ -4,7 +4,7 @@
                      [--encoder pointnet|dgcnn] [--steps N] [--batch-size B] [--seed S] [--threads T]
                      -o RUN [--resume]
     ohra grasp sample --hand H --object O [-n 100] [--seed S] [--model RUN] -o grasps.npz
-    ohra grasp eval --hands H ... --objects O ... [-n 100] [--seed S] [--original] [--model RUN] [-o report.json]
+    ohra grasp eval --hands H ... --objects O ... [-n 100] [--seed S] [--original | --inertials original] [--model RUN] [-o report.json]
 
 Plugged into :mod:`ohra.cli.main` by ``register(subparsers)`` (adds the ``grasp`` group and
 ``grasp`` under the ``train`` group, creating ``train`` if no other plugin did). torch is imported
@@ -45,6 +45,9 @@ def register(sub: Any) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--model", help=model_help)
     p.add_argument("--original", action="store_true", help="replay on the hands' original URDFs through the action map")
+    p.add_argument("--inertials", choices=("capsule", "original"), default="capsule",
+                   help="finger masses of the canonical hand: the template's 1000 kg/m^3 capsules (default) or the "
+                        "original URDF's (registered hands; geometry stays canonical)")
     p.add_argument("--workers", type=int, default=1, help="simulation processes (default 1)")
     p.add_argument("--protocol", default="reference", choices=("reference", "strict", "isaac-step", "isaac-drive"),
                    help="six-direction test preset (default reference; use the one the training data was filtered with)")
@@ -148,7 +151,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
 
     rep = evaluate_model(model, args.hands, args.objects, n=args.n, seed=args.seed, original=args.original,
                          workers=args.workers, progress=not args.quiet, allow_seen=args.allow_seen,
-                         protocol=Protocol.preset(args.protocol))
+                         protocol=Protocol.preset(args.protocol), inertials=args.inertials)
     if args.output:
         from ohra.data.dataset import atomic_write_json
 
@@ -159,7 +162,8 @@ def _cmd_eval(args: argparse.Namespace) -> int:
               f"({100 * p.success_rate:5.1f} %)  {1e3 * p.sample_seconds / len(p.success):6.2f} ms/grasp  "
               f"approach spread {d.get('approach_spread', float('nan')):.2f}")
     for h, r in rep.per_hand().items():
-        print(f"{h}: {100 * r['success_rate']:.1f} % of {r['n']} grasps{' (original URDF)' if args.original else ''}")
+        print(f"{h}: {100 * r['success_rate']:.1f} % of {r['n']} grasps{' (original URDF)' if args.original else ''}"
+              f"{' (canonical, original finger masses)' if args.inertials == 'original' and not args.original else ''}")
     if args.output:
         print(f"report: {args.output}", file=sys.stderr)
     return 0

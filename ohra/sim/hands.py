@@ -15,7 +15,7 @@ one native ``<capsule>`` (the same solid); relative mesh paths become absolute.
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Union
 
@@ -122,6 +122,29 @@ class SimHand:
         return cls(name, urdf, joints, lo[idx], up[idx], lo, up, idx, base, None, np.eye(4),
                    np.array([_finger_of_slot(k) for k in idx], dtype=int), link_finger, {}, tuple(couplings))
 
+    @property
+    def finger_masses(self) -> np.ndarray:
+        """(5,) total mass [kg] of each finger's links (thumb, index, middle, ring, little; 0 when absent),
+        from the ``<inertial>`` of every link a finger's joints move (mimic-driven links included)."""
+        return finger_masses(self.urdf, self.link_finger)
+
+    def with_finger_masses(self, masses: np.ndarray) -> "SimHand":
+        """This canonical hand with each finger's inertials scaled to the given total mass [kg].
+
+        The canonical template weighs its capsules at 1000 kg/m^3 (the reference's choice), which makes
+        fingers 3-25x lighter than the links of real hands' URDFs; under a force-limited position drive
+        the finger mass changes how a grasp resists the perturbations (README, Table 4 analogue). Mass,
+        centre of mass and inertia stay one consistent body: every link of finger ``f`` is scaled by
+        ``masses[f] / current[f]`` (its shape, and the mass distribution along the finger, unchanged).
+        Fingers whose target is 0 (absent on the original) keep their capsule mass.
+        """
+        if not self.canonical:
+            raise GraspError(f"with_finger_masses applies to canonical hands; {self.name!r} is an original URDF")
+        m = np.asarray(masses, dtype=float).reshape(-1)
+        if m.shape != (5,) or not np.all(np.isfinite(m)) or np.any(m < 0):
+            raise GraspError(f"finger masses: expected 5 finite non-negative values in kg, got {np.asarray(masses).tolist()!r}")
+        return replace(self, urdf=scale_finger_inertials(self.urdf, self.link_finger, m))
+
     @classmethod
     def from_original(cls, urdf: str | Path, action_map, name: str | None = None,
                       canon_limits: tuple[np.ndarray, np.ndarray] | None = None) -> "SimHand":
@@ -205,6 +228,42 @@ def _limits(j: ET.Element) -> tuple[float, float]:
     if lim is None:
         return (0.0, 0.0)
     return (float(lim.get("lower", 0.0)), float(lim.get("upper", 0.0)))
+
+
+def _link_mass(link: ET.Element) -> float:
+    m = link.find("inertial/mass")
+    return float(m.get("value", 0.0)) if m is not None else 0.0
+
+
+def finger_masses(urdf: str, link_finger: dict[str, int]) -> np.ndarray:
+    """(5,) summed ``<inertial>`` mass [kg] of the links of each finger (``link_finger``: link -> 0..4, -1 palm)."""
+    out = np.zeros(5)
+    for link in ET.fromstring(urdf).iter("link"):
+        f = link_finger.get(link.get("name"), -1)
+        if f >= 0:
+            out[f] += _link_mass(link)
+    return out
+
+
+def scale_finger_inertials(urdf: str, link_finger: dict[str, int], masses: np.ndarray) -> str:
+    """URDF text with the inertials of each finger's links scaled so the finger weighs ``masses[f]`` kg."""
+    root = ET.fromstring(urdf)
+    current = finger_masses(urdf, link_finger)
+    k = np.where((current > 0) & (np.asarray(masses) > 0), np.asarray(masses) / np.maximum(current, 1e-300), 1.0)
+    for link in root.iter("link"):
+        f = link_finger.get(link.get("name"), -1)
+        inertial = link.find("inertial")
+        if f < 0 or inertial is None or k[f] == 1.0:
+            continue
+        m = inertial.find("mass")
+        if m is not None:
+            m.set("value", repr(float(float(m.get("value", 0.0)) * k[f])))
+        I = inertial.find("inertia")
+        if I is not None:
+            for a in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"):
+                if I.get(a) is not None:
+                    I.set(a, repr(float(float(I.get(a)) * k[f])))
+    return ET.tostring(root, encoding="unicode")
 
 
 def _link_fingers(urdf: str, finger_of_joint: dict[str, int]) -> dict[str, int]:

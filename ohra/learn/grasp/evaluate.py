@@ -5,7 +5,9 @@ sampled from the model and run through the six-direction test (:class:`ohra.sim.
 Reported: success rate, diversity, sampling time per grasp and simulation time. With
 ``original=True`` the same grasps (same seeds) are replayed on the hand's *original* URDF through
 its action map, as ``ohra eval --original`` does, so canonical and original results compare grasp
-for grasp.
+for grasp. With ``inertials="original"`` the canonical hand's fingers carry the original URDF's
+finger masses (:meth:`ohra.sim.SimHand.with_finger_masses`) instead of the template's 1000 kg/m^3
+capsules: the geometry stays canonical, only the fingers' mass and inertia change.
 
 Diversity (of the successful grasps, and of all sampled grasps):
 
@@ -35,6 +37,9 @@ import numpy as np
 from ohra.errors import DatasetError, GraspError
 from ohra.learn.grasp.condition import HandLike, resolve_hand
 from ohra.learn.grasp.model import GraspModel, ObjectLike, resolve_object
+
+
+INERTIALS = ("capsule", "original")  # finger masses of the canonical hand: template capsules, or the original URDF's
 
 
 def _spread(v: np.ndarray) -> float:
@@ -128,7 +133,7 @@ def check_unseen(model: GraspModel, objects: Sequence[Any]) -> None:
 
 def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequence[ObjectLike], n: int = 100,
                    seed: int = 0, original: bool = False, workers: int = 1, protocol: Any = None,
-                   progress: bool = False, allow_seen: bool = False) -> GraspEvalReport:
+                   progress: bool = False, allow_seen: bool = False, inertials: str = "capsule") -> GraspEvalReport:
     """Sample ``n`` grasps per (hand, object) and run the six-direction test (module docstring)."""
     from ohra.sim import GraspEvaluator, SimHand
 
@@ -136,6 +141,8 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
         raise GraspError(f"n must be a positive integer, got {n!r}")
     if not hands or not objects:
         raise GraspError("evaluation needs at least one hand and one object")
+    if inertials not in INERTIALS:
+        raise GraspError(f"inertials must be one of {INERTIALS}, got {inertials!r}")
     objs = [resolve_object(o) for o in objects]
     if not allow_seen:
         check_unseen(model, objs)
@@ -143,14 +150,16 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
     for hand in hands:
         params = resolve_hand(hand)
         name = hand if isinstance(hand, str) else getattr(hand, "name", "hand")
-        if original and not isinstance(hand, str):
-            raise GraspError("original=True replays on a registered hand's original URDF: give the hand by name")
+        if (original or inertials == "original") and not isinstance(hand, str):
+            raise GraspError("original=True and inertials='original' need a registered hand's original URDF: give the hand by name")
         movable = np.asarray(params.movable_joints)
         for obj in objs:
             s = pair_seed(seed, str(name), obj.mesh_hash)
             timing: dict = {}
             grasps = model.sample(params, obj, int(n), seed=s, timing=timing)
             sim_hand = SimHand.registered_original(name) if original else SimHand.from_params(params, name=str(name))
+            if inertials == "original" and not original:
+                sim_hand = sim_hand.with_finger_masses(SimHand.registered_original(name).finger_masses)
             t0 = time.perf_counter()
             with GraspEvaluator(sim_hand, obj, protocol) as ev, warnings.catch_warnings():
                 warnings.simplefilter("ignore", UserWarning)
@@ -159,7 +168,7 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
             pairs.append(PairResult(str(name), obj.name, obj.mesh_hash, bool(original), s, ok, grasps,
                                     timing["seconds"], time.perf_counter() - t0,
                                     diversity(grasps[ok], movable), diversity(grasps, movable)))
-    meta = {"n_per_pair": int(n), "seed": int(seed), "original": bool(original), "model": str(model.path),
+    meta = {"n_per_pair": int(n), "seed": int(seed), "original": bool(original), "inertials": inertials, "model": str(model.path),
             "model_meta": model.meta, "protocol": protocol.__dict__ if protocol is not None else "default"}
     return GraspEvalReport(pairs, meta)
 
