@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import os
 import platform
 import resource
@@ -14,6 +15,12 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def natural_sorted(paths: list[str]) -> list[str]:
+    """Data folders in natural order (``s2`` before ``s10``) whatever order the shell's glob gave: the
+    order of the data folders is part of the studies' run keys."""
+    return sorted(paths, key=lambda d: [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", str(d))])
 
 
 def best_of(fn: Callable[[], Any], repeat: int = 3) -> float:

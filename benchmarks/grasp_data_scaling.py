@@ -21,7 +21,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import write_results  # noqa: E402
+from _common import natural_sorted, write_results  # noqa: E402
 from grasp_study import ROOT, add_run_args, data_protocol, evaluated, protocol_note, trained  # noqa: E402
 
 from ohra.data.recipe import Recipe  # noqa: E402
@@ -56,6 +56,7 @@ def main() -> None:
     add_run_args(ap, steps=3000, n=40, runs="grasp_scaling", name="grasp_data_scaling")
     args = ap.parse_args()
     objs = objects(args.objects)
+    args.data = natural_sorted(args.data)  # s2 before s10, whatever the glob gave
     protocol = data_protocol(args.data)
     res = {"hands": args.hands, "steps": args.steps, "n": args.n, "objects": [o.name for o in objs], "data": args.data,
            "protocol_note": protocol_note(protocol), "rows": []}

@@ -20,14 +20,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 import sys
 import time
 from dataclasses import replace
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import RESULTS, write_results  # noqa: E402
+from _common import RESULTS, natural_sorted, write_results  # noqa: E402
 from _study_cache import cached, claim_run, eval_key, run_key, store, train_key  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -228,7 +227,7 @@ def main() -> None:
     add_run_args(ap, steps=12000, n=100, runs="grasp_study", name="grasp_study")
     args = ap.parse_args()
     # natural order (s2 before s10) whatever the shell's glob gives: the data order is part of the runs' keys
-    args.data = sorted(args.data, key=lambda d: [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", str(d))])
+    args.data = natural_sorted(args.data)
     objects = eval_objects(args.objects_file)
     protocol = data_protocol(args.data)
     unified = trained("unified", args.data, args.hands, args)

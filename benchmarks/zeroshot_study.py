@@ -26,7 +26,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import RESULTS, write_results  # noqa: E402
+from _common import RESULTS, natural_sorted, write_results  # noqa: E402
 from _study_cache import cached, claim_run, eval_key, run_key, store, train_key  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -101,6 +101,7 @@ def main() -> None:
     add_run_args(ap, steps=12000, n=100, runs="zeroshot_study", name="zeroshot_study")
     args = ap.parse_args()
     objects = eval_objects(args.objects_file)
+    args.data = natural_sorted(args.data)  # s2 before s10, whatever the glob gave
     protocol = data_protocol(args.data)
     hands = data_hands(args.data)
     high = [h for h in hands if digit_sum(h) >= 8]

@@ -155,3 +155,17 @@ def test_unknown_setting_is_rejected_by_name():
         RotationConfig(sim_dt=0.007)
     with pytest.raises(RotationConfigError, match="canonical URDF"):
         RotationConfig(urdf="canonical", space="native")
+
+
+def test_canonical_hand_can_carry_the_original_finger_masses(hands_dir):
+    """inertials='original': same canonical geometry and joints, the original URDF's finger masses."""
+    light = resolve(RotationConfig(urdf="canonical"))
+    heavy = resolve(RotationConfig(urdf="canonical", inertials="original"))
+    orig = resolve(RotationConfig(urdf="original"))
+    np.testing.assert_allclose(heavy.hand.finger_masses, orig.hand.finger_masses, rtol=1e-12)
+    assert np.all(light.hand.finger_masses[heavy.hand.finger_masses > 0] < heavy.hand.finger_masses[heavy.hand.finger_masses > 0])
+    assert heavy.hand.joints == light.hand.joints and heavy.space.names == light.space.names
+    with pytest.raises(RotationConfigError, match="inertials"):
+        RotationConfig(urdf="original", inertials="original")
+    with pytest.raises(RotationConfigError, match="inertials"):
+        RotationConfig(inertials="steel")

@@ -19,6 +19,8 @@ from ohra.errors import OhraError
 def _env_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--hand", default="leap_hand_right", help="registered hand, leap_XXXX or params JSON (default LEAP)")
     p.add_argument("--urdf", choices=("canonical", "original"), default="canonical")
+    p.add_argument("--inertials", choices=("capsule", "original"), default="capsule",
+                   help="canonical URDF: finger masses of the template's capsules (default) or of the original URDF")
     p.add_argument("--form", choices=("base", "extended"), help="canonical form (default: extended when registered)")
     p.add_argument("--space", choices=("canonical", "native"), help="joint space of actions (default: by --urdf)")
     p.add_argument("--object", default="cube", help="cube, sphere, cylinder or builtin:NAME (default cube)")
@@ -30,7 +32,7 @@ def _env_args(p: argparse.ArgumentParser) -> None:
 def _env_config(args: argparse.Namespace):
     from ohra.sim.rotation.config import RotationConfig, RotationConfigError
 
-    kw: dict[str, Any] = {"hand": args.hand, "urdf": args.urdf, "form": args.form, "space": args.space,
+    kw: dict[str, Any] = {"hand": args.hand, "urdf": args.urdf, "inertials": args.inertials, "form": args.form, "space": args.space,
                           "object": args.object, "grasp_count": args.grasps}
     for item in args.set:
         key, sep, value = item.partition("=")

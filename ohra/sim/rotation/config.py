@@ -29,6 +29,7 @@ class RotationConfigError(OhraError, ValueError):
 
 
 URDF_KINDS = ("canonical", "original")
+INERTIALS = ("capsule", "original")  # canonical finger masses: the template's capsules or the original URDF's
 SPACES = ("canonical", "native")
 
 # Reference ranges of the per-joint noise around the holding pose for the initial grasps (issue 15,
@@ -59,6 +60,7 @@ class RotationConfig:
     # -- hand and object -----------------------------------------------------------------------
     hand: str = "leap_hand_right"
     urdf: str = "canonical"  # "canonical": the canonical URDF; "original": the hand's own URDF
+    inertials: str = "capsule"  # canonical URDF only: "original" gives its fingers the original URDF's masses
     form: str | None = None  # canonical form; None: extended when registered (closest to the original), else base
     space: str | None = None  # joint space of actions/observations: "canonical" (22) or "native" (the URDF's
     #                           driven joints); None: canonical for the canonical URDF, native for the original
@@ -96,6 +98,11 @@ class RotationConfig:
     def __post_init__(self) -> None:
         if self.urdf not in URDF_KINDS:
             raise RotationConfigError(f"urdf must be one of {URDF_KINDS}, got {self.urdf!r}")
+        if self.inertials not in INERTIALS:
+            raise RotationConfigError(f"inertials must be one of {INERTIALS}, got {self.inertials!r}")
+        if self.inertials == "original" and self.urdf != "canonical":
+            raise RotationConfigError("inertials='original' gives the canonical URDF the original's finger masses; "
+                                      "the original URDF has them already (use urdf='canonical')")
         if self.space is not None and self.space not in SPACES:
             raise RotationConfigError(f"space must be one of {SPACES} or None, got {self.space!r}")
         if self.form is not None and self.form not in ("base", "extended"):

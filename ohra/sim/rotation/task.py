@@ -97,11 +97,15 @@ def resolve(cfg: RotationConfig) -> Task:
 
     form = canonical_form(cfg.hand, cfg.form)
     params = get_hand(cfg.hand, form)
+    from ohra.hands import registry
+
     if cfg.urdf == "canonical":
         hand = SimHand.from_params(params, name=f"{cfg.hand}:canonical")
+        if cfg.inertials == "original":
+            if cfg.hand not in registry.registered_hands():
+                raise HandNotFoundError(f"inertials='original' needs a registered hand with an original URDF, not {cfg.hand!r}")
+            hand = hand.with_finger_masses(SimHand.registered_original(cfg.hand, params.form).finger_masses)
     else:
-        from ohra.hands import registry
-
         if cfg.hand not in registry.registered_hands():
             raise HandNotFoundError(f"urdf='original' needs a registered hand with an original URDF, not {cfg.hand!r}")
         hand = SimHand.registered_original(cfg.hand, params.form)
