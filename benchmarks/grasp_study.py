@@ -9,7 +9,9 @@ Models, all with the same architecture, steps, batch size and seed (the same bud
 only). Evaluation: ``-n`` grasps per (hand, object) with random wrist rotations on the objects of
 ``recipes/grasp_eval_objects.yaml`` (never trained on; the model refuses seen objects), six-direction
 test with the protocol the data was filtered with (read from the first dataset's manifest);
-the unified model's grasps are replayed on the original URDFs too.
+the unified model's grasps are replayed on the original URDFs too, and evaluated once more on the
+canonical geometry carrying the original URDFs' finger masses (``inertials="original"``): how much of
+the canonical/original difference is finger mass (README, Table 4 analogue).
 
 Run: python benchmarks/grasp_study.py --data out/grasp_unified [out/grasp_unified_s1 ...] [--steps 12000] [-n 100]
        [--runs runs/grasp_study] [--hands ...] [--objects-file recipes/grasp_eval_objects.yaml]
