@@ -97,3 +97,12 @@ def test_cli_eval_inertials_original_needs_a_registered_hand(tmp_path, capsys):
     rc = main(["eval", str(g), "--hand", str(hand), "--object", str(mesh), "--inertials", "original", "--quiet"])
     err = capsys.readouterr().err
     assert rc == 2 and err.count("\n") == 1 and "Traceback" not in err and "not registered" in err
+
+
+def test_grasp_eval_with_original_masses_needs_a_registered_hand():
+    from ohra.learn.grasp.evaluate import evaluate_model
+
+    with pytest.raises(GraspError, match="not a registered hand"):
+        evaluate_model(object(), ["/nowhere/hand.json"], ["builtin:box"], n=1, inertials="original", allow_seen=True)
+    with pytest.raises(GraspError, match="inertials must be one of"):
+        evaluate_model(object(), ["barrett_hand"], ["builtin:box"], n=1, inertials="steel")

@@ -135,6 +135,7 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
                    seed: int = 0, original: bool = False, workers: int = 1, protocol: Any = None,
                    progress: bool = False, allow_seen: bool = False, inertials: str = "capsule") -> GraspEvalReport:
     """Sample ``n`` grasps per (hand, object) and run the six-direction test (module docstring)."""
+    from ohra.hands.registry import registered_hands
     from ohra.sim import GraspEvaluator, SimHand
 
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
@@ -148,10 +149,11 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
         check_unseen(model, objs)
     pairs = []
     for hand in hands:
+        if (original or inertials == "original") and not (isinstance(hand, str) and hand in registered_hands()):
+            raise GraspError(f"original=True and inertials='original' need a registered hand's original URDF: give the hand "
+                             f"by name; {hand if isinstance(hand, str) else type(hand).__name__!r} is not a registered hand")
         params = resolve_hand(hand)
         name = hand if isinstance(hand, str) else getattr(hand, "name", "hand")
-        if (original or inertials == "original") and not isinstance(hand, str):
-            raise GraspError("original=True and inertials='original' need a registered hand's original URDF: give the hand by name")
         movable = np.asarray(params.movable_joints)
         for obj in objs:
             s = pair_seed(seed, str(name), obj.mesh_hash)
