@@ -63,18 +63,13 @@ def eval_hand(name: str, original: bool = False, form: str | None = None, inerti
     canonical hand the original URDF's finger masses."""
     from ohra.hands import get_couplings, get_hand
     from ohra.sim import SimHand
+    from ohra.sim.hands import original_finger_masses
 
     if original:
         return SimHand.registered_original(name, form=form)
     hand = SimHand.from_params(get_hand(name, form), name=name, couplings=get_couplings(name))
     if inertials == "original":
-        from ohra.errors import HandNotFoundError
-        from ohra.hands.registry import registered_hands
-
-        if name not in registered_hands():
-            raise HandNotFoundError(f"--inertials original takes the finger masses of a registered hand's original URDF; "
-                                    f"{name!r} is not registered")
-        hand = hand.with_finger_masses(SimHand.registered_original(name, form=form).finger_masses)
+        hand = hand.with_finger_masses(original_finger_masses(name, form))
     return hand
 
 

@@ -132,7 +132,7 @@ class SimHand:
         """This canonical hand with each finger's inertials scaled to the given total mass [kg].
 
         The canonical template weighs its capsules at 1000 kg/m^3 (the reference's choice), which makes
-        fingers 3-25x lighter than the links of real hands' URDFs; under a force-limited position drive
+        fingers of most registered hands 1.4-16x lighter than their URDFs' links; under a force-limited position drive
         the finger mass changes how a grasp resists the perturbations (README, Table 4 analogue). Mass,
         centre of mass and inertia stay one consistent body: every link of finger ``f`` is scaled by
         ``masses[f] / current[f]`` (its shape, and the mass distribution along the finger, unchanged).
@@ -228,6 +228,16 @@ def _limits(j: ET.Element) -> tuple[float, float]:
     if lim is None:
         return (0.0, 0.0)
     return (float(lim.get("lower", 0.0)), float(lim.get("upper", 0.0)))
+
+
+def original_finger_masses(name: str, form: str | None = None) -> np.ndarray:
+    """(5,) finger masses [kg] of a registered hand's original URDF; one clear error for any other hand."""
+    from ohra.errors import HandNotFoundError
+    from ohra.hands.registry import registered_hands
+
+    if name not in registered_hands():
+        raise HandNotFoundError(f"original finger masses need a registered hand with an original URDF; {name!r} is not registered")
+    return SimHand.registered_original(name, form=form).finger_masses
 
 
 def _link_mass(link: ET.Element) -> float:

@@ -137,6 +137,7 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
     """Sample ``n`` grasps per (hand, object) and run the six-direction test (module docstring)."""
     from ohra.hands.registry import registered_hands
     from ohra.sim import GraspEvaluator, SimHand
+    from ohra.sim.hands import original_finger_masses
 
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
         raise GraspError(f"n must be a positive integer, got {n!r}")
@@ -161,7 +162,7 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
             grasps = model.sample(params, obj, int(n), seed=s, timing=timing)
             sim_hand = SimHand.registered_original(name) if original else SimHand.from_params(params, name=str(name))
             if inertials == "original" and not original:
-                sim_hand = sim_hand.with_finger_masses(SimHand.registered_original(name).finger_masses)
+                sim_hand = sim_hand.with_finger_masses(original_finger_masses(name))
             t0 = time.perf_counter()
             with GraspEvaluator(sim_hand, obj, protocol) as ev, warnings.catch_warnings():
                 warnings.simplefilter("ignore", UserWarning)

@@ -102,9 +102,9 @@ def resolve(cfg: RotationConfig) -> Task:
     if cfg.urdf == "canonical":
         hand = SimHand.from_params(params, name=f"{cfg.hand}:canonical")
         if cfg.inertials == "original":
-            if cfg.hand not in registry.registered_hands():
-                raise HandNotFoundError(f"inertials='original' needs a registered hand with an original URDF, not {cfg.hand!r}")
-            hand = hand.with_finger_masses(SimHand.registered_original(cfg.hand, params.form).finger_masses)
+            from ohra.sim.hands import original_finger_masses
+
+            hand = hand.with_finger_masses(original_finger_masses(cfg.hand, params.form))
     else:
         if cfg.hand not in registry.registered_hands():
             raise HandNotFoundError(f"urdf='original' needs a registered hand with an original URDF, not {cfg.hand!r}")
