@@ -14,7 +14,8 @@ from typing import Any, Callable
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
-RESULTS = Path(__file__).resolve().parent / "results"
+# OHRA_RESULTS_DIR: write elsewhere (tests run the study scripts without touching the committed results)
+RESULTS = Path(os.environ.get("OHRA_RESULTS_DIR") or Path(__file__).resolve().parent / "results")
 
 
 def natural_sorted(paths: list[str]) -> list[str]:

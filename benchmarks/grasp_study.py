@@ -176,11 +176,14 @@ def add_run_args(ap: argparse.ArgumentParser, steps: int, n: int, runs: str, nam
     ap.add_argument("--quiet", action="store_true")
 
 
-def pictures(model, hands: list[str], objects: list, ev: dict, name: str, per_row: int = 8) -> dict:
+def pictures(model, hands: list[str], objects: list, ev: dict, name: str, per_row: int = 8,
+             title: str = "unified model: first passing grasp per (hand, unseen object); red: none passed") -> dict:
     """Contact sheet (hands x objects, the first grasp of each pair that passed, else the first grasp;
     green / red frame = passed / failed) and a meshcat scene (each hand's first passing grasp on the
     first object, side by side). Grasps are re-sampled with the evaluation's pair seeds (sampling is
-    deterministic), the verdicts are the evaluation's."""
+    deterministic), the verdicts are the evaluation's. ``model``: one model for every hand, or a
+    dict hand -> model (the zero-shot gallery: each unseen variant drawn by a model that never saw it);
+    ``ev``: ``{"success": {"<hand>/<object>": [0/1 per grasp]}}``."""
     from matplotlib.figure import Figure
 
     from ohra.canonical.kinematics import HandModel
@@ -198,7 +201,8 @@ def pictures(model, hands: list[str], objects: list, ev: dict, name: str, per_ro
         sim = SimHand.from_params(get_hand(h), name=h)
         for c, o in enumerate(objs):
             ok = np.asarray(ev["success"][f"{h}/{o.name}"], dtype=bool)
-            grasps = model.sample(h, o, len(ok), seed=pair_seed(0, h, o.mesh_hash))
+            m = model[h] if isinstance(model, dict) else model
+            grasps = m.sample(h, o, len(ok), seed=pair_seed(0, h, o.mesh_hash))
             i = int(np.argmax(ok)) if ok.any() else 0
             tile = contact_sheet(render_grasps(sim, o, grasps[i:i + 1], size=160), ok[i:i + 1], columns=1)
             ax = fig.add_subplot(len(hands), len(objs), r * len(objs) + c + 1)
@@ -212,7 +216,7 @@ def pictures(model, hands: list[str], objects: list, ev: dict, name: str, per_ro
                 off[1, 3] = 0.35 * r
                 add_mesh(vis, np.asarray(o.mesh.vertices), np.asarray(o.mesh.faces), T=off, path=f"{h}/object")
                 add_hand(vis, HandModel.from_params(get_hand(h)), q, off @ T, path=f"{h}/hand")
-    fig.suptitle("unified model: first passing grasp per (hand, unseen object); red: none passed", fontsize=9)
+    fig.suptitle(title, fontsize=9)
     fig.tight_layout()
     RESULTS.mkdir(parents=True, exist_ok=True)
     sheet = RESULTS / f"{name}_sheet.png"

@@ -11,8 +11,9 @@ Models (``params`` condition, same architecture, steps, batch and seed):
 Tables: 7, success of ``all`` and ``zs-<v>`` on each test variant and the zero-shot / all-data ratio;
 8, low-sum variants, ``all`` vs ``only-<v>`` with training counts (the ``all`` model here is
 trained on the >= 8 variants, so low-sum variants are unseen by it, as in the paper); 9, ``leap_3033``
-sampled with the conditions of other variants. Fig. 8: condition saliency per parameter group for
-``leap_3333`` and ``leap_3033`` (``all`` model) -> benchmarks/results/zeroshot_saliency.png.
+sampled with the conditions of other variants. Gallery: each unseen variant drawn by a model that never saw it
+-> benchmarks/results/zeroshot_study_sheet.png and _scene.html. Fig. 8: condition saliency per parameter group for
+``leap_3333`` and ``leap_3033`` (``all`` model) -> benchmarks/results/zeroshot_study_saliency.png.
 
 Run: python benchmarks/zeroshot_study.py --data out/leap_zeroshot [...] [--steps 12000] [-n 100] [--runs runs/zeroshot_study]
   -> benchmarks/results/zeroshot_study.{json,md}
@@ -31,13 +32,12 @@ from _study_cache import cached, claim_run, eval_key, run_key, store, train_key 
 
 import numpy as np  # noqa: E402
 
-from grasp_study import add_run_args, data_protocol, eval_objects  # noqa: E402
+from grasp_study import add_run_args, data_protocol, eval_objects, pictures  # noqa: E402
 from ohra.learn.grasp import GraspModelConfig, GraspTrainConfig  # noqa: E402
 from ohra.learn.grasp.evaluate import evaluate_model  # noqa: E402
 from ohra.learn.grasp.model import load_grasp_model  # noqa: E402
 from ohra.learn.grasp.saliency import condition_saliency, saliency_figure  # noqa: E402
 from ohra.learn.grasp.train import train_grasp  # noqa: E402
-from ohra.sim import GraspEvaluator  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 TEST = ("leap_3033", "leap_3303", "leap_3330")
@@ -70,23 +70,19 @@ def trained(name: str, data: list[str], hands: list[str], test_hands: tuple, arg
 
 
 def success(model, key: str, hand: str, objects: list, protocol, args, condition_hand: str | None = None) -> dict:
-    """Success of ``hand`` sampled by ``model`` (conditioned on ``condition_hand`` if given), cached."""
+    """Success of ``hand`` sampled by ``model`` (conditioned on ``condition_hand`` if given: Table 9;
+    the grasps run on the true hand), with the per-grasp verdicts per object (for the gallery), cached.
+    Pair seeds are the evaluator's, so the true and the wrong conditions sample from the same noise."""
     path = Path(args.runs) / f"eval_{key}_{hand}{'_as_' + condition_hand if condition_hand else ''}.json"
     ekey = eval_key(run_key(Path(args.runs) / key), hand=hand, condition_hand=condition_hand,
                     objects=[o.name for o in objects], n=args.n, seed=0, protocol=protocol)
     if (hit := cached(path, ekey)) is not None:
         return hit
-    if condition_hand is None:
-        rep = evaluate_model(model, [hand], objects, n=args.n, seed=0, protocol=protocol, workers=args.workers)
-        ok = np.concatenate([p.success for p in rep.pairs])
-    else:  # Table 9: the model is told another hand; the grasps run on the true one
-        oks = []
-        for k, obj in enumerate(objects):
-            g = model.sample(hand, obj, args.n, seed=k, condition_hand=condition_hand)
-            with GraspEvaluator(hand, obj, protocol) as ev:
-                oks.append(ev.evaluate(g).success)
-        ok = np.concatenate(oks)
-    out = {"n": int(len(ok)), "successes": int(ok.sum()), "success_rate": float(ok.mean())}
+    rep = evaluate_model(model, [hand], objects, n=args.n, seed=0, protocol=protocol, workers=args.workers,
+                         condition_hand=condition_hand)
+    ok = np.concatenate([p.success for p in rep.pairs])
+    out = {"n": int(len(ok)), "successes": int(ok.sum()), "success_rate": float(ok.mean()),
+           "success": {f"{p.hand}/{p.object}": p.success.astype(int).tolist() for p in rep.pairs}}
     return store(path, ekey, out)
 
 
@@ -139,6 +135,19 @@ def main() -> None:
             z = success(zs3033, "zs-leap_3033", "leap_3033", objects, protocol, args, None if c == "leap_3033" else c)
             res["table9"][c] = {"all": a, "zero_shot": z}
             lines.append(f"| {c}{' (true)' if c == 'leap_3033' else ''} | {pct(a)} | {pct(z)} |")
+    # gallery: every variant drawn by a model that never saw a grasp of it (zs-<v> for the test
+    # variants; the all-data model for the low-sum ones, which it was not trained on)
+    gallery_models, gallery_ev = {}, {"success": {}}
+    for v, r in res["table7"].items():
+        gallery_models[v] = load_grasp_model(Path(args.runs) / f"zs-{v}")
+        gallery_ev["success"].update(r["zero_shot"]["success"])
+    for v, r in res["table8"].items():
+        gallery_models[v] = all_model
+        gallery_ev["success"].update(r["all"]["success"])
+    if gallery_models:
+        res["pictures"] = pictures(gallery_models, list(gallery_models), objects, gallery_ev, args.name,
+                                   title="unseen LEAP variants (rows; each drawn by a model never trained on it): "
+                                         "first passing grasp per unseen object; red: none passed")
     sal = {h: condition_saliency(all_model, h, objects[0], n=64, seed=0) for h in ("leap_3333", "leap_3033")}
     res["saliency"] = {h: r["groups"] for h, r in sal.items()}
     RESULTS.mkdir(parents=True, exist_ok=True)
@@ -149,6 +158,9 @@ def main() -> None:
     for h, g in res["saliency"].items():
         lines.append(f"| {h} | " + " | ".join(f"{v:.3g}" for v in g.values()) + " |")
     lines += ["", f"Budget: {args.steps} steps per model; {args.n} grasps per (variant, object) on {len(objects)} unseen objects."]
+    if "pictures" in res:
+        lines += ["", f"Gallery of unseen variants: `{res['pictures']['sheet']}` (contact sheet), `{res['pictures']['scene']}` "
+                  "(meshcat; regenerated by the study, not committed)."]
     write_results(args.name, res, "\n".join(lines))
 
 

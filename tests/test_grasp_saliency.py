@@ -73,3 +73,18 @@ def test_wrong_condition_changes_the_grasps_not_the_limits(params_model):
     assert np.array_equal(right, same) and not np.allclose(right, wrong)
     q = wrong[:, 9:]
     assert np.all(q >= np.asarray(hand.joint_lowers) - 1e-12) and np.all(q <= np.asarray(hand.joint_uppers) + 1e-12)
+
+
+def test_evaluation_with_a_wrong_condition_runs_the_true_hand(params_model):
+    """Table 9 through the evaluator: the wrong condition's grasps are those ``sample`` gives with the
+    same pair seed, they run on the true hand, and the report names the condition it was told."""
+    from ohra.learn.grasp.evaluate import evaluate_model, pair_seed
+    from ohra.objects import ObjectModel
+
+    obj = ObjectModel.builtin("capsule")
+    rep = evaluate_model(params_model, ["leap_3033"], [obj], n=2, allow_seen=True, condition_hand="leap_3333")
+    expect = params_model.sample("leap_3033", obj, 2, seed=pair_seed(0, "leap_3033", obj.mesh_hash), condition_hand="leap_3333")
+    assert np.array_equal(rep.pairs[0].grasps, expect)
+    assert rep.pairs[0].hand == "leap_3033" and rep.meta["condition_hand"] == "leap_3333"
+    true = evaluate_model(params_model, ["leap_3033"], [obj], n=2, allow_seen=True)
+    assert true.meta["condition_hand"] is None and not np.allclose(true.pairs[0].grasps, expect)

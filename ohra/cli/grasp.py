@@ -4,7 +4,7 @@
                      [--encoder pointnet|dgcnn] [--steps N] [--batch-size B] [--seed S] [--threads T]
                      -o RUN [--resume]
     ohra grasp sample --hand H --object O [-n 100] [--seed S] [--model RUN] -o grasps.npz
-    ohra grasp eval --hands H ... --objects O ... [-n 100] [--seed S] [--original | --inertials original] [--model RUN] [-o report.json]
+    ohra grasp eval --hands H ... --objects O ... [-n 100] [--seed S] [--original | --inertials original] [--condition-hand H] [--model RUN] [-o report.json]
 
 Plugged into :mod:`ohra.cli.main` by ``register(subparsers)`` (adds the ``grasp`` group and
 ``grasp`` under the ``train`` group, creating ``train`` if no other plugin did). torch is imported
@@ -48,6 +48,8 @@ def register(sub: Any) -> None:
     p.add_argument("--inertials", choices=("capsule", "original"), default="capsule",
                    help="finger masses of the canonical hand: the template's 1000 kg/m^3 capsules (default) or the "
                         "original URDF's (registered hands; geometry stays canonical)")
+    p.add_argument("--condition-hand", help="condition the model on this hand instead (paper Table 9); the grasps run on "
+                   "the true hand, within its joint limits")
     p.add_argument("--workers", type=int, default=1, help="simulation processes (default 1)")
     p.add_argument("--protocol", default="reference", choices=("reference", "strict", "isaac-step", "isaac-drive"),
                    help="six-direction test preset (default reference; use the one the training data was filtered with)")
@@ -151,7 +153,8 @@ def _cmd_eval(args: argparse.Namespace) -> int:
 
     rep = evaluate_model(model, args.hands, args.objects, n=args.n, seed=args.seed, original=args.original,
                          workers=args.workers, progress=not args.quiet, allow_seen=args.allow_seen,
-                         protocol=Protocol.preset(args.protocol), inertials=args.inertials)
+                         protocol=Protocol.preset(args.protocol), inertials=args.inertials,
+                         condition_hand=args.condition_hand)
     if args.output:
         from ohra.data.dataset import atomic_write_json
 
@@ -163,7 +166,8 @@ def _cmd_eval(args: argparse.Namespace) -> int:
               f"approach spread {d.get('approach_spread', float('nan')):.2f}")
     for h, r in rep.per_hand().items():
         print(f"{h}: {100 * r['success_rate']:.1f} % of {r['n']} grasps{' (original URDF)' if args.original else ''}"
-              f"{' (canonical, original finger masses)' if args.inertials == 'original' and not args.original else ''}")
+              f"{' (canonical, original finger masses)' if args.inertials == 'original' and not args.original else ''}"
+              f"{f' (model told {args.condition_hand})' if args.condition_hand else ''}")
     if args.output:
         print(f"report: {args.output}", file=sys.stderr)
     return 0

@@ -35,7 +35,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ohra.errors import DatasetError, GraspError
-from ohra.learn.grasp.condition import HandLike, resolve_hand
+from ohra.learn.grasp.condition import HandLike, hand_key, resolve_hand
 from ohra.learn.grasp.model import GraspModel, ObjectLike, resolve_object
 
 
@@ -133,8 +133,13 @@ def check_unseen(model: GraspModel, objects: Sequence[Any]) -> None:
 
 def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequence[ObjectLike], n: int = 100,
                    seed: int = 0, original: bool = False, workers: int = 1, protocol: Any = None,
-                   progress: bool = False, allow_seen: bool = False, inertials: str = "capsule") -> GraspEvalReport:
-    """Sample ``n`` grasps per (hand, object) and run the six-direction test (module docstring)."""
+                   progress: bool = False, allow_seen: bool = False, inertials: str = "capsule",
+                   condition_hand: HandLike | None = None) -> GraspEvalReport:
+    """Sample ``n`` grasps per (hand, object) and run the six-direction test (module docstring).
+
+    ``condition_hand``: tell the model this hand instead of the true one (paper Table 9: does the
+    condition matter?); the grasps keep the true hand's joint limits and run on the true hand.
+    """
     from ohra.hands.registry import registered_hands
     from ohra.sim import GraspEvaluator, SimHand
     from ohra.sim.hands import original_finger_masses
@@ -159,7 +164,7 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
         for obj in objs:
             s = pair_seed(seed, str(name), obj.mesh_hash)
             timing: dict = {}
-            grasps = model.sample(params, obj, int(n), seed=s, timing=timing)
+            grasps = model.sample(params, obj, int(n), seed=s, timing=timing, condition_hand=condition_hand)
             sim_hand = SimHand.registered_original(name) if original else SimHand.from_params(params, name=str(name))
             if inertials == "original" and not original:
                 sim_hand = sim_hand.with_finger_masses(original_finger_masses(name))
@@ -171,7 +176,9 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
             pairs.append(PairResult(str(name), obj.name, obj.mesh_hash, bool(original), s, ok, grasps,
                                     timing["seconds"], time.perf_counter() - t0,
                                     diversity(grasps[ok], movable), diversity(grasps, movable)))
-    meta = {"n_per_pair": int(n), "seed": int(seed), "original": bool(original), "inertials": inertials, "model": str(model.path),
+    cond = None if condition_hand is None else (condition_hand if isinstance(condition_hand, str) else hand_key(resolve_hand(condition_hand)))
+    meta = {"n_per_pair": int(n), "seed": int(seed), "original": bool(original), "inertials": inertials, "condition_hand": cond,
+            "model": str(model.path),
             "model_meta": model.meta, "protocol": protocol.__dict__ if protocol is not None else "default"}
     return GraspEvalReport(pairs, meta)
 
