@@ -5,8 +5,9 @@ a run of other data, hands or steps stops the study with one line; an evaluation
 grasps per pair or protocol is redone); an interrupted study loses at most one unfinished step.
 
 Models, all with the same architecture, steps, batch size and seed (the same budget):
-``unified`` (every hand of the data, VAE condition) and ``specific-<hand>`` (one hand's grasps
-only). Evaluation: ``-n`` grasps per (hand, object) with random wrist rotations on the objects of
+``unified`` (every hand of the data, VAE condition), ``specific-<hand>`` (one hand's grasps
+only) and ``unified-params`` (every hand, the raw-parameter condition of the zero-shot study; the
+VAE vs params table; ``--no-compare-condition`` skips it). Evaluation: ``-n`` grasps per (hand, object) with random wrist rotations on the objects of
 ``recipes/grasp_eval_objects.yaml`` (never trained on; the model refuses seen objects), six-direction
 test with the protocol the data was filtered with (read from the first dataset's manifest);
 the unified model's grasps are replayed on the original URDFs too, and evaluated once more on the
@@ -38,6 +39,7 @@ from ohra.data.recipe import Recipe  # noqa: E402
 from ohra.learn.grasp import GraspModelConfig, GraspTrainConfig  # noqa: E402
 from ohra.learn.grasp.evaluate import evaluate_model  # noqa: E402
 from ohra.learn.grasp.model import load_grasp_model  # noqa: E402
+from ohra.learn.grasp.refine import RefineSettings  # noqa: E402
 from ohra.learn.grasp.train import train_grasp  # noqa: E402
 from ohra.hands import get_hand  # noqa: E402
 from ohra.sim import Protocol, SimHand  # noqa: E402
@@ -69,29 +71,31 @@ def eval_objects(path: Path) -> list:
     return Recipe.from_dict({"hands": ["leap_3333"], "objects": d["objects"]}, path).resolve_objects()
 
 
-def trained(name: str, data: list[str], hands: list[str], args) -> object:
+def trained(name: str, data: list[str], hands: list[str], args, condition: str = "vae") -> object:
     """The model ``name`` trained on ``hands`` (resumed or reused when its run exists)."""
     run = Path(args.runs) / name
-    if claim_run(run, train_key(data, hands, args.steps, args.seed, "vae")):
+    if claim_run(run, train_key(data, hands, args.steps, args.seed, condition)):
         return load_grasp_model(run)
     tcfg = GraspTrainConfig(steps=args.steps, seed=args.seed, threads=args.threads, hands=tuple(hands))
-    res = train_grasp(data, GraspModelConfig(condition="vae"), tcfg, run, resume=(run / "checkpoints" / "last.pt").exists(),
+    res = train_grasp(data, GraspModelConfig(condition=condition), tcfg, run, resume=(run / "checkpoints" / "last.pt").exists(),
                       progress=not args.quiet)
     return res.model
 
 
 def evaluated(model, key: str, hands: list[str], objects: list, original: bool, protocol: Protocol, args,
-              inertials: str = "capsule") -> dict:
-    suffix = ("_original" if original else "") + ("_origmass" if inertials != "capsule" else "")
+              inertials: str = "capsule", refine: bool = False) -> dict:
+    suffix = ("_original" if original else "") + ("_origmass" if inertials != "capsule" else "") + ("_refined" if refine else "")
     path = Path(args.runs) / f"eval_{key}{suffix}.json"
     extra = {"inertials": inertials} if inertials != "capsule" else {}  # the capsule evaluations keep their keys
+    if refine:
+        extra["refine"] = RefineSettings()
     ekey = eval_key(run_key(Path(args.runs) / key), hands=hands, objects=[o.name for o in objects], n=args.n, seed=0,
                     original=original, protocol=protocol, **extra)
     if (hit := cached(path, ekey)) is not None:
         return hit
     t0 = time.perf_counter()
     rep = evaluate_model(model, hands, objects, n=args.n, seed=0, original=original, protocol=protocol, workers=args.workers,
-                         inertials=inertials)
+                         inertials=inertials, refine=refine)
     out = {"per_hand": rep.per_hand(), "pairs": [{"hand": p.hand, "object": p.object, "successes": int(p.success.sum()),
                                                   "n": int(len(p.success))} for p in rep.pairs],
            "success": {p.hand + "/" + p.object: p.success.astype(int).tolist() for p in rep.pairs},
@@ -106,16 +110,26 @@ def paired_change(a: dict, b: dict, hand: str) -> tuple[float, float]:
 
 
 def tables(res: dict) -> str:
-    u, uo = res["unified"], res["unified_original"]
+    u, uo, ur = res["unified"], res["unified_original"], res.get("unified_refined")
     lines = ["Table 5 analogue: success on unseen objects (unified model)", "",
              "| hand | training grasps | success (canonical) | ms / grasp | "
+             + ("success, fingers refined | refinement ms / grasp | " if ur else "")
              + " | ".join(f"{m} (reported)" for m in REPORTED) + " |",
-             "|---|---|---|---|" + "---|" * len(REPORTED)]
+             "|---|---|---|---|" + ("---|---|" if ur else "") + "---|" * len(REPORTED)]
     for h in res["hands"]:
         r = u["per_hand"][h]
+        refined = ""
+        if ur:
+            rr = ur["per_hand"][h]
+            d, se = paired_change(u, ur, h)  # the same sampled grasps before and after refinement
+            refined = f"{100 * rr['success_rate']:.1f} % ({d:+.1f} ± {se:.1f}) | {rr.get('refine_ms_per_grasp', float('nan')):.0f} | "
         lines.append(f"| {h} | {res['train_counts'].get(h, 0)} | {100 * r['success_rate']:.1f} % of {r['n']} | "
-                     f"{r['sample_ms_per_grasp']:.2f} | "
+                     f"{r['sample_ms_per_grasp']:.2f} | " + refined
                      + " | ".join(f"{v[h]} %" if h in v else "-" for v in REPORTED.values()) + " |")
+    if ur:
+        lines += ["", "Fingers refined: the same sampled grasps with the fingers opened just enough to clear the object "
+                  "(`refine=True`, `ohra.learn.grasp.refine`: joints only, 1 mm of penetration left alone); the change "
+                  "is paired over the same grasps, in points."]
     lines += ["", "Reported columns: other protocol (Isaac Gym), other objects and hardware; DFC, GenDexGrasp and "
               "D(R,O) as reported by D(R,O) Grasp (arXiv 2410.01702, Table I), OHRA by its paper's Table 5.",
               "", "Table 6 analogue: unified vs hand-specific (same data, steps, batch, seed)", "",
@@ -125,6 +139,16 @@ def tables(res: dict) -> str:
         a, b = ru["success_rate"], rs["success_rate"]
         se = np.sqrt(a * (1 - a) / ru["n"] + b * (1 - b) / rs["n"])  # two independent samples of grasps
         lines.append(f"| {h} | {100 * a:.1f} % | {100 * b:.1f} % | {100 * (a - b):+.1f} ± {100 * se:.1f} |")
+    if "unified_params" in res:
+        up = res["unified_params"]
+        lines += ["", "Hand condition: the VAE's mean latent vs the raw normalised parameters (the zero-shot study's "
+                  "condition; the VAE reads base-form hands only, so LEAP variants can only use `params`): unified "
+                  "models with the same data, steps, batch and seed", "",
+                  "| hand | VAE latent | raw parameters | params - VAE ± SE [points] |", "|---|---|---|---|"]
+        for h in res["hands"]:
+            a, b = u["per_hand"][h]["success_rate"], up["per_hand"][h]["success_rate"]
+            se = np.sqrt(a * (1 - a) / u["per_hand"][h]["n"] + b * (1 - b) / up["per_hand"][h]["n"])
+            lines.append(f"| {h} | {100 * a:.1f} % | {100 * b:.1f} % | {100 * (b - a):+.1f} ± {100 * se:.1f} |")
     um = res.get("unified_origmass")
     lines += ["", "Table 4 analogue: the unified model's grasps replayed on the original URDFs"
               + (" (and on the canonical hand carrying the original URDF's finger masses)" if um else ""), ""]
@@ -231,6 +255,8 @@ def main() -> None:
     ap.add_argument("--hands", nargs="+", default=list(PAPER))
     ap.add_argument("--objects-file", type=Path, default=ROOT / "recipes" / "grasp_eval_objects.yaml")
     add_run_args(ap, steps=12000, n=100, runs="grasp_study", name="grasp_study")
+    ap.add_argument("--no-compare-condition", dest="compare_condition", action="store_false",
+                    help="skip the unified model with the raw-parameter condition (VAE vs params table)")
     args = ap.parse_args()
     # natural order (s2 before s10) whatever the shell's glob gives: the data order is part of the runs' keys
     args.data = natural_sorted(args.data)
@@ -244,12 +270,16 @@ def main() -> None:
     res["unified"] = evaluated(unified, "unified", args.hands, objects, False, protocol, args)
     res["unified_original"] = evaluated(unified, "unified", args.hands, objects, True, protocol, args)
     res["unified_origmass"] = evaluated(unified, "unified", args.hands, objects, False, protocol, args, inertials="original")
+    res["unified_refined"] = evaluated(unified, "unified", args.hands, objects, False, protocol, args, refine=True)
     res["finger_masses"] = {h: {"canonical": SimHand.from_params(get_hand(h), name=h).finger_masses.tolist(),
                                 "original": SimHand.registered_original(h).finger_masses.tolist()} for h in args.hands}
     res["specific"] = {}
     for h in args.hands:
         m = trained(f"specific-{h}", args.data, [h], args)
         res["specific"][h] = evaluated(m, f"specific-{h}", [h], objects, False, protocol, args)
+    if args.compare_condition:  # the zero-shot study's condition on the hands the VAE can read too
+        m = trained("unified-params", args.data, args.hands, args, condition="params")
+        res["unified_params"] = evaluated(m, "unified-params", args.hands, objects, False, protocol, args)
     res["pictures"] = pictures(unified, args.hands, objects, res["unified"], args.name)
     write_results(args.name, res, tables(res))
 

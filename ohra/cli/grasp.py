@@ -3,8 +3,8 @@
     ohra train grasp --data DIR [DIR ...] [--hands H ...] [--test-objects O ...] --condition vae|params
                      [--encoder pointnet|dgcnn] [--steps N] [--batch-size B] [--seed S] [--threads T]
                      -o RUN [--resume]
-    ohra grasp sample --hand H --object O [-n 100] [--seed S] [--model RUN] -o grasps.npz
-    ohra grasp eval --hands H ... --objects O ... [-n 100] [--seed S] [--original | --inertials original] [--condition-hand H] [--model RUN] [-o report.json]
+    ohra grasp sample --hand H --object O [-n 100] [--seed S] [--refine] [--model RUN] -o grasps.npz
+    ohra grasp eval --hands H ... --objects O ... [-n 100] [--seed S] [--original | --inertials original] [--condition-hand H] [--refine] [--model RUN] [-o report.json]
 
 Plugged into :mod:`ohra.cli.main` by ``register(subparsers)`` (adds the ``grasp`` group and
 ``grasp`` under the ``train`` group, creating ``train`` if no other plugin did). torch is imported
@@ -24,6 +24,10 @@ from ohra.cli.main import subcommand_group
 from ohra.errors import OhraError
 
 
+REFINE_HELP = ("open the fingers just enough to clear the object after sampling "
+               "(ohra.learn.grasp.refine; tens of ms per grasp)")
+
+
 def register(sub: Any) -> None:
     """Add ``ohra grasp sample|eval`` and ``ohra train grasp``."""
     register_train(subcommand_group(sub, "train", "train learned models (vae, grasp, ...)", "train_command"))
@@ -35,6 +39,7 @@ def register(sub: Any) -> None:
     p.add_argument("-n", type=int, default=100, help="number of grasps (default 100)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--model", help=model_help)
+    p.add_argument("--refine", action="store_true", help=REFINE_HELP)
     p.add_argument("-o", "--output", required=True, help="output .npz")
     p.set_defaults(func=_cmd_sample)
 
@@ -48,6 +53,7 @@ def register(sub: Any) -> None:
     p.add_argument("--inertials", choices=("capsule", "original"), default="capsule",
                    help="finger masses of the canonical hand: the template's 1000 kg/m^3 capsules (default) or the "
                         "original URDF's (registered hands; geometry stays canonical)")
+    p.add_argument("--refine", action="store_true", help=REFINE_HELP)
     p.add_argument("--condition-hand", help="condition the model on this hand instead (paper Table 9); the grasps run on "
                    "the true hand, within its joint limits")
     p.add_argument("--workers", type=int, default=1, help="simulation processes (default 1)")
@@ -134,12 +140,13 @@ def _cmd_sample(args: argparse.Namespace) -> int:
 
     model = _load(args.model)
     timing: dict = {}
-    g = model.sample(args.hand, args.object, args.n, seed=args.seed, timing=timing)
+    g = model.sample(args.hand, args.object, args.n, seed=args.seed, timing=timing, refine=args.refine)
     out = Path(args.output)
     if out.suffix != ".npz":
         raise OhraError(f"-o must end in .npz, got {out}")
     atomic_write_npz(out, {"grasps": g.astype(np.float64)})
-    print(f"wrote {len(g)} grasps of {args.hand} on {args.object} to {out} ({1e3 * timing['seconds'] / len(g):.2f} ms per grasp)")
+    extra = f", refinement {1e3 * timing['refine_seconds'] / len(g):.1f} ms per grasp" if args.refine else ""
+    print(f"wrote {len(g)} grasps of {args.hand} on {args.object} to {out} ({1e3 * timing['seconds'] / len(g):.2f} ms per grasp{extra})")
     return 0
 
 
@@ -154,7 +161,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     rep = evaluate_model(model, args.hands, args.objects, n=args.n, seed=args.seed, original=args.original,
                          workers=args.workers, progress=not args.quiet, allow_seen=args.allow_seen,
                          protocol=Protocol.preset(args.protocol), inertials=args.inertials,
-                         condition_hand=args.condition_hand)
+                         condition_hand=args.condition_hand, refine=args.refine)
     if args.output:
         from ohra.data.dataset import atomic_write_json
 

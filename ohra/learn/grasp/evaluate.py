@@ -29,7 +29,7 @@ import json
 import time
 import warnings
 import zlib
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import Any, Sequence
 
 import numpy as np
@@ -37,6 +37,7 @@ import numpy as np
 from ohra.errors import DatasetError, GraspError
 from ohra.learn.grasp.condition import HandLike, hand_key, resolve_hand
 from ohra.learn.grasp.model import GraspModel, ObjectLike, resolve_object
+from ohra.learn.grasp.refine import RefineSettings
 
 
 INERTIALS = ("capsule", "original")  # finger masses of the canonical hand: template capsules, or the original URDF's
@@ -79,6 +80,7 @@ class PairResult:
     sim_seconds: float
     diversity_success: dict | None
     diversity_all: dict | None
+    refine_seconds: float = 0.0  # test-time refinement of the n grasps (0 when off)
 
     @property
     def success_rate(self) -> float:
@@ -88,7 +90,8 @@ class PairResult:
         n = len(self.success)
         return {"hand": self.hand, "object": self.object, "object_hash": self.object_hash, "original": self.original,
                 "seed": self.seed, "n": n, "successes": int(self.success.sum()), "success_rate": self.success_rate,
-                "sample_ms_per_grasp": 1e3 * self.sample_seconds / max(n, 1), "sim_seconds": self.sim_seconds,
+                "sample_ms_per_grasp": 1e3 * self.sample_seconds / max(n, 1),
+                "refine_ms_per_grasp": 1e3 * self.refine_seconds / max(n, 1), "sim_seconds": self.sim_seconds,
                 "diversity_success": self.diversity_success, "diversity_all": self.diversity_all}
 
 
@@ -106,7 +109,8 @@ class GraspEvalReport:
             n = len(succ)
             out[h] = {"n": n, "success_rate": float(succ.mean()) if n else 0.0,
                       "pair_rates": [p.success_rate for p in ps],
-                      "sample_ms_per_grasp": 1e3 * sum(p.sample_seconds for p in ps) / max(n, 1)}
+                      "sample_ms_per_grasp": 1e3 * sum(p.sample_seconds for p in ps) / max(n, 1),
+                      "refine_ms_per_grasp": 1e3 * sum(p.refine_seconds for p in ps) / max(n, 1)}
         return out
 
     def to_dict(self) -> dict[str, Any]:
@@ -134,7 +138,7 @@ def check_unseen(model: GraspModel, objects: Sequence[Any]) -> None:
 def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequence[ObjectLike], n: int = 100,
                    seed: int = 0, original: bool = False, workers: int = 1, protocol: Any = None,
                    progress: bool = False, allow_seen: bool = False, inertials: str = "capsule",
-                   condition_hand: HandLike | None = None) -> GraspEvalReport:
+                   condition_hand: HandLike | None = None, refine: bool | RefineSettings = False) -> GraspEvalReport:
     """Sample ``n`` grasps per (hand, object) and run the six-direction test (module docstring).
 
     ``condition_hand``: tell the model this hand instead of the true one (paper Table 9: does the
@@ -164,7 +168,7 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
         for obj in objs:
             s = pair_seed(seed, str(name), obj.mesh_hash)
             timing: dict = {}
-            grasps = model.sample(params, obj, int(n), seed=s, timing=timing, condition_hand=condition_hand)
+            grasps = model.sample(params, obj, int(n), seed=s, timing=timing, condition_hand=condition_hand, refine=refine)
             sim_hand = SimHand.registered_original(name) if original else SimHand.from_params(params, name=str(name))
             if inertials == "original" and not original:
                 sim_hand = sim_hand.with_finger_masses(original_finger_masses(name))
@@ -175,9 +179,11 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
             ok = rep.success
             pairs.append(PairResult(str(name), obj.name, obj.mesh_hash, bool(original), s, ok, grasps,
                                     timing["seconds"], time.perf_counter() - t0,
-                                    diversity(grasps[ok], movable), diversity(grasps, movable)))
+                                    diversity(grasps[ok], movable), diversity(grasps, movable), timing.get("refine_seconds", 0.0)))
     cond = None if condition_hand is None else (condition_hand if isinstance(condition_hand, str) else hand_key(resolve_hand(condition_hand)))
+    ref = None if refine is False or refine is None else asdict(refine if isinstance(refine, RefineSettings) else RefineSettings())
     meta = {"n_per_pair": int(n), "seed": int(seed), "original": bool(original), "inertials": inertials, "condition_hand": cond,
+            "refine": ref,
             "model": str(model.path),
             "model_meta": model.meta, "protocol": protocol.__dict__ if protocol is not None else "default"}
     return GraspEvalReport(pairs, meta)

@@ -33,6 +33,7 @@ from ohra.learn.grasp.config import GraspModelConfig
 from ohra.learn.grasp.diffusion import DDIMScheduler, Denoiser
 from ohra.learn.grasp.encoder import make_encoder
 from ohra.learn.grasp.joints import JointNet, clamp_joints
+from ohra.learn.grasp.refine import RefineSettings, refine_grasps
 from ohra.objects.model import ObjectModel
 
 MODEL_FORMAT = "ohra-grasp-model"
@@ -162,7 +163,8 @@ class GraspModel:
 
     # -- sampling -------------------------------------------------------------------------------------
     def sample(self, hand: HandLike, obj: ObjectLike, n: int, rotations: Any = None, seed: int = 0,
-               timing: dict | None = None, condition_hand: HandLike | None = None) -> np.ndarray:
+               timing: dict | None = None, condition_hand: HandLike | None = None,
+               refine: bool | RefineSettings = False) -> np.ndarray:
         """``n`` grasps (n, 31) of ``hand`` on ``obj`` (see the module docstring).
 
         ``rotations``: wrist rotations (n, 3, 3), rot6d (n, 6) or a scipy ``Rotation``; None draws
@@ -170,6 +172,9 @@ class GraspModel:
         dict, receives ``seconds`` (wall time of the sampling itself, rotations to joints).
         ``condition_hand``: condition the model on another hand's parameters while the joints stay
         clamped to ``hand``'s limits (the paper's wrong-condition study, Table 9).
+        ``refine``: True (default settings) or :class:`~ohra.learn.grasp.refine.RefineSettings` opens
+        the fingers just enough to clear the object (:func:`~ohra.learn.grasp.refine.refine_grasps`);
+        its wall time goes to ``timing["refine_seconds"]``, not ``seconds``.
         """
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
             raise GraspError(f"n must be a positive integer, got {n!r}")
@@ -198,6 +203,11 @@ class GraspModel:
         out = np.concatenate([x.double().numpy() * self.t_scale, r6, q64], axis=1)
         if timing is not None:
             timing["seconds"] = time.perf_counter() - t0
+        if refine is not False and refine is not None:
+            t1 = time.perf_counter()
+            out = refine_grasps(params, obj, out, refine if isinstance(refine, RefineSettings) else None).grasps
+            if timing is not None:
+                timing["refine_seconds"] = time.perf_counter() - t1
         return out
 
     def _run(self, obj: ObjectModel, hand_vec: torch.Tensor, r6: np.ndarray, lower: torch.Tensor, upper: torch.Tensor,

@@ -1,0 +1,123 @@
+"""Test-time refinement of sampled grasps (ohra.learn.grasp.refine): fingers sunk into the object are
+opened just enough to clear it; nothing else moves."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ohra.canonical.kinematics import HandModel
+from ohra.errors import GraspError
+from ohra.hands import get_hand
+from ohra.learn.grasp.refine import RefineSettings, refine_grasps
+from ohra.objects.model import ObjectModel
+from ohra.rotations import matrix_to_rot6d
+from scipy.spatial.transform import Rotation
+
+
+def _sunk_grasps(hand: HandModel, obj: ObjectModel, n: int, seed: int = 0, depth: float = 0.005) -> np.ndarray:
+    """A model's typical error, made by the joints: random palm orientations facing the object, each
+    palm as close as its open fingers (20 % closed) stay 2 mm clear, then the fingers closed until one
+    sinks ``depth`` into the object (grasps where none does are dropped)."""
+    from ohra.synth.pipeline import finger_object_distance
+
+    R = Rotation.random(n, random_state=seed).as_matrix()
+    x = R[:, :, 0]  # palm normal, toward the object
+    lo, up = hand.lower, hand.upper
+    out = np.concatenate([np.zeros((n, 3)), matrix_to_rot6d(R), np.tile(lo + 0.2 * (up - lo), (n, 1))], axis=1)
+    placed = np.zeros(n, dtype=bool)
+    for r in np.arange(obj.radius + 0.15, 0.0, -0.0005):  # palm from far to near, fingers open
+        g = out.copy()
+        g[:, :3] = -x * r
+        ok = finger_object_distance(hand, obj, g) >= 0.002
+        out[~placed & ok, :3] = g[~placed & ok, :3]
+        placed |= ~ok & (np.linalg.norm(out[:, :3], axis=1) > 0)  # the last clear distance is kept
+    sunk = np.zeros(n, dtype=bool)
+    for a in np.linspace(0.2, 1.0, 161):  # close the fingers
+        g = out.copy()
+        g[:, 9:] = lo + a * (up - lo)
+        hit = ~sunk & (finger_object_distance(hand, obj, g) <= -depth)
+        out[hit, 9:], sunk = g[hit, 9:], sunk | hit
+    return out[sunk]
+
+
+@pytest.fixture(scope="module")
+def case():
+    hand = HandModel.from_params(get_hand("allegro_hand_left"))
+    obj = ObjectModel.builtin("sphere")
+    g = _sunk_grasps(hand, obj, 24)
+    return hand, obj, g, refine_grasps(hand, obj, g)
+
+
+def test_sunk_fingers_come_out_to_the_clearance(case):
+    hand, obj, g, r = case
+    sunk = r.min_distance_before < -0.003
+    assert sunk.sum() >= 20  # the fixture does sink fingers
+    s = RefineSettings()
+    # 0.1 mm margin: the last step's length
+    assert np.all(r.min_distance_after[sunk] >= -s.clearance_m - 0.0001), r.min_distance_after[sunk]
+
+
+def test_only_joints_move_and_they_stay_within_the_limits(case):
+    hand, _, g, r = case
+    assert np.array_equal(r.grasps[:, :9], g[:, :9])
+    assert np.all(r.grasps[:, 9:] >= hand.lower - 1e-12) and np.all(r.grasps[:, 9:] <= hand.upper + 1e-12)
+    fixed = hand.upper <= hand.lower  # absent and fixed joints
+    assert np.array_equal(r.grasps[:, 9:][:, fixed], g[:, 9:][:, fixed])
+
+
+def test_the_refinement_opens_as_little_as_it_needs(case):
+    """A grasp 1 mm deep is left alone at 1 mm clearance and moved only slightly at 0 mm."""
+    hand, obj, g, r = case
+    moved = np.abs(r.grasps[:, 9:] - g[:, 9:]).max(axis=1)
+    assert np.all(moved[r.steps == 0] == 0)
+    assert np.median(moved[r.steps > 0]) < 0.5  # rad: a nudge, not a reset to the open hand
+
+
+def test_clear_grasps_are_returned_unchanged_and_the_result_is_deterministic(case):
+    hand, obj, g, r = case
+    clear = r.min_distance_before >= -RefineSettings().clearance_m
+    again = refine_grasps(hand, obj, g[clear])
+    assert np.array_equal(again.grasps, g[clear]) and np.all(again.steps == 0)
+    assert np.array_equal(refine_grasps(hand, obj, g).grasps, r.grasps)
+
+
+def test_any_canonical_hand_works_leap_variants_included():
+    p = get_hand("leap_3033")
+    hand = HandModel.from_params(p)
+    obj = ObjectModel.builtin("box")
+    g = _sunk_grasps(hand, obj, 12, seed=1)
+    assert len(g) >= 3
+    r = refine_grasps(p, obj, g)
+    absent = ~np.asarray(p.present_joints, dtype=bool) if hasattr(p, "present_joints") else hand.upper <= hand.lower
+    assert np.all(r.grasps[:, 9:][:, absent] == 0)
+    assert np.all(r.min_distance_after >= -RefineSettings().clearance_m - 0.0001), r.min_distance_after
+
+
+def test_bad_input_is_refused():
+    hand = HandModel.from_params(get_hand("allegro_hand_left"))
+    with pytest.raises(GraspError, match=r"\(N, 31\)"):
+        refine_grasps(hand, ObjectModel.builtin("sphere"), np.zeros((3, 30)))
+    with pytest.raises(GraspError, match="step_rad"):
+        RefineSettings(step_rad=0.0)
+
+
+def test_the_model_refines_its_own_samples_on_request(tmp_path):
+    """``sample(refine=True)`` = the plain sample with the fingers cleared; ``evaluate_model`` records it."""
+    pytest.importorskip("torch")
+    from grasp_fixtures import tiny_model_config, tiny_train_config, write_dataset
+
+    from ohra.learn.grasp.evaluate import evaluate_model
+    from ohra.learn.grasp.train import train_grasp
+
+    model = train_grasp(write_dataset(tmp_path), tiny_model_config(condition="params"), tiny_train_config(),
+                        progress=False).model
+    obj = ObjectModel.builtin("cylinder")
+    timing: dict = {}
+    raw = model.sample("barrett_hand", obj, 16, seed=2)
+    ref = model.sample("barrett_hand", obj, 16, seed=2, refine=True, timing=timing)
+    assert np.array_equal(ref, refine_grasps(get_hand("barrett_hand"), obj, raw).grasps)
+    assert np.array_equal(ref[:, :9], raw[:, :9]) and timing["refine_seconds"] > 0
+    rep = evaluate_model(model, ["barrett_hand"], [obj], n=2, refine=True, allow_seen=True)
+    assert rep.meta["refine"]["clearance_m"] == RefineSettings().clearance_m
+    assert evaluate_model(model, ["barrett_hand"], [obj], n=2, allow_seen=True).meta["refine"] is None
