@@ -201,13 +201,15 @@ def add_run_args(ap: argparse.ArgumentParser, steps: int, n: int, runs: str, nam
 
 
 def pictures(model, hands: list[str], objects: list, ev: dict, name: str, per_row: int = 8,
-             title: str = "unified model: first passing grasp per (hand, unseen object); red: none passed") -> dict:
+             title: str = "unified model: first passing grasp per (hand, unseen object); red: none passed",
+             refine: bool = False) -> dict:
     """Contact sheet (hands x objects, the first grasp of each pair that passed, else the first grasp;
     green / red frame = passed / failed) and a meshcat scene (each hand's first passing grasp on the
     first object, side by side). Grasps are re-sampled with the evaluation's pair seeds (sampling is
     deterministic), the verdicts are the evaluation's. ``model``: one model for every hand, or a
     dict hand -> model (the zero-shot gallery: each unseen variant drawn by a model that never saw it);
-    ``ev``: ``{"success": {"<hand>/<object>": [0/1 per grasp]}}``."""
+    ``ev``: ``{"success": {"<hand>/<object>": [0/1 per grasp]}}``; ``refine``: the evaluation refined the
+    fingers (the pictures must show the grasps it simulated)."""
     from matplotlib.figure import Figure
 
     from ohra.canonical.kinematics import HandModel
@@ -226,7 +228,7 @@ def pictures(model, hands: list[str], objects: list, ev: dict, name: str, per_ro
         for c, o in enumerate(objs):
             ok = np.asarray(ev["success"][f"{h}/{o.name}"], dtype=bool)
             m = model[h] if isinstance(model, dict) else model
-            grasps = m.sample(h, o, len(ok), seed=pair_seed(0, h, o.mesh_hash))
+            grasps = m.sample(h, o, len(ok), seed=pair_seed(0, h, o.mesh_hash), refine=refine)
             i = int(np.argmax(ok)) if ok.any() else 0
             tile = contact_sheet(render_grasps(sim, o, grasps[i:i + 1], size=160), ok[i:i + 1], columns=1)
             ax = fig.add_subplot(len(hands), len(objs), r * len(objs) + c + 1)

@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import asdict
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -36,6 +37,7 @@ from grasp_study import add_run_args, data_protocol, eval_objects, pictures  # n
 from ohra.learn.grasp import GraspModelConfig, GraspTrainConfig  # noqa: E402
 from ohra.learn.grasp.evaluate import evaluate_model  # noqa: E402
 from ohra.learn.grasp.model import load_grasp_model  # noqa: E402
+from ohra.learn.grasp.refine import RefineSettings  # noqa: E402
 from ohra.learn.grasp.saliency import condition_saliency, saliency_figure  # noqa: E402
 from ohra.learn.grasp.train import train_grasp  # noqa: E402
 
@@ -73,13 +75,14 @@ def success(model, key: str, hand: str, objects: list, protocol, args, condition
     """Success of ``hand`` sampled by ``model`` (conditioned on ``condition_hand`` if given: Table 9;
     the grasps run on the true hand), with the per-grasp verdicts per object (for the gallery), cached.
     Pair seeds are the evaluator's, so the true and the wrong conditions sample from the same noise."""
-    path = Path(args.runs) / f"eval_{key}_{hand}{'_as_' + condition_hand if condition_hand else ''}.json"
+    path = Path(args.runs) / f"eval_{key}_{hand}{'_as_' + condition_hand if condition_hand else ''}{'_refined' if args.refine else ''}.json"
+    extra = {"refine": asdict(RefineSettings())} if args.refine else {}
     ekey = eval_key(run_key(Path(args.runs) / key), hand=hand, condition_hand=condition_hand,
-                    objects=[o.name for o in objects], n=args.n, seed=0, protocol=protocol)
+                    objects=[o.name for o in objects], n=args.n, seed=0, protocol=protocol, **extra)
     if (hit := cached(path, ekey)) is not None:
         return hit
     rep = evaluate_model(model, [hand], objects, n=args.n, seed=0, protocol=protocol, workers=args.workers,
-                         condition_hand=condition_hand)
+                         condition_hand=condition_hand, refine=args.refine)
     ok = np.concatenate([p.success for p in rep.pairs])
     out = {"n": int(len(ok)), "successes": int(ok.sum()), "success_rate": float(ok.mean()),
            "success": {f"{p.hand}/{p.object}": p.success.astype(int).tolist() for p in rep.pairs}}
@@ -95,13 +98,15 @@ def main() -> None:
     ap.add_argument("--data", nargs="+", required=True)
     ap.add_argument("--objects-file", type=Path, default=ROOT / "recipes" / "grasp_eval_objects.yaml")
     add_run_args(ap, steps=12000, n=100, runs="zeroshot_study", name="zeroshot_study")
+    ap.add_argument("--refine", action="store_true", help="evaluate the sampled grasps with their fingers refined "
+                    "(ohra.learn.grasp.refine); cached apart from the plain evaluations")
     args = ap.parse_args()
     objects = eval_objects(args.objects_file)
     args.data = natural_sorted(args.data)  # s2 before s10, whatever the glob gave
     protocol = data_protocol(args.data)
     hands = data_hands(args.data)
     high = [h for h in hands if digit_sum(h) >= 8]
-    res: dict = {"steps": args.steps, "n": args.n, "objects": [o.name for o in objects], "variants_with_grasps": len(high)}
+    res: dict = {"steps": args.steps, "n": args.n, "refine": bool(args.refine), "objects": [o.name for o in objects], "variants_with_grasps": len(high)}
     all_model, counts = trained("all", args.data, high, (), args)
     res["train_counts"] = counts
     lines = ["Table 7 analogue: all-data vs zero-shot models on the test variants (unseen objects)", "",
@@ -147,7 +152,7 @@ def main() -> None:
     if gallery_models:
         res["pictures"] = pictures(gallery_models, list(gallery_models), objects, gallery_ev, args.name,
                                    title="unseen LEAP variants (rows; each drawn by a model never trained on it): "
-                                         "first passing grasp per unseen object; red: none passed")
+                                         "first passing grasp per unseen object; red: none passed", refine=args.refine)
     sal = {h: condition_saliency(all_model, h, objects[0], n=64, seed=0) for h in ("leap_3333", "leap_3033")}
     res["saliency"] = {h: r["groups"] for h, r in sal.items()}
     RESULTS.mkdir(parents=True, exist_ok=True)
@@ -157,7 +162,8 @@ def main() -> None:
               "|---|" + "---|" * len(next(iter(res["saliency"].values())))]
     for h, g in res["saliency"].items():
         lines.append(f"| {h} | " + " | ".join(f"{v:.3g}" for v in g.values()) + " |")
-    lines += ["", f"Budget: {args.steps} steps per model; {args.n} grasps per (variant, object) on {len(objects)} unseen objects."]
+    lines += ["", f"Budget: {args.steps} steps per model; {args.n} grasps per (variant, object) on {len(objects)} unseen objects"
+              + ("; fingers refined before simulation (`--refine`)." if args.refine else ".")]
     if "pictures" in res:
         lines += ["", f"Gallery of unseen variants: `{res['pictures']['sheet']}` (contact sheet), `{res['pictures']['scene']}` "
                   "(meshcat; regenerated by the study, not committed)."]

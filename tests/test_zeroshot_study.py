@@ -60,6 +60,23 @@ def test_wrong_condition_evaluations_are_kept_apart_from_the_true_one(study):
     assert true["key"]["condition_hand"] is None and wrong["key"]["condition_hand"] == "leap_3333"
 
 
+def test_refined_evaluations_are_cached_apart(study):
+    """--refine on the same runs: no retraining, new evaluation files whose keys carry the settings."""
+    import os
+
+    tmp, results, _ = study
+    data, objs = tmp / "data", tmp / "eval.yaml"
+    cmd = [sys.executable, str(ROOT / "benchmarks" / "zeroshot_study.py"), "--data", str(data), "--objects-file", str(objs),
+           "--steps", "2", "-n", "2", "--runs", str(tmp / "runs"), "--name", "zs_refined", "--quiet", "--refine"]
+    before = {p.name: p.stat().st_mtime for p in (tmp / "runs").glob("*/model.pt")}
+    r = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "OHRA_RESULTS_DIR": str(results)}, timeout=600)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert {p.name: p.stat().st_mtime for p in (tmp / "runs").glob("*/model.pt")} == before
+    ref = json.loads((tmp / "runs" / "eval_all_leap_3303_refined.json").read_text())
+    assert ref["key"]["refine"]["clearance_m"] == 0.001
+    assert json.loads((results / "zs_refined.json").read_text())["refine"] is True
+
+
 def test_the_gallery_and_the_saliency_figure_are_written(study):
     _, results, res = study
     assert (results / res["pictures"]["sheet"]).stat().st_size > 5000
