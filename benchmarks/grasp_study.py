@@ -149,26 +149,33 @@ def tables(res: dict) -> str:
             a, b = u["per_hand"][h]["success_rate"], up["per_hand"][h]["success_rate"]
             se = np.sqrt(a * (1 - a) / u["per_hand"][h]["n"] + b * (1 - b) / up["per_hand"][h]["n"])
             lines.append(f"| {h} | {100 * a:.1f} % | {100 * b:.1f} % | {100 * (b - a):+.1f} ± {100 * se:.1f} |")
-    um = res.get("unified_origmass")
+    um, rro = res.get("unified_origmass"), res.get("unified_refined_original")
     lines += ["", "Table 4 analogue: the unified model's grasps replayed on the original URDFs"
               + (" (and on the canonical hand carrying the original URDF's finger masses)" if um else ""), ""]
     if um:
-        lines += ["| hand | finger masses: canonical / original [kg] | canonical | canonical, original masses | original | "
-                  "original - canonical ± SE [points] | original - canonical (original masses) ± SE | paper (reported) |",
-                  "|---|---|---|---|---|---|---|---|"]
+        head = ["hand", "finger masses: canonical / original [kg]", "canonical", "canonical, original masses", "original",
+                "original - canonical ± SE [points]", "original - canonical (original masses) ± SE"]
+        head += ["fingers refined: canonical → original", "original - canonical, refined ± SE"] if rro else []
     else:
-        lines += ["| hand | canonical | original | change ± SE [points] | paper (reported) |", "|---|---|---|---|---|"]
+        head = ["hand", "canonical", "original", "change ± SE [points]"]
+    lines += ["| " + " | ".join(head + ["paper (reported)"]) + " |", "|" + "---|" * (len(head) + 1)]
     for h in res["hands"]:
         c, s = paired_change(u, uo, h)
+        rate = {k: f"{100 * v['per_hand'][h]['success_rate']:.1f} %" for k, v in (("u", u), ("um", um), ("uo", uo), ("ur", ur), ("rro", rro)) if v}
         if um:
             cm, sm = paired_change(um, uo, h)
             fm = res["finger_masses"][h]
-            lines.append(f"| {h} | {sum(fm['canonical']):.3f} / {sum(fm['original']):.3f} | {100 * u['per_hand'][h]['success_rate']:.1f} % | "
-                         f"{100 * um['per_hand'][h]['success_rate']:.1f} % | {100 * uo['per_hand'][h]['success_rate']:.1f} % | "
-                         f"{c:+.1f} ± {s:.1f} | {cm:+.1f} ± {sm:.1f} | {PAPER_REPLAY.get(h, '-')} |")
+            cells = [h, f"{sum(fm['canonical']):.3f} / {sum(fm['original']):.3f}", rate["u"], rate["um"], rate["uo"],
+                     f"{c:+.1f} ± {s:.1f}", f"{cm:+.1f} ± {sm:.1f}"]
+            if rro:
+                cr, sr = paired_change(ur, rro, h)
+                cells += [f"{rate['ur']} → {rate['rro']}", f"{cr:+.1f} ± {sr:.1f}"]
         else:
-            lines.append(f"| {h} | {100 * u['per_hand'][h]['success_rate']:.1f} % | {100 * uo['per_hand'][h]['success_rate']:.1f} % | "
-                         f"{c:+.1f} ± {s:.1f} | {PAPER_REPLAY.get(h, '-')} |")
+            cells = [h, rate["u"], rate["uo"], f"{c:+.1f} ± {s:.1f}"]
+        lines.append("| " + " | ".join(cells + [str(PAPER_REPLAY.get(h, "-"))]) + " |")
+    if rro:
+        lines += ["", "Fingers refined: the same grasps with their fingers opened out of the object first (`refine=True`), "
+                  "then simulated on the canonical and the original URDF."]
     if um:
         lines += ["", "Finger masses: the sum over fingers of the links' `<inertial>` masses; canonical = the template's "
                   "capsules at 1000 kg/m^3, original = the original URDF's links moved by each finger "
@@ -273,6 +280,7 @@ def main() -> None:
     res["unified_original"] = evaluated(unified, "unified", args.hands, objects, True, protocol, args)
     res["unified_origmass"] = evaluated(unified, "unified", args.hands, objects, False, protocol, args, inertials="original")
     res["unified_refined"] = evaluated(unified, "unified", args.hands, objects, False, protocol, args, refine=True)
+    res["unified_refined_original"] = evaluated(unified, "unified", args.hands, objects, True, protocol, args, refine=True)
     res["finger_masses"] = {h: {"canonical": SimHand.from_params(get_hand(h), name=h).finger_masses.tolist(),
                                 "original": SimHand.registered_original(h).finger_masses.tolist()} for h in args.hands}
     res["specific"] = {}
