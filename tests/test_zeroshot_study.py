@@ -60,6 +60,7 @@ def test_wrong_condition_evaluations_are_kept_apart_from_the_true_one(study):
     assert true["key"]["condition_hand"] is None and wrong["key"]["condition_hand"] == "leap_3333"
 
 
+@pytest.mark.slow  # a second study run (~11 s); the suite keeps the first
 def test_refined_evaluations_are_cached_apart(study):
     """--refine on the same runs: no retraining, new evaluation files whose keys carry the settings."""
     import os
