@@ -111,11 +111,12 @@ def main() -> None:
     res["train_counts"] = counts
     lines = ["Table 7 analogue: all-data vs zero-shot models on the test variants (unseen objects)", "",
              "| variant | all-data | zero-shot | ratio | grasps of the variant in all-data training |", "|---|---|---|---|---|"]
-    res["table7"] = {}
+    res["table7"], zs_models = {}, {}
     for v in TEST:
         if v not in high:
             continue
         zs, _ = trained(f"zs-{v}", args.data, [h for h in high if h != v], (v,), args)
+        zs_models[v] = zs
         a, z = success(all_model, "all", v, objects, protocol, args), success(zs, f"zs-{v}", v, objects, protocol, args)
         ratio = z["success_rate"] / a["success_rate"] if a["success_rate"] else float("nan")
         res["table7"][v] = {"all": a, "zero_shot": z, "ratio": ratio}
@@ -134,7 +135,7 @@ def main() -> None:
               "| condition | all-data | zero-shot (zs-leap_3033) |", "|---|---|---|"]
     res["table9"] = {}
     if "leap_3033" in high:
-        zs3033 = load_grasp_model(Path(args.runs) / "zs-leap_3033")
+        zs3033 = zs_models["leap_3033"]
         for c in ("leap_3033",) + WRONG:
             a = success(all_model, "all", "leap_3033", objects, protocol, args, None if c == "leap_3033" else c)
             z = success(zs3033, "zs-leap_3033", "leap_3033", objects, protocol, args, None if c == "leap_3033" else c)
@@ -144,7 +145,7 @@ def main() -> None:
     # variants; the all-data model for the low-sum ones, which it was not trained on)
     gallery_models, gallery_ev = {}, {"success": {}}
     for v, r in res["table7"].items():
-        gallery_models[v] = load_grasp_model(Path(args.runs) / f"zs-{v}")
+        gallery_models[v] = zs_models[v]
         gallery_ev["success"].update(r["zero_shot"]["success"])
     for v, r in res["table8"].items():
         gallery_models[v] = all_model

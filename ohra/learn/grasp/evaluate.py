@@ -37,7 +37,7 @@ import numpy as np
 from ohra.errors import DatasetError, GraspError
 from ohra.learn.grasp.condition import HandLike, hand_key, resolve_hand
 from ohra.learn.grasp.model import GraspModel, ObjectLike, resolve_object
-from ohra.learn.grasp.refine import RefineSettings
+from ohra.learn.grasp.refine import RefineSettings, as_refine_settings
 
 
 INERTIALS = ("capsule", "original")  # finger masses of the canonical hand: template capsules, or the original URDF's
@@ -181,7 +181,7 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
                                     timing["seconds"], time.perf_counter() - t0,
                                     diversity(grasps[ok], movable), diversity(grasps, movable), timing.get("refine_seconds", 0.0)))
     cond = None if condition_hand is None else (condition_hand if isinstance(condition_hand, str) else hand_key(resolve_hand(condition_hand)))
-    ref = None if refine is False or refine is None else asdict(refine if isinstance(refine, RefineSettings) else RefineSettings())
+    ref = None if (rs := as_refine_settings(refine)) is None else asdict(rs)
     meta = {"n_per_pair": int(n), "seed": int(seed), "original": bool(original), "inertials": inertials, "condition_hand": cond,
             "refine": ref,
             "model": str(model.path),

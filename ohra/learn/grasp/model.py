@@ -33,7 +33,7 @@ from ohra.learn.grasp.config import GraspModelConfig
 from ohra.learn.grasp.diffusion import DDIMScheduler, Denoiser
 from ohra.learn.grasp.encoder import make_encoder
 from ohra.learn.grasp.joints import JointNet, clamp_joints
-from ohra.learn.grasp.refine import RefineSettings, refine_grasps
+from ohra.learn.grasp.refine import RefineSettings, as_refine_settings, refine_grasps
 from ohra.objects.model import ObjectModel
 
 MODEL_FORMAT = "ohra-grasp-model"
@@ -203,9 +203,9 @@ class GraspModel:
         out = np.concatenate([x.double().numpy() * self.t_scale, r6, q64], axis=1)
         if timing is not None:
             timing["seconds"] = time.perf_counter() - t0
-        if refine is not False and refine is not None:
+        if (settings := as_refine_settings(refine)) is not None:
             t1 = time.perf_counter()
-            out = refine_grasps(params, obj, out, refine if isinstance(refine, RefineSettings) else None).grasps
+            out = refine_grasps(params, obj, out, settings).grasps
             if timing is not None:
                 timing["refine_seconds"] = time.perf_counter() - t1
         return out

@@ -45,6 +45,13 @@ class RefineSettings:
             raise GraspError(f"RefineSettings: iterations >= 0 and samples_per_capsule >= 2 needed, got {self}")
 
 
+def as_refine_settings(refine: "bool | RefineSettings | None") -> RefineSettings | None:
+    """The settings a ``refine=`` argument asks for: None when off (False/None), the defaults for True."""
+    if refine is None or refine is False:
+        return None
+    return refine if isinstance(refine, RefineSettings) else RefineSettings()
+
+
 @dataclass
 class RefineResult:
     """Refined ``grasps`` (N, 31; the input's float type), the smallest finger-object signed distance before and after
@@ -110,4 +117,4 @@ def refine_grasps(hand, obj, grasps: np.ndarray, settings: RefineSettings | None
     return RefineResult(out, d0, d1, steps)
 
 
-__all__ = ["RefineSettings", "RefineResult", "refine_grasps"]
+__all__ = ["RefineSettings", "RefineResult", "as_refine_settings", "refine_grasps"]
