@@ -13,7 +13,10 @@ nbformat = pytest.importorskip("nbformat")
 
 NOTEBOOKS_DIR = Path(__file__).resolve().parents[1] / "notebooks"
 # Written out, so that a missing notebook fails here instead of parametrizing nothing.
-NOTEBOOKS = ["01_canonical_hand", "02_parse_and_compare", "03_morphology_vae", "04_grasp_evaluation", "05_grasp_synthesis", "06_grasp_model", "08_in_hand_rotation"]
+NOTEBOOKS = ["01_canonical_hand", "02_parse_and_compare", "03_morphology_vae", "04_grasp_evaluation", "05_grasp_synthesis", "06_grasp_model", "07_zero_shot", "08_in_hand_rotation"]
+# 07 shows the zero-shot study's models: until the study has run (its all-data model committed) the
+# notebook is committed without outputs, and opening it says what to run; from then on the rule holds.
+PENDING_STUDY = {"07_zero_shot": NOTEBOOKS_DIR.parent / "runs" / "zeroshot_study" / "all" / "model.pt"}
 RASTER = re.compile(r"\bplt\.|\.imshow\(|\bImage\(|\bstrip_png\(")  # cells that draw a PNG figure
 SCENE = re.compile(r"\brender_static\(|\bstatic_html\(|\bcompare_html\(")  # cells that show a meshcat scene
 
@@ -34,6 +37,9 @@ def test_the_notebook_list_is_complete():
 def test_saved_notebook_shows_every_figure_it_draws(name):
     cells = _cells(name)
     executed = any(c.get("execution_count") is not None for c in cells)
+    if name in PENDING_STUDY and not PENDING_STUDY[name].is_file():
+        assert not executed, f"{name} carries outputs but {PENDING_STUDY[name]} (the study it shows) is not committed"
+        return
     for k, cell in enumerate(cells):
         assert "matplotlib.use(" not in cell.source, f"{name} code cell {k} switches the matplotlib backend"
         if RASTER.search(cell.source):

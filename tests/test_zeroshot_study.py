@@ -83,3 +83,28 @@ def test_the_gallery_and_the_saliency_figure_are_written(study):
     assert (results / res["pictures"]["sheet"]).stat().st_size > 5000
     assert (results / "zs_test_saliency.png").stat().st_size > 5000
     assert "Gallery of unseen variants" in (results / "zs_test.md").read_text()
+
+
+def test_notebook_07_runs_on_the_study(study, tmp_path, monkeypatch):
+    """notebooks/07_zero_shot.ipynb reads the study's models and tables (here the tiny study's, through
+    its environment variables): the split is shown clean, an untrained variant is sampled by name and by
+    params JSON and simulated, the saliency and the study's tables are shown."""
+    pytest.importorskip("nbclient")
+    from notebook_utils import execute
+
+    tmp, results, _ = study
+    monkeypatch.setenv("OHRA_ZS_RUNS", str(tmp / "runs"))
+    monkeypatch.setenv("OHRA_RESULTS_DIR", str(results))
+    monkeypatch.setenv("OHRA_ZS_NAME", "zs_test")
+    nb, texts = execute("07_zero_shot.ipynb", tmp_path, timeout=600)
+    assert "condition params, 4 LEAP variants" in texts[0]
+    for v in ("leap_3033", "leap_3303", "leap_3330"):
+        assert f"{v} among them: False" in texts[0]
+    assert "leap_2211 in the training data: False" in texts[1]
+    assert "(16, 31) grasps; from the params JSON: same grasps True" in texts[1]
+    assert "leap_2211 on cylinder-500:" in texts[2] and "<png>" in texts[2]
+    assert texts[3].count("index") == 2 and "<png>" in texts[3]
+    assert texts[4].count("ratio") == 3 and "<png>" in texts[4]  # the gallery
+    shown = [o["data"].get("text/markdown", "") for o in [c for c in nb.cells if c.cell_type == "code"][4].outputs if "data" in o]
+    assert any("Table 9" in m for m in shown)
+    assert (tmp_path / "zero_shot_saliency.png").is_file() and (tmp_path / "leap_2211.json").is_file()
