@@ -130,7 +130,9 @@ class GraspDataset:
             raise DatasetError(f"no shard for hand {hand!r} and object {obj!r}")
         return self._read(hits[0][0], hits[0][3])
 
-    def _read(self, root: Path, sh: dict) -> dict[str, np.ndarray]:
+    def _read(self, root: Path, sh: dict, keys: tuple[str, ...] | None = None) -> dict[str, np.ndarray]:
+        """The shard's arrays (only ``keys`` when given: a shard holds ~18 arrays and a training set
+        reads thousands of shards for their grasps), after checking its hash and the grasp shapes."""
         path = root / sh["file"]
         if not path.is_file():
             raise DatasetError(f"shard listed in the manifest is missing: {path}")
@@ -139,7 +141,7 @@ class GraspDataset:
             raise DatasetError(f"{path}: content hash {digest} does not match the manifest ({sh['sha256']})")
         try:
             with np.load(path) as z:
-                data = {k: z[k] for k in z.files}
+                data = {k: z[k] for k in z.files if keys is None or k in keys}
         except Exception as exc:  # zipfile / numpy raise several types for damaged files
             raise DatasetError(f"{path}: cannot read shard ({exc})") from None
         for key in ("grasps", "grasps_post") if sh["_format"] != "ohra-grasps/1" else ("grasps",):
@@ -149,7 +151,7 @@ class GraspDataset:
         return data
 
     def _grasps(self, root: Path, sh: dict) -> np.ndarray:
-        data = self._read(root, sh)
+        data = self._read(root, sh, keys=("grasps", "grasps_post"))
         if sh["_format"] == "ohra-grasps/1":
             if self.which == "pre":
                 raise DatasetError(f"{root / sh['file']}: format 1 shards store post-test grasps only; use which='post'")

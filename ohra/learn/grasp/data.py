@@ -14,6 +14,7 @@ uniformly random rotations that are applied to its cloud and to the grasps assig
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 from dataclasses import dataclass, field
@@ -37,10 +38,23 @@ def object_key(name: str, mesh_hash: str) -> str:
     return f"{name}-{mesh_hash[:8]}"
 
 
+@functools.lru_cache(maxsize=16)
+def _parsed_manifest(path: str, mtime_ns: int, size: int) -> dict:
+    return json.loads(Path(path).read_text())
+
+
+def _read_manifest(root: Path) -> dict:
+    """A dataset's manifest, parsed once per file version: the manifests of the zero-shot data run to
+    several MB and a training set asks for the params of each of its ~70 hands."""
+    path = root / "manifest.json"
+    st = path.stat()
+    return _parsed_manifest(str(path), st.st_mtime_ns, st.st_size)
+
+
 def _manifest_params(root: Path, hand: str) -> BaseParams | ExtendedParams:
     """The hand's params as stored in the dataset manifest (registered hands as a fallback)."""
     try:
-        d = json.loads((root / "manifest.json").read_text())["hands"][hand].get("params")
+        d = _read_manifest(root)["hands"][hand].get("params")
     except (OSError, KeyError, json.JSONDecodeError):
         d = None
     if d:
@@ -134,7 +148,7 @@ def _test_hand_keys(roots: Sequence[Path], names: Sequence[str]) -> dict[str, st
     for n in names:
         for root in roots:
             try:
-                if n in json.loads((root / "manifest.json").read_text()).get("hands", {}):
+                if n in _read_manifest(root).get("hands", {}):
                     keys[n] = params_key(_manifest_params(root, n))
                     break
             except (OSError, json.JSONDecodeError):
