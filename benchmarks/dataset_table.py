@@ -70,13 +70,29 @@ def rows(root: Path, exclude: tuple[str, ...] = ()) -> tuple[list[str], list[str
         cpu[name] += s["cpu_hours"]
     tot_rows = [f"| **{name}, all folders** | `ohra data info {root.name}/{name}_s*` | | {_kept(per)} | {cpu[name]:.2f} |"
                 for name, per in totals.items()]
-    return out, tot_rows
+    return out, tot_rows, totals
+
+
+def per_hand_lines(totals: dict[str, dict[str, int]]) -> list[str]:
+    """For recipes with too many hands for the table: every hand's robust grasps over all folders,
+    fewest first, and the recipe's hands that have none (built or not), named."""
+    out = []
+    for name, per in totals.items():
+        if len(per) <= 4:
+            continue
+        _, hands_all, _ = _recipe(name)
+        none = sorted({h for h in hands_all if not per.get(h)})
+        listed = sorted(((n, h) for h, n in per.items() if n), key=lambda t: (t[0], t[1]))
+        out += ["", f"**{name}, robust grasps per hand over all folders** (fewest first): "
+                + ", ".join(f"{h} {n:,}" for n, h in listed) + ". Hands of the recipe without a grasp: "
+                + (", ".join(none) if none else "none") + "."]
+    return out
 
 
 def table(root: Path, exclude: tuple[str, ...] = ()) -> str:
-    data, tot = rows(root, exclude)
+    data, tot, totals = rows(root, exclude)
     head = ["| folder | made by | status | robust grasps | CPU-hours |", "|---|---|---|---|---|"]
-    return "\n".join([START, *head, *data, *tot, END])
+    return "\n".join([START, *head, *data, *tot, *per_hand_lines(totals), END])
 
 
 def main() -> int:
