@@ -17,6 +17,8 @@ sampled with the conditions of other variants. Gallery: each unseen variant draw
 
 Run: python benchmarks/zeroshot_study.py --data out/leap_zeroshot [...] [--steps 12000] [-n 100] [--runs runs/zeroshot_study]
   -> benchmarks/results/zeroshot_study.{json,md}
+Two cores: train the nine models in two processes first (``--train-only all zs-leap_3033 ...`` in one,
+the other runs in the other), then run the study without the flag (``--workers 2`` for the simulations).
 """
 
 from __future__ import annotations
@@ -100,12 +102,26 @@ def main() -> None:
     add_run_args(ap, steps=12000, n=100, runs="zeroshot_study", name="zeroshot_study")
     ap.add_argument("--refine", action="store_true", help="evaluate the sampled grasps with their fingers refined "
                     "(ohra.learn.grasp.refine); cached apart from the plain evaluations")
+    ap.add_argument("--train-only", nargs="+", metavar="RUN",
+                    help="train these runs (all, zs-<variant>, only-<variant>) and stop: several study processes with "
+                         "different runs use one core each; a last run without the flag reuses them")
     args = ap.parse_args()
-    objects = eval_objects(args.objects_file)
     args.data = natural_sorted(args.data)  # s2 before s10, whatever the glob gave
-    protocol = data_protocol(args.data)
     hands = data_hands(args.data)
     high = [h for h in hands if digit_sum(h) >= 8]
+    if args.train_only:
+        specs = {"all": (high, ())}
+        specs.update({f"zs-{v}": ([h for h in high if h != v], (v,)) for v in TEST if v in high})
+        specs.update({f"only-{v}": ([v], ()) for v in LOW if v in hands})
+        unknown = [r for r in args.train_only if r not in specs]
+        if unknown:
+            print(f"zeroshot_study: --train-only: unknown run(s) {unknown}; this data has {list(specs)}", file=sys.stderr)
+            raise SystemExit(2)
+        for r in args.train_only:
+            trained(r, args.data, *specs[r], args)
+        return
+    objects = eval_objects(args.objects_file)
+    protocol = data_protocol(args.data)
     res: dict = {"steps": args.steps, "n": args.n, "refine": bool(args.refine), "objects": [o.name for o in objects], "variants_with_grasps": len(high)}
     all_model, counts = trained("all", args.data, high, (), args)
     res["train_counts"] = counts

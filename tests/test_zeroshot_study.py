@@ -108,3 +108,20 @@ def test_notebook_07_runs_on_the_study(study, tmp_path, monkeypatch):
     shown = [o["data"].get("text/markdown", "") for o in [c for c in nb.cells if c.cell_type == "code"][4].outputs if "data" in o]
     assert any("Table 9" in m for m in shown)
     assert (tmp_path / "zero_shot_saliency.png").is_file() and (tmp_path / "leap_2211.json").is_file()
+
+
+def test_train_only_trains_the_named_runs_and_nothing_else(study):
+    """Two study processes can share the training (one core each): --train-only trains its runs and
+    stops; an unknown run name is one line and exit 2."""
+    import os
+
+    tmp, results, _ = study
+    runs = tmp / "runs_split"
+    base = [sys.executable, str(ROOT / "benchmarks" / "zeroshot_study.py"), "--data", str(tmp / "data"),
+            "--steps", "2", "--runs", str(runs), "--quiet"]
+    env = {**os.environ, "OHRA_RESULTS_DIR": str(results)}
+    r = subprocess.run(base + ["--train-only", "zs-leap_3303", "only-leap_0303"], capture_output=True, text=True, env=env, timeout=600)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert sorted(p.parent.name for p in runs.glob("*/model.pt")) == ["only-leap_0303", "zs-leap_3303"]
+    bad = subprocess.run(base + ["--train-only", "zs-leap_3333"], capture_output=True, text=True, env=env, timeout=600)
+    assert bad.returncode == 2 and "unknown run(s) ['zs-leap_3333']" in bad.stderr and "Traceback" not in bad.stderr
