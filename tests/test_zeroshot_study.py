@@ -125,3 +125,26 @@ def test_train_only_trains_the_named_runs_and_nothing_else(study):
     assert sorted(p.parent.name for p in runs.glob("*/model.pt")) == ["only-leap_0303", "zs-leap_3303"]
     bad = subprocess.run(base + ["--train-only", "zs-leap_3333"], capture_output=True, text=True, env=env, timeout=600)
     assert bad.returncode == 2 and "unknown run(s) ['zs-leap_3333']" in bad.stderr and "Traceback" not in bad.stderr
+
+
+def test_cli_samples_an_untrained_variant_by_name_and_by_params_json(study, tmp_path, capsys):
+    """Issue 14's "any hand, zero-shot" from the shell: a params-conditioned model samples leap_2211 (in no
+    dataset) by name and from its params JSON with the same grasps; a hand it cannot read is one line, exit 2."""
+    import numpy as np
+
+    from ohra.cli.main import main as cli
+    from ohra.hands import get_hand
+
+    tmp, _, _ = study
+    model = str(tmp / "runs" / "all")
+    get_hand("leap_2211").to_json(tmp_path / "leap_2211.json")
+    out = {}
+    for key, hand in (("name", "leap_2211"), ("json", str(tmp_path / "leap_2211.json"))):
+        f = tmp_path / f"{key}.npz"
+        assert cli(["grasp", "sample", "--model", model, "--hand", hand, "--object", "builtin:cylinder", "-n", "4", "-o", str(f)]) == 0
+        with np.load(f) as z:
+            out[key] = z["grasps"]
+    assert out["name"].shape == (4, 31) and np.array_equal(out["name"], out["json"])
+    assert cli(["grasp", "sample", "--model", model, "--hand", str(tmp_path / "none.json"), "--object", "builtin:cylinder",
+                "-o", str(tmp_path / "x.npz")]) == 2
+    assert "none.json" in capsys.readouterr().err
