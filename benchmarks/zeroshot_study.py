@@ -109,10 +109,11 @@ def main() -> None:
     args.data = natural_sorted(args.data)  # s2 before s10, whatever the glob gave
     hands = data_hands(args.data)
     high = [h for h in hands if digit_sum(h) >= 8]
+    # every run of the study: name -> (training hands, held-out hands)
+    specs = {"all": (high, ())}
+    specs.update({f"zs-{v}": ([h for h in high if h != v], (v,)) for v in TEST if v in high})
+    specs.update({f"only-{v}": ([v], ()) for v in LOW if v in hands})
     if args.train_only:
-        specs = {"all": (high, ())}
-        specs.update({f"zs-{v}": ([h for h in high if h != v], (v,)) for v in TEST if v in high})
-        specs.update({f"only-{v}": ([v], ()) for v in LOW if v in hands})
         unknown = [r for r in args.train_only if r not in specs]
         if unknown:
             print(f"zeroshot_study: --train-only: unknown run(s) {unknown}; this data has {list(specs)}", file=sys.stderr)
@@ -123,7 +124,7 @@ def main() -> None:
     objects = eval_objects(args.objects_file)
     protocol = data_protocol(args.data)
     res: dict = {"steps": args.steps, "n": args.n, "refine": bool(args.refine), "objects": [o.name for o in objects], "variants_with_grasps": len(high)}
-    all_model, counts = trained("all", args.data, high, (), args)
+    all_model, counts = trained("all", args.data, *specs["all"], args)
     res["train_counts"] = counts
     lines = ["Table 7 analogue: all-data vs zero-shot models on the test variants (unseen objects)", "",
              "| variant | all-data | zero-shot | ratio | grasps of the variant in all-data training |", "|---|---|---|---|---|"]
@@ -131,7 +132,7 @@ def main() -> None:
     for v in TEST:
         if v not in high:
             continue
-        zs, _ = trained(f"zs-{v}", args.data, [h for h in high if h != v], (v,), args)
+        zs, _ = trained(f"zs-{v}", args.data, *specs[f"zs-{v}"], args)
         zs_models[v] = zs
         a, z = success(all_model, "all", v, objects, protocol, args), success(zs, f"zs-{v}", v, objects, protocol, args)
         ratio = z["success_rate"] / a["success_rate"] if a["success_rate"] else float("nan")
@@ -143,7 +144,7 @@ def main() -> None:
     for v in LOW:
         if v not in hands:
             continue
-        only, c = trained(f"only-{v}", args.data, [v], (), args)
+        only, c = trained(f"only-{v}", args.data, *specs[f"only-{v}"], args)
         a, s = success(all_model, "all", v, objects, protocol, args), success(only, f"only-{v}", v, objects, protocol, args)
         res["table8"][v] = {"all": a, "specific": s, "specific_grasps": c.get(v, 0)}
         lines.append(f"| {v} | {pct(a)} | {pct(s)} | {c.get(v, 0)} |")
