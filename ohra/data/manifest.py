@@ -12,6 +12,11 @@ Rules (what ``--resume`` and a repeated run may assume):
 - A manifest that is not valid JSON is an error naming the file, never silently replaced.
 - Objects are keyed by name; objects sharing a name (``a/mug.stl`` and ``b/mug.stl``) get the
   name plus their mesh hash prefix, so each has its own manifest entry.
+
+The file is plain JSON with one shard entry per line (:func:`manifest_json`): a run rewrites the
+manifest after every pair, and re-encoding thousands of unchanged entries with ``indent`` (Python's
+pure-Python encoder) cost 0.4 CPU-s per pair at 2,700 pairs, 10 % of the synthesis itself.
+:class:`ManifestWriter` encodes each shard entry once; a new pair adds one line to the file.
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ from collections import Counter
 from pathlib import Path
 
 from ohra.data.dataset import file_digest, read_manifest
+from ohra.io import write_text
 from ohra.errors import DatasetError
 from ohra.objects.procedural import same_procedural_object
 
@@ -114,3 +120,60 @@ def shard_complete(root: Path, sh: dict | None, obj_desc: dict) -> bool:
         return False
     f = root / sh.get("file", "")
     return f.is_file() and bool(sh.get("sha256")) and file_digest(f) == sh["sha256"]
+
+
+def _block(value, pad: str) -> str:
+    """``value`` as indented JSON whose continuation lines start with ``pad`` (small sections)."""
+    return json.dumps(value, indent=1, default=str).replace("\n", "\n" + pad)
+
+
+def manifest_json(manifest: dict, cache: dict | None = None) -> str:
+    """The manifest as JSON text: top-level sections indented, each hand's fields on one line
+    each, each shard entry compact on its own line (keys in insertion order).
+
+    ``cache`` maps ``(hand, key)`` to ``(entry, text)``; an entry that is the same object as the
+    cached one is not encoded again (shard entries are replaced, never edited, once written)."""
+    out = ["{"]
+    top = list(manifest.items())
+    for i, (k, v) in enumerate(top):
+        comma = "," if i < len(top) - 1 else ""
+        if k != "hands" or not isinstance(v, dict):
+            out.append(f" {json.dumps(k)}: {_block(v, ' ')}{comma}")
+            continue
+        out.append(f' "hands": {{')
+        hands = list(v.items())
+        for j, (hand, entry) in enumerate(hands):
+            out.append(f"  {json.dumps(hand)}: {{")
+            fields = list(entry.items())
+            for m, (fk, fv) in enumerate(fields):
+                fcomma = "," if m < len(fields) - 1 else ""
+                if fk != "shards" or not isinstance(fv, dict):
+                    out.append(f"   {json.dumps(fk)}: {json.dumps(fv, default=str)}{fcomma}")
+                    continue
+                out.append('   "shards": {')
+                shards = list(fv.items())
+                for n, (key, sh) in enumerate(shards):
+                    hit = cache.get((hand, key)) if cache is not None else None
+                    if hit is not None and hit[0] is sh:
+                        text = hit[1]
+                    else:
+                        text = f"    {json.dumps(key)}: {json.dumps(sh, default=str)}"
+                        if cache is not None:
+                            cache[(hand, key)] = (sh, text)
+                    out.append(text + ("," if n < len(shards) - 1 else ""))
+                out.append("   }" + fcomma)
+            out.append("  }" + ("," if j < len(hands) - 1 else ""))
+        out.append(" }" + comma)
+    out.append("}")
+    return "\n".join(out) + "\n"
+
+
+class ManifestWriter:
+    """Writes one directory's manifest atomically, encoding each shard entry only once."""
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        self._cache: dict = {}
+
+    def write(self, manifest: dict) -> None:
+        write_text(self.path, manifest_json(manifest, self._cache))

@@ -34,8 +34,8 @@ from ohra import __version__
 from ohra.canonical.kinematics import HandModel
 from ohra.canonical.params import BaseParams, ExtendedParams
 from ohra.data.backends import run_tasks
-from ohra.data.dataset import atomic_write_bytes, atomic_write_json, npz_bytes, shard_name
-from ohra.data.manifest import hand_entry, object_keys, open_manifest, shard_complete
+from ohra.data.dataset import atomic_write_bytes, npz_bytes, shard_name
+from ohra.data.manifest import ManifestWriter, hand_entry, object_keys, open_manifest, shard_complete
 from ohra.errors import ObjectError, OhraError
 from ohra.objects.model import ObjectModel
 from ohra.objects.resolve import GRASPABLE_EXTENT_M, size_problem
@@ -302,12 +302,13 @@ def synthesize(hands: list[tuple], objects: list[ObjectModel], out: str | Path, 
     tasks = [(name, params, obj, key, hand_settings[name])
              for obj, key, desc in zip(objects, keys, descs) for name, params, _ in hands
              if not (resume and shard_complete(out, entries[name]["shards"].get(key), desc))]
-    _run(out, manifest, tasks, len(hands) * len(objects), workers, backend, address, progress)
-    _finish(out, manifest)
+    writer = ManifestWriter(out / "manifest.json")
+    _run(out, manifest, writer, tasks, len(hands) * len(objects), workers, backend, address, progress)
+    _finish(manifest, writer)
     return manifest
 
 
-def _run(out: Path, manifest: dict, tasks: list, total: int, workers: int, backend: str, address: str | None, progress: bool) -> None:
+def _run(out: Path, manifest: dict, writer: ManifestWriter, tasks: list, total: int, workers: int, backend: str, address: str | None, progress: bool) -> None:
     bar = _bar(total, progress)
     bar.update(total - len(tasks))
     t0, kept = time.perf_counter(), 0
@@ -318,14 +319,14 @@ def _run(out: Path, manifest: dict, tasks: list, total: int, workers: int, backe
         if old and old.get("file") != res["info"]["file"]:
             (out / old["file"]).unlink(missing_ok=True)  # the object changed: its old shard is not listed any more
         shards[res["key"]] = res["info"]
-        atomic_write_json(out / "manifest.json", manifest)
+        writer.write(manifest)
         kept += res["info"]["n_grasps"]
         bar.set_postfix(verified_s=f"{kept / (time.perf_counter() - t0):.2f}", kept=kept)
         bar.update(1)
     bar.close()
 
 
-def _finish(out: Path, manifest: dict) -> None:
+def _finish(manifest: dict, writer: ManifestWriter) -> None:
     core_s = 0.0
     for entry in manifest["hands"].values():
         sh = entry["shards"].values()
@@ -333,7 +334,7 @@ def _finish(out: Path, manifest: dict) -> None:
                            (("candidates", "candidates"), ("solved", "solved"), ("sim_passed", "sim_passed"), ("grasps", "grasps"))}
         core_s += sum(s["timing"]["total_s"] for s in sh)
     manifest["core_hours"] = core_s / 3600.0  # one core per shard task: the sum of shard wall times
-    atomic_write_json(out / "manifest.json", manifest)
+    writer.write(manifest)
 
 
 class _Quiet:
