@@ -1,7 +1,7 @@
 """Cache keys of the grasp-model studies: a cached training run or evaluation is reused only when it
 was made with the same settings.
 
-A training run directory holds ``study_key.json`` (data folders and their manifests' content hash,
+A training run directory holds ``study_key.json`` (data folders and a digest of their grasps,
 hands, held-out hands, steps, seed, condition); a run made with other settings, or by a script that
 wrote no key, stops the study with one line naming the difference instead of being reused. An
 evaluation JSON carries its key (the model's key, hands, objects, grasps per pair, seed, protocol,
@@ -16,16 +16,20 @@ from dataclasses import asdict, is_dataclass
 from pathlib import Path
 from typing import Any
 
-from ohra.data.dataset import atomic_write_json
+from ohra.data.dataset import atomic_write_json, read_manifest
 
 KEY_FILE = "study_key.json"
 
 
 def data_fingerprint(data: list[str]) -> list[str]:
-    """``<folder>:<sha256 of its manifest>`` per dataset folder: a grown or rebuilt dataset differs."""
+    """``<folder>:<digest of its content>`` per dataset folder: the settings digest and every pair's
+    (hand, object key, shard sha256). A grown or rebuilt dataset differs; the same grasps in another
+    file layout (a rewritten manifest, a packed directory: ``ohra data pack``) do not."""
     out = []
     for d in data:
-        digest = hashlib.sha256((Path(d) / "manifest.json").read_bytes()).hexdigest()[:16]
+        man = read_manifest(Path(d) / "manifest.json") or {}
+        pairs = sorted((h, k, sh.get("sha256")) for h, e in man.get("hands", {}).items() for k, sh in e.get("shards", {}).items())
+        digest = hashlib.sha256(json.dumps([man.get("settings_digest"), pairs]).encode()).hexdigest()[:16]
         out.append(f"{Path(d).name}:{digest}")
     return out
 

@@ -61,6 +61,9 @@ def rows(root: Path, exclude: tuple[str, ...] = ()) -> tuple[list[str], list[str
         per = {r["hand"]: r["grasps"] for r in s["rows"]}
         done, want = s["total"]["pairs"], n_obj * len(built)
         status = "complete" if done == want else f"partial: {done} of {want} pairs"
+        packed = sum("pack" in sh for e in man["hands"].values() for sh in e.get("shards", {}).values())
+        if packed:
+            status += ", packed" if packed == done else f", {packed} pairs packed"
         if some_hands:
             cmd += " --hands " + " ".join(built) if len(built) <= 4 else f" (--hands: {len(built)} of {len(hands_all)} hands)"
             status += f" ({len(built)} of {len(hands_all)} hands)"

@@ -1,4 +1,4 @@
-"""``ohra data build RECIPE.yaml`` and ``ohra data info DIR``: grasp datasets from recipes.
+"""``ohra data build RECIPE.yaml``, ``ohra data pack DIR`` and ``ohra data info DIR``: grasp datasets from recipes.
 
 Plugged into :mod:`ohra.cli.main` through ``register(subparsers)``; ``python -m ohra.data`` runs
 the same commands on their own. Bad input is one line on stderr and exit code 2.
@@ -16,7 +16,7 @@ from typing import Any, Sequence
 def register(sub: Any) -> None:
     from ohra.cli.synth import add_backend_options
 
-    data = sub.add_parser("data", help="grasp datasets: build from a recipe, summarise")
+    data = sub.add_parser("data", help="grasp datasets: build from a recipe, pack, summarise")
     dsub = data.add_subparsers(dest="data_command", metavar="ACTION", parser_class=type(data))
     dsub.required = True
 
@@ -32,6 +32,11 @@ def register(sub: Any) -> None:
                    help="build only these of the recipe's hands (top up one hand; resume completes the rest later)")
     add_backend_options(p)
     p.set_defaults(func=_build)
+
+    p = dsub.add_parser("pack", help="pack finished dataset directories: one .npz per hand (lossless, checked)")
+    p.add_argument("dir", nargs="+", help="dataset directories (each holds manifest.json)")
+    p.add_argument("--unpack", action="store_true", help="write every packed pair back to its own shard file")
+    p.set_defaults(func=_pack)
 
     p = dsub.add_parser("info", help="summary table of dataset directories")
     p.add_argument("dir", nargs="+", help="dataset directories (each holds manifest.json); with several, a table "
@@ -54,6 +59,17 @@ def _build(args: argparse.Namespace) -> int:
     print_summary(man, Path(out), filtered=recipe.filter)
     split = man.get("split", {})
     print(f"objects: {len(split.get('train', []))} train / {len(split.get('test', []))} test; {man['core_hours']:.3f} core-hours")
+    return 0
+
+
+def _pack(args: argparse.Namespace) -> int:
+    from ohra.data.pack import pack, unpack
+
+    for d in args.dir:
+        if args.unpack:
+            print(f"{d}: {unpack(d)} shards written back")
+        else:
+            print(pack(d).line())
     return 0
 
 

@@ -1,7 +1,7 @@
 """Grasp datasets: atomic shard/manifest writes and the lazy :class:`GraspDataset` reader.
 
 A dataset is a directory with ``manifest.json`` and one ``.npz`` shard per (hand, object) under
-``<hand>/``. In format ``ohra-grasps/2`` a shard's ``grasps`` are the (M,31) float32
+``<hand>/``, or, once packed (:mod:`ohra.data.pack`), one ``.npz`` per hand holding its shards' rows. In format ``ohra-grasps/2`` a shard's ``grasps`` are the (M,31) float32
 ``[t, rot6d, q22]`` vectors exactly as the simulator evaluated them (the *pre-test* grasps, which
 passed the six-direction test and its robustness trials), and ``grasps_post`` the same grasps
 after the nominal test (hand pose relative to the settled object, settled joints: what the
@@ -133,17 +133,23 @@ class GraspDataset:
     def _read(self, root: Path, sh: dict, keys: tuple[str, ...] | None = None) -> dict[str, np.ndarray]:
         """The shard's arrays (only ``keys`` when given: a shard holds ~18 arrays and a training set
         reads thousands of shards for their grasps), after checking its hash and the grasp shapes."""
-        path = root / sh["file"]
-        if not path.is_file():
-            raise DatasetError(f"shard listed in the manifest is missing: {path}")
-        digest = file_digest(path)
-        if sh.get("sha256") and digest != sh["sha256"]:
-            raise DatasetError(f"{path}: content hash {digest} does not match the manifest ({sh['sha256']})")
-        try:
-            with np.load(path) as z:
-                data = {k: z[k] for k in z.files if keys is None or k in keys}
-        except Exception as exc:  # zipfile / numpy raise several types for damaged files
-            raise DatasetError(f"{path}: cannot read shard ({exc})") from None
+        if "pack" in sh:  # a packed directory (ohra.data.pack): the pack's hash is checked once per file
+            from ohra.data.pack import read_row
+
+            path = root / sh["pack"]["file"]
+            data = read_row(root, sh, keys)
+        else:
+            path = root / sh["file"]
+            if not path.is_file():
+                raise DatasetError(f"shard listed in the manifest is missing: {path}")
+            digest = file_digest(path)
+            if sh.get("sha256") and digest != sh["sha256"]:
+                raise DatasetError(f"{path}: content hash {digest} does not match the manifest ({sh['sha256']})")
+            try:
+                with np.load(path) as z:
+                    data = {k: z[k] for k in z.files if keys is None or k in keys}
+            except Exception as exc:  # zipfile / numpy raise several types for damaged files
+                raise DatasetError(f"{path}: cannot read shard ({exc})") from None
         for key in ("grasps", "grasps_post") if sh["_format"] != "ohra-grasps/1" else ("grasps",):
             g = data.get(key)
             if g is None or g.ndim != 2 or g.shape[1] != 31 or len(g) != sh.get("n_grasps", len(g)):

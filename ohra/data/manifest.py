@@ -7,8 +7,9 @@ Rules (what ``--resume`` and a repeated run may assume):
   which deletes the shards the old manifest lists and starts a new manifest: no shard is left
   behind that no manifest lists. The same holds for a hand whose parameters changed.
 - With the same settings, a run recomputes the pairs it is given and keeps every other pair;
-  with ``resume`` it skips a pair whose shard exists, has the sha256 the manifest records and was
-  made from the same object (mesh and body hash). A truncated or edited shard is recomputed.
+  with ``resume`` it skips a pair whose shard (or pack, :mod:`ohra.data.pack`) exists, has the
+  sha256 the manifest records and was made from the same object (mesh and body hash). A truncated
+  or edited shard is recomputed.
 - A manifest that is not valid JSON is an error naming the file, never silently replaced.
 - Objects are keyed by name; objects sharing a name (``a/mug.stl`` and ``b/mug.stl``) get the
   name plus their mesh hash prefix, so each has its own manifest entry.
@@ -64,10 +65,10 @@ def remove_listed_shards(root: Path, manifest: dict) -> int:
     n = 0
     for entry in manifest.get("hands", {}).values():
         for sh in entry.get("shards", {}).values():
-            f = root / sh.get("file", "")
-            if f.is_file() and f.suffix == ".npz":
-                f.unlink()
-                n += 1
+            for f in (root / sh.get("file", ""), root / sh.get("pack", {}).get("file", "")):
+                if f.is_file() and f.suffix == ".npz":
+                    f.unlink()
+                    n += 1
     return n
 
 
@@ -118,6 +119,10 @@ def shard_complete(root: Path, sh: dict | None, obj_desc: dict) -> bool:
     same = o.get("mesh_hash") == obj_desc["mesh_hash"] and o.get("body_hash") == obj_desc["body_hash"]
     if not (same or same_procedural_object(o, obj_desc)):
         return False
+    if "pack" in sh:
+        from ohra.data.pack import pack_complete
+
+        return pack_complete(root, sh["pack"])
     f = root / sh.get("file", "")
     return f.is_file() and bool(sh.get("sha256")) and file_digest(f) == sh["sha256"]
 

@@ -318,6 +318,7 @@ def _run(out: Path, manifest: dict, writer: ManifestWriter, tasks: list, total: 
         atomic_write_bytes(out / res["info"]["file"], res["bytes"])
         if old and old.get("file") != res["info"]["file"]:
             (out / old["file"]).unlink(missing_ok=True)  # the object changed: its old shard is not listed any more
+        # a recomputed pair of a packed hand leaves its old row in the pack, unlisted, until it is packed again
         shards[res["key"]] = res["info"]
         writer.write(manifest)
         kept += res["info"]["n_grasps"]
