@@ -10,7 +10,6 @@ Run: python benchmarks/bench_dataset.py --data out/grasp_unified [--name dataset
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import warnings
 from pathlib import Path
@@ -22,7 +21,7 @@ import numpy as np  # noqa: E402
 
 from ohra.canonical.kinematics import HandModel  # noqa: E402
 from ohra.canonical.params import load_params  # noqa: E402
-from ohra.data.dataset import GraspDataset  # noqa: E402
+from ohra.data.dataset import GraspDataset, read_manifest  # noqa: E402
 from ohra.learn.grasp.data import load_dataset_object  # noqa: E402
 from ohra.sim import GraspEvaluator, Protocol, SimHand  # noqa: E402
 from ohra.synth.robust import RobustnessSettings, perturb  # noqa: E402
@@ -37,7 +36,7 @@ def main() -> None:
                     help="replay at most N stored grasps per hand (a seeded random subset; default: all)")
     args = ap.parse_args()
     warnings.simplefilter("ignore")
-    man = json.loads((args.data / "manifest.json").read_text())
+    man = read_manifest(args.data / "manifest.json")
     st = man["settings"]
     protocol = Protocol(**st["protocol"])
     rob = RobustnessSettings(**{**st["robustness"], "trials": 1})

@@ -25,7 +25,6 @@ import argparse
 import json
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -35,6 +34,7 @@ from _study_cache import cached, claim_run, eval_key, run_key, store, train_key 
 import numpy as np  # noqa: E402
 import yaml  # noqa: E402
 
+from ohra.data.dataset import read_manifest  # noqa: E402
 from ohra.data.recipe import Recipe  # noqa: E402
 from ohra.learn.grasp import GraspModelConfig, GraspTrainConfig  # noqa: E402
 from ohra.learn.grasp.evaluate import evaluate_model  # noqa: E402
@@ -60,7 +60,7 @@ REPORTED = {
 
 def data_protocol(data: list[str]) -> Protocol:
     """The six-direction protocol the first dataset was filtered with (its manifest's settings)."""
-    man = json.loads((Path(data[0]) / "manifest.json").read_text())
+    man = read_manifest(Path(data[0]) / "manifest.json") or {}
     if "settings" not in man:  # a dataset written by other tools: the default protocol
         return Protocol()
     return Protocol(**man["settings"]["protocol"])

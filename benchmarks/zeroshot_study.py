@@ -36,6 +36,7 @@ from _study_cache import cached, claim_run, eval_key, run_key, store, train_key 
 import numpy as np  # noqa: E402
 
 from grasp_study import add_run_args, data_protocol, eval_objects, pictures  # noqa: E402
+from ohra.data.dataset import read_manifest  # noqa: E402
 from ohra.learn.grasp import GraspModelConfig, GraspTrainConfig  # noqa: E402
 from ohra.learn.grasp.evaluate import evaluate_model  # noqa: E402
 from ohra.learn.grasp.model import load_grasp_model  # noqa: E402
@@ -57,7 +58,7 @@ def digit_sum(h: str) -> int:
 def data_hands(data: list[str]) -> list[str]:
     out: dict[str, None] = {}
     for d in data:
-        for h, e in json.loads((Path(d) / "manifest.json").read_text())["hands"].items():
+        for h, e in read_manifest(Path(d) / "manifest.json")["hands"].items():
             if sum(s.get("n_grasps", 0) for s in e["shards"].values()):
                 out[h] = None
     return list(out)

@@ -190,4 +190,12 @@ def read_manifest(path: str | Path) -> dict | None:
         raise DatasetError(f"{path}: corrupt manifest ({exc}); delete it (and the shards) or write to another directory") from None
     if not isinstance(data, dict) or not isinstance(data.get("hands"), dict):
         raise DatasetError(f"{path}: not an ohra grasp manifest (no 'hands' object); delete it or write to another directory")
+    table = data.pop("objects", None) or {}
+    for hand, entry in data["hands"].items():
+        for key, sh in entry.get("shards", {}).items():
+            ref = sh.get("object")
+            if isinstance(ref, str):  # a description stored once in the "objects" table (ohra.data.manifest)
+                if ref not in table:
+                    raise DatasetError(f"{path}: {hand}/{key} names object {ref!r}, which the manifest's objects table lacks")
+                sh["object"] = table[ref]
     return data

@@ -132,16 +132,42 @@ def _block(value, pad: str) -> str:
     return json.dumps(value, indent=1, default=str).replace("\n", "\n" + pad)
 
 
+def _object_table(manifest: dict) -> dict[str, dict]:
+    """Object key -> the description the first shard of that key carries (every hand of a dataset
+    grasps the same objects: storing each description once makes a 71-hand manifest 5x smaller)."""
+    table: dict[str, dict] = {}
+    for entry in manifest.get("hands", {}).values():
+        for key, sh in entry.get("shards", {}).items():
+            if isinstance(sh.get("object"), dict):
+                table.setdefault(key, sh["object"])
+    return table
+
+
 def manifest_json(manifest: dict, cache: dict | None = None) -> str:
     """The manifest as JSON text: top-level sections indented, each hand's fields on one line
     each, each shard entry compact on its own line (keys in insertion order).
 
-    ``cache`` maps ``(hand, key)`` to ``(entry, text)``; an entry that is the same object as the
-    cached one is not encoded again (shard entries are replaced, never edited, once written)."""
+    Object descriptions are stored once, in a top-level ``objects`` table keyed by object key; a
+    shard whose description equals its key's table entry names the key (``"object": "box-3"``),
+    any other keeps its own. :func:`ohra.data.dataset.read_manifest` puts them back in place, so
+    readers see one description per shard either way.
+
+    ``cache`` maps ``(hand, key)`` to ``(entry, table description, text)``; an entry that is the
+    same object as the cached one, under the same table description, is not encoded again (shard
+    entries are replaced, never edited, once written)."""
+    table = _object_table(manifest)
     out = ["{"]
-    top = list(manifest.items())
+    items = list(manifest.items())
+    if table:
+        at = next((i for i, (k, _) in enumerate(items) if k == "hands"), len(items))
+        items.insert(at, ("objects", table))
+    top = items
     for i, (k, v) in enumerate(top):
         comma = "," if i < len(top) - 1 else ""
+        if k == "objects" and v is table:  # one object description per line
+            rows = [f"  {json.dumps(key)}: {json.dumps(d, default=str)}" for key, d in v.items()]
+            out += [' "objects": {', ",\n".join(rows), " }" + comma]
+            continue
         if k != "hands" or not isinstance(v, dict):
             out.append(f" {json.dumps(k)}: {_block(v, ' ')}{comma}")
             continue
@@ -158,13 +184,16 @@ def manifest_json(manifest: dict, cache: dict | None = None) -> str:
                 out.append('   "shards": {')
                 shards = list(fv.items())
                 for n, (key, sh) in enumerate(shards):
+                    desc = table.get(key)
                     hit = cache.get((hand, key)) if cache is not None else None
-                    if hit is not None and hit[0] is sh:
-                        text = hit[1]
+                    if hit is not None and hit[0] is sh and hit[1] is desc:
+                        text = hit[2]
                     else:
-                        text = f"    {json.dumps(key)}: {json.dumps(sh, default=str)}"
+                        obj = sh.get("object")
+                        stored = {**sh, "object": key} if desc is not None and (obj is desc or obj == desc) else sh
+                        text = f"    {json.dumps(key)}: {json.dumps(stored, default=str)}"
                         if cache is not None:
-                            cache[(hand, key)] = (sh, text)
+                            cache[(hand, key)] = (sh, desc, text)
                     out.append(text + ("," if n < len(shards) - 1 else ""))
                 out.append("   }" + fcomma)
             out.append("  }" + ("," if j < len(hands) - 1 else ""))

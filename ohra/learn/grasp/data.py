@@ -25,7 +25,7 @@ import numpy as np
 import torch
 
 from ohra.canonical.params import BaseParams, ExtendedParams, load_params
-from ohra.data import GraspDataset
+from ohra.data import GraspDataset, read_manifest
 from ohra.errors import DatasetError, ObjectError, OhraError
 from ohra.learn.grasp.config import GraspTrainConfig
 from ohra.objects.model import ObjectModel
@@ -40,7 +40,7 @@ def object_key(name: str, mesh_hash: str) -> str:
 
 @functools.lru_cache(maxsize=16)
 def _parsed_manifest(path: str, mtime_ns: int, size: int) -> dict:
-    return json.loads(Path(path).read_text())
+    return read_manifest(path) or {}
 
 
 def _read_manifest(root: Path) -> dict:
