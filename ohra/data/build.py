@@ -11,7 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Sequence
 
-from ohra.data.dataset import read_manifest
+from ohra.data.dataset import require_manifest
 from ohra.data.manifest import object_keys
 from ohra.data.recipe import Recipe, RecipeError
 from ohra.errors import DatasetError
@@ -56,10 +56,7 @@ _COUNTS = ("pairs", "candidates", "solved", "sim_passed", "grasps", "grasps_test
 
 
 def _manifest(path: Path) -> dict:
-    man = read_manifest(path / "manifest.json")
-    if man is None:
-        raise DatasetError(f"{path}: no manifest.json (not an ohra grasp dataset)")
-    return man
+    return require_manifest(path)
 
 
 def summary(path: str | Path) -> dict:

@@ -178,6 +178,14 @@ class GraspDataset:
         return sum(min(sh["n_grasps"], self.max_per_pair or sh["n_grasps"]) for _, _, _, sh in self.entries)
 
 
+def require_manifest(root: str | Path) -> dict:
+    """The manifest of the dataset directory ``root``; :class:`DatasetError` if it has none."""
+    manifest = read_manifest(Path(root) / "manifest.json")
+    if manifest is None:
+        raise DatasetError(f"{root}: no manifest.json (not an ohra grasp dataset)")
+    return manifest
+
+
 def read_manifest(path: str | Path) -> dict | None:
     """The manifest at ``path`` (None if absent); :class:`DatasetError` naming the file if it is not
     a readable manifest (truncated JSON, not an object, no ``hands``)."""

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ohra.data.dataset import file_digest, npz_bytes, read_manifest
+from ohra.data.dataset import file_digest, npz_bytes, require_manifest
 from ohra.data.manifest import ManifestWriter
 from ohra.errors import DatasetError
 from ohra.io import write_bytes
@@ -135,9 +135,7 @@ def pack(root: str | Path) -> PackReport:
             bytes (nothing is changed then).
     """
     root = Path(root)
-    manifest = read_manifest(root / "manifest.json")
-    if manifest is None:
-        raise DatasetError(f"{root}: no manifest.json (not an ohra grasp dataset)")
+    manifest = require_manifest(root)
     hands = manifest.get("hands", {})
     before = sum(f.stat().st_size for h in hands for f in _npz_files(root, h))
     new_packs, folded = {}, 0
@@ -173,9 +171,7 @@ def unpack(root: str | Path) -> int:
     """Write every packed pair of ``root`` back to its own shard file (byte-identical to the one
     packed) and drop the packs; returns the number of shards written."""
     root = Path(root)
-    manifest = read_manifest(root / "manifest.json")
-    if manifest is None:
-        raise DatasetError(f"{root}: no manifest.json (not an ohra grasp dataset)")
+    manifest = require_manifest(root)
     n, packs = 0, set()
     for hand, entry in manifest.get("hands", {}).items():
         for key, sh in entry.get("shards", {}).items():
