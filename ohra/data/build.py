@@ -14,7 +14,6 @@ from typing import Sequence
 from ohra.data.dataset import require_manifest
 from ohra.data.manifest import object_keys
 from ohra.data.recipe import Recipe, RecipeError
-from ohra.errors import DatasetError
 
 
 def build(recipe: Recipe | str | Path, out: str | Path | None = None, workers: int = 1, resume: bool = False,
