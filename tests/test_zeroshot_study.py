@@ -148,3 +148,21 @@ def test_cli_samples_an_untrained_variant_by_name_and_by_params_json(study, tmp_
     assert cli(["grasp", "sample", "--model", model, "--hand", str(tmp_path / "none.json"), "--object", "builtin:cylinder",
                 "-o", str(tmp_path / "x.npz")]) == 2
     assert "none.json" in capsys.readouterr().err
+
+
+def test_a_partial_study_trains_and_fills_only_its_tables(study):
+    """--tables 9: the all-data model and zs-leap_3033 only (no other zero-shot or variant-specific
+    model), Table 9 filled, Tables 7 and 8 empty and marked "not computed" in the markdown."""
+    import os
+
+    tmp, results, _ = study
+    runs = tmp / "runs_partial"
+    cmd = [sys.executable, str(ROOT / "benchmarks" / "zeroshot_study.py"), "--data", str(tmp / "data"), "--objects-file",
+           str(tmp / "eval.yaml"), "--steps", "2", "-n", "1", "--runs", str(runs), "--name", "zs_partial", "--quiet", "--tables", "9"]
+    r = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "OHRA_RESULTS_DIR": str(results)}, timeout=600)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert sorted(p.parent.name for p in runs.glob("*/model.pt")) == ["all", "zs-leap_3033"]
+    res = json.loads((results / "zs_partial.json").read_text())
+    assert res["tables"] == ["9"] and res["table7"] == {} and res["table8"] == {}
+    assert set(res["table9"]) == {"leap_3033", "leap_3303", "leap_3330", "leap_3333"}
+    assert (results / "zs_partial.md").read_text().count("not computed in this run") == 2
