@@ -45,6 +45,17 @@ def test_every_table_is_filled(study):
     assert set(res["saliency"]) == {"leap_3333", "leap_3033"}
 
 
+def test_the_study_states_its_compute(study):
+    """Every model and every distinct evaluation is counted once (Table 9's true condition is Table 7's
+    evaluation), each with a positive cost, and the markdown states the total."""
+    _, results, res = study
+    c = res["compute"]
+    assert set(c["training"]) == {"all", "zs-leap_3033", "zs-leap_3303", "zs-leap_3330", "only-leap_0303"}
+    assert len(c["simulation"]) == 6 + 2 + 6 and all(v > 0 for v in [*c["training"].values(), *c["simulation"].values()])
+    assert c["training_core_hours"] == pytest.approx(sum(c["training"].values()) / 3600)
+    assert "Compute (core-hours" in (results / "zs_test.md").read_text()
+
+
 def test_zero_shot_models_never_saw_their_variant(study):
     tmp, _, res = study
     for v in res["table7"]:
