@@ -54,13 +54,9 @@ def _select(resolved: list[tuple], names: list[str] | None, r: Recipe) -> list[t
 _COUNTS = ("pairs", "candidates", "solved", "sim_passed", "grasps", "grasps_test", "core_s", "cpu_s")
 
 
-def _manifest(path: Path) -> dict:
-    return require_manifest(path)
-
-
 def summary(path: str | Path) -> dict:
     """Per-hand and total counts of a dataset directory, with core-hours and the object split."""
-    return _summarise(Path(path), _manifest(Path(path)))
+    return _summarise(Path(path), require_manifest(path))
 
 
 def _summarise(path: Path, man: dict) -> dict:
@@ -87,7 +83,7 @@ def _summarise(path: Path, man: dict) -> dict:
 def combined_summary(paths: Sequence[str | Path]) -> dict:
     """Per-hand totals over several dataset directories (e.g. the seeds of one recipe), in the form of
     :func:`summary`: counts and hours add up; ``split`` counts the distinct object keys of all of them."""
-    mans = [(Path(p), _manifest(Path(p))) for p in paths]
+    mans = [(Path(p), require_manifest(p)) for p in paths]
     parts = [_summarise(p, man) for p, man in mans]
     if len(parts) == 1:
         return parts[0]
