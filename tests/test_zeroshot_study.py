@@ -64,6 +64,14 @@ def test_zero_shot_models_never_saw_their_variant(study):
     assert res["train_counts"].keys() == {"leap_3033", "leap_3303", "leap_3330", "leap_3333"}  # no low-sum variant
 
 
+def test_variant_specific_models_saw_their_variant_alone(study):
+    """Table 8: ``only-<v>`` trains on ``v``'s grasps and nothing else, and the table states that count."""
+    tmp, _, res = study
+    for v, row in res["table8"].items():
+        per_hand = json.loads((tmp / "runs" / f"only-{v}" / "metrics.json").read_text())["data"]["per_hand"]
+        assert list(per_hand) == [v] and row["specific_grasps"] == per_hand[v] > 0
+
+
 def test_wrong_condition_evaluations_are_kept_apart_from_the_true_one(study):
     tmp, _, _ = study
     true = json.loads((tmp / "runs" / "eval_all_leap_3033.json").read_text())
