@@ -12,11 +12,16 @@ from __future__ import annotations
 
 import hashlib
 import json
+import sys
+import time
 from dataclasses import asdict, is_dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable, TypeVar
 
 from ohra.data.dataset import atomic_write_json, read_manifest
+from ohra.errors import FolderInUseError
+
+T = TypeVar("T")
 
 KEY_FILE = "study_key.json"
 
@@ -64,6 +69,18 @@ def claim_run(run: Path, key: dict) -> bool:
     run.mkdir(parents=True, exist_ok=True)
     atomic_write_json(f, key)
     return False
+
+
+def when_free(get: Callable[[], T], poll_s: float = 30.0) -> T:
+    """``get()``, waited for while another process trains the same run (two study processes whose
+    ``--train-only`` lists overlap): it fails with ``FolderInUseError`` until the other finishes,
+    then ``get()`` finds the run complete and reuses it."""
+    while True:
+        try:
+            return get()
+        except FolderInUseError as e:
+            print(f"{e}; waiting {poll_s:g} s", file=sys.stderr, flush=True)
+            time.sleep(poll_s)
 
 
 def run_key(run: Path) -> dict:

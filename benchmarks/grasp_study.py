@@ -29,7 +29,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import RESULTS, natural_sorted, write_results  # noqa: E402
-from _study_cache import cached, claim_run, eval_key, run_key, store, train_key  # noqa: E402
+from _study_cache import cached, claim_run, eval_key, run_key, store, train_key, when_free  # noqa: E402
 
 import numpy as np  # noqa: E402
 import yaml  # noqa: E402
@@ -74,12 +74,15 @@ def eval_objects(path: Path) -> list:
 def trained(name: str, data: list[str], hands: list[str], args, condition: str = "vae") -> object:
     """The model ``name`` trained on ``hands`` (resumed or reused when its run exists)."""
     run = Path(args.runs) / name
-    if claim_run(run, train_key(data, hands, args.steps, args.seed, condition)):
-        return load_grasp_model(run)
-    tcfg = GraspTrainConfig(steps=args.steps, seed=args.seed, threads=args.threads, hands=tuple(hands))
-    res = train_grasp(data, GraspModelConfig(condition=condition), tcfg, run, resume=(run / "checkpoints" / "last.pt").exists(),
-                      progress=not args.quiet)
-    return res.model
+
+    def get():
+        if claim_run(run, train_key(data, hands, args.steps, args.seed, condition)):
+            return load_grasp_model(run)
+        tcfg = GraspTrainConfig(steps=args.steps, seed=args.seed, threads=args.threads, hands=tuple(hands))
+        return train_grasp(data, GraspModelConfig(condition=condition), tcfg, run,
+                           resume=(run / "checkpoints" / "last.pt").exists(), progress=not args.quiet).model
+
+    return when_free(get)
 
 
 def evaluated(model, key: str, hands: list[str], objects: list, original: bool, protocol: Protocol, args,

@@ -32,7 +32,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import RESULTS, natural_sorted, write_results  # noqa: E402
-from _study_cache import cached, claim_run, eval_key, run_key, store, train_key  # noqa: E402
+from _study_cache import cached, claim_run, eval_key, run_key, store, train_key, when_free  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -69,13 +69,16 @@ def data_hands(data: list[str]) -> list[str]:
 
 def trained(name: str, data: list[str], hands: list[str], test_hands: tuple, args):
     run = Path(args.runs) / name
-    if claim_run(run, train_key(data, hands, args.steps, args.seed, "params", test_hands)):
-        model, metrics = load_grasp_model(run), json.loads((run / "metrics.json").read_text())
-    else:
+
+    def get():
+        if claim_run(run, train_key(data, hands, args.steps, args.seed, "params", test_hands)):
+            return load_grasp_model(run), json.loads((run / "metrics.json").read_text())
         tcfg = GraspTrainConfig(steps=args.steps, seed=args.seed, threads=args.threads, hands=tuple(hands), test_hands=test_hands)
         res = train_grasp(data, GraspModelConfig(condition="params"), tcfg, run,
                           resume=(run / "checkpoints" / "last.pt").exists(), progress=not args.quiet)
-        model, metrics = res.model, res.metrics
+        return res.model, res.metrics
+
+    model, metrics = when_free(get)
     # core-seconds = wall seconds x threads: what the run occupied, whether or not it was cached now
     COMPUTE["training"][name] = metrics["train_seconds_total"] * metrics.get("threads", 1)
     return model, metrics["data"]["per_hand"]

@@ -56,6 +56,10 @@ class DatasetError(OhraError, ValueError):
     """A grasp dataset is malformed or does not match its manifest."""
 
 
+class FolderInUseError(OhraError, RuntimeError):
+    """Another process is writing the same run or dataset folder (it holds the folder's lock)."""
+
+
 class ObjectWarning(UserWarning):
     """Something about an object was estimated or approximated (mass properties, its simulated body)."""
 

@@ -85,4 +85,48 @@ def write_npz(path: str | Path, arrays: Mapping[str, np.ndarray]) -> Path:
     return atomic_write(path, lambda fh: np.savez_compressed(fh, **arrays))
 
 
-__all__ = ["umask_mode", "atomic_path", "atomic_write", "write_bytes", "write_text", "write_json", "write_npz"]
+LOCK_NAME = ".ohra.lock"
+
+
+@contextlib.contextmanager
+def folder_lock(folder: str | Path, what: str = "folder") -> Iterator[Path]:
+    """Hold the exclusive lock of ``folder`` (created if missing) while the block runs.
+
+    Two processes training into one run folder, or building one dataset, would overwrite each
+    other's checkpoints and manifest without either noticing; the second one fails at once instead.
+    The lock is an advisory ``flock`` on ``folder/.ohra.lock`` (the holder's PID is written there for
+    the message); the kernel drops it when the holder exits, however it exits, so a killed job leaves
+    no stale lock. ``what`` names the folder's content in the error (``"training run"``, ``"dataset"``).
+
+    Raises:
+        FolderInUseError: another process holds the lock (its PID in the message).
+    """
+    from ohra.errors import FolderInUseError
+
+    try:
+        import fcntl
+    except ImportError:  # no flock (Windows): run unguarded rather than refuse to run
+        yield Path(folder)
+        return
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / LOCK_NAME
+    fh = open(path, "a+")
+    try:
+        try:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            fh.seek(0)
+            holder = fh.read().strip() or "unknown"
+            raise FolderInUseError(f"{folder}: another process (pid {holder}) is writing this {what}; "
+                                   f"wait for it to finish or choose another folder") from None
+        fh.seek(0)
+        fh.truncate()
+        fh.write(f"{os.getpid()}\n")
+        fh.flush()
+        yield folder
+    finally:
+        fh.close()  # releases the lock
+
+
+__all__ = ["folder_lock", "umask_mode", "atomic_path", "atomic_write", "write_bytes", "write_text", "write_json", "write_npz"]

@@ -225,6 +225,29 @@ def test_resume_equals_an_uninterrupted_run(dataset, tmp_path):
     assert longer.metrics["history"][-1]["step"] == 8
 
 
+def test_a_run_another_process_is_training_is_refused_and_left_alone(dataset, tmp_path):
+    """Two processes resuming one run would interleave its checkpoints: the second fails at once."""
+    import subprocess
+    import sys
+
+    from ohra.errors import FolderInUseError
+
+    run = tmp_path / "run"
+    train_grasp(dataset, tiny_model_config(), tiny_train_config(steps=2), run, progress=False)
+    before = (run / "checkpoints" / "last.pt").read_bytes()
+    hold = "import sys, time\nfrom ohra.io import folder_lock\nwith folder_lock(sys.argv[1]):\n    print('held', flush=True); time.sleep(120)"
+    p = subprocess.Popen([sys.executable, "-c", hold, str(run)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert p.stdout.readline().strip() == "held"
+        with pytest.raises(FolderInUseError, match=f"pid {p.pid}.*grasp training run"):
+            train_grasp(dataset, tiny_model_config(), tiny_train_config(steps=4), run, resume=True, progress=False)
+    finally:
+        p.kill()
+        p.wait()
+    assert (run / "checkpoints" / "last.pt").read_bytes() == before
+    assert train_grasp(dataset, tiny_model_config(), tiny_train_config(steps=4), run, resume=True, progress=False).metrics["steps"] == 4
+
+
 def test_resume_refuses_other_settings_or_data(dataset, tmp_path):
     train_grasp(dataset, tiny_model_config(), tiny_train_config(), tmp_path, progress=False)
     with pytest.raises(CheckpointError, match="batch_size"):

@@ -128,3 +128,62 @@ def test_write_npz_and_json_round_trip(tmp_path):
 
 def test_parent_folders_are_created(tmp_path):
     assert write_text(tmp_path / "a" / "b" / "c.txt", "x").read_text() == "x"
+
+
+HOLD = """
+import sys, time
+from ohra.io import folder_lock
+with folder_lock(sys.argv[1], "dataset"):
+    print("held", flush=True)
+    time.sleep(120)
+"""
+
+
+@pytest.fixture
+def held(tmp_path):
+    """A folder whose lock another process holds (killed, not released, at the end)."""
+    import subprocess
+    import sys
+
+    folder = tmp_path / "run"
+    p = subprocess.Popen([sys.executable, "-c", HOLD, str(folder)], stdout=subprocess.PIPE, text=True)
+    assert p.stdout.readline().strip() == "held"
+    yield folder, p
+    p.kill()
+    p.wait()
+
+
+def test_a_folder_held_by_another_process_is_refused_with_its_pid(held):
+    from ohra.errors import FolderInUseError
+    from ohra.io import folder_lock
+
+    folder, p = held
+    with pytest.raises(FolderInUseError, match=rf"{folder}: another process \(pid {p.pid}\) is writing this dataset"):
+        with folder_lock(folder, "dataset"):
+            pass
+
+
+def test_a_killed_holder_leaves_no_stale_lock(held):
+    from ohra.io import folder_lock
+
+    folder, p = held
+    p.kill()
+    p.wait()
+    with folder_lock(folder, "dataset") as f:
+        assert f == folder
+    with folder_lock(folder, "dataset"):  # released on exit: taken again by the same process
+        pass
+
+
+def test_the_cli_refuses_a_dataset_another_build_is_writing(held, tmp_path):
+    import subprocess
+    import sys
+
+    folder, _ = held
+    recipe = tmp_path / "r.yaml"
+    recipe.write_text("hands: [leap_2200]\nobjects: [builtin:box]\ngrasps_per_pair: 1\nfilter: false\n")
+    proc = subprocess.run([sys.executable, "-m", "ohra.data", "build", str(recipe), "--out", str(folder)],
+                          capture_output=True, text=True, timeout=600)
+    lines = [l for l in proc.stderr.splitlines() if l.strip() and "pybullet build time" not in l]
+    assert proc.returncode == 2 and len(lines) == 1 and "is writing this dataset" in lines[0], proc.stderr
+    assert not (folder / "manifest.json").exists()

@@ -37,6 +37,7 @@ from ohra.data.backends import run_tasks
 from ohra.data.dataset import atomic_write_bytes, npz_bytes, shard_name
 from ohra.data.manifest import ManifestWriter, hand_entry, object_keys, open_manifest, shard_complete
 from ohra.errors import ObjectError, OhraError
+from ohra.io import folder_lock
 from ohra.objects.model import ObjectModel
 from ohra.objects.resolve import GRASPABLE_EXTENT_M, size_problem
 from ohra.rotations import grasp_to_pose
@@ -277,6 +278,7 @@ def synthesize(hands: list[tuple], objects: list[ObjectModel], out: str | Path, 
     Raises:
         OhraError: bad hands, objects outside the graspable size range, a manifest that is
             corrupt or was written with other settings.
+        FolderInUseError: another process is building into ``out``.
     """
     out = Path(out)
     if out.exists() and not out.is_dir():
@@ -289,7 +291,14 @@ def synthesize(hands: list[tuple], objects: list[ObjectModel], out: str | Path, 
     _check_objects(objects, settings)
     keys = object_keys(objects)
     descs = [o.describe() for o in objects]  # settles each body once, before workers start
-    out.mkdir(parents=True, exist_ok=True)
+    with folder_lock(out, "dataset"):  # two builds of one folder would overwrite each other's manifest
+        return _synthesize_locked(hands, objects, keys, descs, out, settings, workers, resume, progress, overwrite,
+                                  backend, address, header)
+
+
+def _synthesize_locked(hands: list[tuple], objects: list[ObjectModel], keys: list[str], descs: list, out: Path,
+                       settings: SynthSettings, workers: int, resume: bool, progress: bool, overwrite: bool,
+                       backend: str, address: str | None, header: dict | None) -> dict:
     manifest = open_manifest(out, settings.to_dict(), settings.digest(), overwrite, {"ohra_version": __version__})
     manifest.update(header or {})
     entries, hand_settings = {}, {}

@@ -16,6 +16,7 @@ random state and a resumed run equals an uninterrupted one.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import time
@@ -31,7 +32,7 @@ from ohra.learn.grasp.condition import HandCondition
 from ohra.learn.grasp.config import GraspModelConfig, GraspTrainConfig, RunSpec
 from ohra.learn.grasp.data import TrainingData, make_batch
 from ohra.learn.grasp.model import CHECKPOINT_FORMAT, GraspModel, GraspNet
-from ohra.io import write_text
+from ohra.io import folder_lock, write_text
 from ohra.learn.train_vae import _peak_rss_mib, atomic_save, load_torch_file, torch_settings
 from ohra.objects.model import ObjectModel
 
@@ -209,7 +210,9 @@ def train_grasp(data: str | Path | Sequence[str | Path], model_cfg: GraspModelCo
     run = Path(run_dir) if run_dir is not None else None
     ckpt_path = run / "checkpoints" / "last.pt" if run is not None else None
     t_start = time.perf_counter()
-    with torch_settings(cfg.threads):
+    # one writer per run folder: a second process resuming the same run would interleave checkpoints
+    lock = folder_lock(run, "grasp training run") if run is not None else contextlib.nullcontext()
+    with lock, torch_settings(cfg.threads):
         st = _prepare(spec, paths, ckpt_path, resume, objects, vae_path)
         if run is not None:
             write_text(run / "config.json", json.dumps(spec.to_dict(), indent=1) + "\n")
@@ -226,11 +229,11 @@ def train_grasp(data: str | Path | Sequence[str | Path], model_cfg: GraspModelCo
             "encoder": model_cfg.encoder, "threads": cfg.threads, "history": h,
             "wall_seconds": time.perf_counter() - t_start, "peak_rss_mib": _peak_rss_mib(),
         }
-    model = st.model
-    if run is not None:
-        atomic_save(model.payload(), run / "model.pt")
-        write_text(run / "metrics.json", json.dumps(metrics, indent=1) + "\n")
-        model.path = run / "model.pt"
+        model = st.model
+        if run is not None:
+            atomic_save(model.payload(), run / "model.pt")
+            write_text(run / "metrics.json", json.dumps(metrics, indent=1) + "\n")
+            model.path = run / "model.pt"
     return GraspTrainResult(model, metrics, run)
 
 

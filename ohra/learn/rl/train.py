@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from ohra.io import folder_lock
 from ohra.learn.rl.config import PPOSettings, RLConfigError
 from ohra.sim.rotation.config import RotationConfig
 
@@ -175,10 +176,13 @@ def _check_resume(run_dir: Path, env_cfg: RotationConfig, ppo: PPOSettings) -> N
 
 def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Path, resume: bool = False,
                    verbose: int = 0) -> Path:
-    """Train (or resume) a PPO rotation policy into ``run_dir``; returns the final model path."""
+    """Train (or resume) a PPO rotation policy into ``run_dir``; returns the final model path.
+
+    Raises:
+        RLConfigError: nothing to resume, or a fresh run into a folder that holds one.
+        FolderInUseError: another process is training into ``run_dir``.
+    """
     import torch
-    from stable_baselines3.common.utils import set_random_seed
-    from stable_baselines3.common.vec_env import VecNormalize
 
     from ohra.sim.rotation.grasps import load_or_generate
     from ohra.sim.rotation.task import resolve
@@ -191,7 +195,14 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
         raise RLConfigError(f"{run_dir} already holds a run; pass resume=True (--resume) or choose another folder")
     torch.set_num_threads(ppo.threads)
     load_or_generate(resolve(env_cfg), progress=verbose > 0)  # once here, not in every worker
-    run_dir.mkdir(parents=True, exist_ok=True)
+    with folder_lock(run_dir, "rotation training run"):  # one writer per run folder
+        return _train_locked(env_cfg, ppo, run_dir, resume, verbose, last)
+
+
+def _train_locked(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: Path, resume: bool, verbose: int, last: Path) -> Path:
+    from stable_baselines3.common.utils import set_random_seed
+    from stable_baselines3.common.vec_env import VecNormalize
+
     if resume:
         _check_resume(run_dir, env_cfg, ppo)
     else:

@@ -1,0 +1,35 @@
+"""The studies' run cache (benchmarks/_study_cache.py): a study process that reaches a run another
+process is training waits for it instead of training it a second time into the same folder."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+try:
+    from _study_cache import when_free
+finally:
+    sys.path.pop(0)
+
+from ohra.io import folder_lock  # noqa: E402
+
+HOLD = "import sys, time\nfrom ohra.io import folder_lock\nwith folder_lock(sys.argv[1]):\n    print('held', flush=True); time.sleep(1.5)"
+
+
+def test_a_run_in_training_elsewhere_is_waited_for_then_taken(tmp_path, capsys):
+    run = tmp_path / "run"
+    p = subprocess.Popen([sys.executable, "-c", HOLD, str(run)], stdout=subprocess.PIPE, text=True)
+    assert p.stdout.readline().strip() == "held"
+    calls = []
+
+    def get():
+        calls.append(time.monotonic())
+        with folder_lock(run, "training run"):
+            return "trained here"
+
+    assert when_free(get, poll_s=0.2) == "trained here"
+    p.wait()
+    assert len(calls) >= 2 and "is writing this training run" in (err := capsys.readouterr().err) and "waiting 0.2 s" in err
