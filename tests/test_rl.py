@@ -56,8 +56,13 @@ def test_train_resume_evaluate_and_plot_a_tiny_run(tiny):
     assert first[-1] == 48 and (run / "checkpoints" / "last.zip").is_file()
     with pytest.raises(RLConfigError, match="already holds a run"):
         train_rotation(env_cfg, ppo, run)
-    with pytest.raises(RLConfigError, match="environment config differs"):
+    with pytest.raises(RLConfigError, match=r"environment config differs.*friction: run 1\.0, now 2\.0"):
         train_rotation(env_cfg.with_overrides(friction=2.0), with_budget(ppo, 96), run, resume=True)
+    # a run made before a setting existed resumes: the missing setting counts at its default
+    cfg_file = run / "config.json"
+    saved = json.loads(cfg_file.read_text())
+    del saved["env"]["inertials"]
+    cfg_file.write_text(json.dumps(saved))
     train_rotation(env_cfg, with_budget(ppo, total_steps=96), run, resume=True)
     prog = read_progress(run)
     assert list(prog["timesteps"]) == [24, 48, 72, 96]  # appended, continuing the step count
@@ -85,3 +90,19 @@ def test_train_resume_evaluate_and_plot_a_tiny_run(tiny):
     assert not list(small.glob("*.pkl")) and (small / "grasps.npz").is_file()
     shipped = evaluate_run(small, episodes=2, seed=10, write=False)
     assert shipped.cumulative_rotation == res.cumulative_rotation  # same weights, stats and starting states
+
+
+def test_resume_reads_an_older_run_with_current_defaults_and_names_real_differences(tmp_path):
+    """A run saved before a setting existed (here ``inertials``) resumes with that setting at its
+    default; a changed setting is refused with its name and both values."""
+    from ohra.learn.rl.train import _check_resume
+
+    env_cfg, ppo = RotationConfig(hand="leap_hand_right"), PPOSettings()
+    saved = {"env": json.loads(json.dumps(env_cfg.to_dict())), "ppo": json.loads(json.dumps(ppo.to_dict()))}
+    del saved["env"]["inertials"]
+    (tmp_path / "config.json").write_text(json.dumps(saved))
+    _check_resume(tmp_path, env_cfg, ppo)
+    with pytest.raises(RLConfigError, match=r"inertials: run 'capsule', now 'original'"):
+        _check_resume(tmp_path, env_cfg.with_overrides(inertials="original"), ppo)
+    with pytest.raises(RLConfigError, match=r"PPO settings \['gamma'\]"):
+        _check_resume(tmp_path, env_cfg, PPOSettings(gamma=0.9))

@@ -164,10 +164,17 @@ def _vec_env(env_cfg: RotationConfig, ppo: PPOSettings):
 
 
 def _check_resume(run_dir: Path, env_cfg: RotationConfig, ppo: PPOSettings) -> None:
+    """Refuse a resume whose environment or (non-budget) PPO settings differ from the run's. The saved
+    config is read through the dataclasses, so a setting added to ohra after the run was made counts
+    at its default (which keeps the earlier behaviour) instead of failing the comparison."""
     saved = json.loads((run_dir / "config.json").read_text())
-    if saved["env"] != json.loads(json.dumps(env_cfg.to_dict())):
-        raise RLConfigError(f"{run_dir}: the environment config differs from the run being resumed")
-    theirs, mine = saved["ppo"], json.loads(json.dumps(ppo.to_dict()))
+    theirs = _plain(RotationConfig.from_dict(saved["env"], f"{run_dir}/config.json").to_dict())
+    mine = _plain(env_cfg.to_dict())
+    diff = sorted(k for k in set(theirs) | set(mine) if theirs.get(k) != mine.get(k))
+    if diff:
+        raise RLConfigError(f"{run_dir}: the environment config differs from the run being resumed: "
+                            + "; ".join(f"{k}: run {theirs.get(k)!r}, now {mine.get(k)!r}" for k in diff))
+    theirs, mine = _plain(PPOSettings.from_dict(saved["ppo"]).to_dict()), _plain(ppo.to_dict())
     diff = sorted(k for k in mine if k not in RESUMABLE_CHANGES and mine[k] != theirs.get(k))
     if diff:
         raise RLConfigError(f"{run_dir}: PPO settings {diff} differ from the run being resumed "
@@ -241,6 +248,11 @@ def _new_model(cls, venv, ppo: PPOSettings, verbose: int):
                kl_target=ppo.kl_target, lr_bounds=ppo.lr_bounds, seed=ppo.seed, device="cpu", verbose=verbose,
                policy_kwargs={"net_arch": {"pi": arch, "vf": arch}, "activation_fn": act,
                               "log_std_init": ppo.log_std_init})
+
+
+def _plain(d: dict) -> dict:
+    """``d`` as JSON would round-trip it (tuples as lists), so saved and current settings compare equal."""
+    return json.loads(json.dumps(d))
 
 
 def _write_config(run_dir: Path, env_cfg: RotationConfig, ppo: PPOSettings) -> None:
