@@ -8,7 +8,11 @@ what a 2-env ``SubprocVecEnv`` can reach. A settings table varies the physics st
 iterations and finger-finger collisions on LEAP canonical. Grasp generation: starting states per
 second (``ohra.sim.rotation.grasps.generate``, 64 states, uncached).
 
-    python benchmarks/bench_rotation.py [--steps 2000] [--quick]
+Every stepping measurement is repeated (``--repeat``, default 3) and the median is reported: on this
+virtual machine the same 2,000-step loop measured 580 and 973 steps per CPU-second minutes apart
+(the host's other tenants slow the vCPU without it showing as load), so one sample can be far off.
+
+    python benchmarks/bench_rotation.py [--steps 2000] [--repeat 3] [--quick]
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ from __future__ import annotations
 import argparse
 import multiprocessing as mp
 import os
+import statistics
 import sys
 import time
 from pathlib import Path
@@ -60,18 +65,24 @@ def _prepare(kw: dict) -> None:
     InHandRotateEnv(grasp_count=GRASPS, **kw).close()
 
 
-def throughput(kw: dict, steps: int) -> dict:
+def throughput(kw: dict, steps: int, repeat: int = 3) -> dict:
+    """Medians over ``repeat`` measurements (the samples are kept too)."""
     _prepare(kw)
-    one = _run((kw, steps, 0))
+    ones = [_run((kw, steps, 0)) for _ in range(repeat)]
     ctx = mp.get_context("spawn")
-    t = time.perf_counter()
-    with ctx.Pool(2) as pool:
-        two = pool.map(_run, [(kw, steps, 1), (kw, steps, 2)])
-    wall2 = time.perf_counter() - t
-    return {"steps": steps, "1proc_per_core": steps / one["cpu_s"], "1proc_wall": steps / one["wall_s"],
-            "2proc_per_core": [steps / r["cpu_s"] for r in two],
-            "2proc_aggregate_wall": 2 * steps / max(r["wall_s"] for r in two),
-            "2proc_aggregate_wall_with_startup": 2 * steps / wall2}
+    twos, walls = [], []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        with ctx.Pool(2) as pool:
+            twos.append(pool.map(_run, [(kw, steps, 1), (kw, steps, 2)]))
+        walls.append(time.perf_counter() - t)
+    med = statistics.median
+    return {"steps": steps, "repeat": repeat,
+            "1proc_per_core": med(steps / r["cpu_s"] for r in ones), "1proc_wall": med(steps / r["wall_s"] for r in ones),
+            "1proc_per_core_samples": [steps / r["cpu_s"] for r in ones],
+            "2proc_per_core": [med(steps / two[i]["cpu_s"] for two in twos) for i in range(2)],
+            "2proc_aggregate_wall": med(2 * steps / max(r["wall_s"] for r in two) for two in twos),
+            "2proc_aggregate_wall_with_startup": med(2 * steps / w for w in walls)}
 
 
 def grasp_rate(kw: dict) -> dict:
@@ -89,6 +100,7 @@ def grasp_rate(kw: dict) -> dict:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--steps", type=int, default=2000, help="control steps per measurement")
+    ap.add_argument("--repeat", type=int, default=3, help="measurements per figure (the median is reported)")
     ap.add_argument("--quick", action="store_true", help="LEAP canonical only, no settings table")
     args = ap.parse_args(argv)
     from ohra.sim.rotation.config import RotationConfig
@@ -98,15 +110,16 @@ def main(argv: list[str] | None = None) -> int:
     rows = {}
     for hand, urdf in hands:
         kw = {"hand": hand, "urdf": urdf}
-        rows[f"{hand}/{urdf}"] = {**throughput(kw, args.steps), "grasps": grasp_rate(kw)}
+        rows[f"{hand}/{urdf}"] = {**throughput(kw, args.steps, args.repeat), "grasps": grasp_rate(kw)}
         print(f"{hand}/{urdf}: {rows[f'{hand}/{urdf}']}", file=sys.stderr)
     settings = {}
     if not args.quick:
         for s in SETTINGS:
             kw = {"hand": "leap_hand_right", "urdf": "canonical", **s}
             _prepare(kw)
-            r = _run((kw, args.steps, 0))
-            settings[_label(s)] = {"per_core": args.steps / r["cpu_s"], "wall": args.steps / r["wall_s"]}
+            rs = [_run((kw, args.steps, 0)) for _ in range(args.repeat)]
+            settings[_label(s)] = {"per_core": statistics.median(args.steps / r["cpu_s"] for r in rs),
+                                   "wall": statistics.median(args.steps / r["wall_s"] for r in rs)}
     d = RotationConfig()
     physics = (f"sim_dt 1/{round(1 / d.sim_dt)} s x {d.substeps} sub-steps per {d.control_hz:g} Hz control step, "
                f"{d.solver_iterations} solver iterations, finger-finger collisions {'on' if d.self_collision else 'off'}, "
@@ -125,7 +138,8 @@ def _label(s: dict) -> str:
 def _table(rows: dict, settings: dict, physics: str, load: float) -> str:
     lines = [f"In-hand rotation env throughput (control steps/s; random policy, resets included). Physics: {physics}.",
              f"Shared 2-core machine, load average {load:.1f} at the start: per-core = steps per CPU-second of the "
-             "stepping process. Target: >= 1,000 per core for LEAP.", "",
+             f"stepping process; each figure the median of {next(iter(rows.values()))['repeat']} measurements. "
+             "Target: >= 1,000 per core for LEAP.", "",
              "| hand / urdf | 1 proc per core | 1 proc wall | 2 procs per core (each) | 2 procs aggregate wall | "
              "grasps kept / tried | grasps/s per core |", "|---|---|---|---|---|---|---|"]
     for name, r in rows.items():
