@@ -14,7 +14,7 @@ from grasp_fixtures import tiny_model_config, tiny_train_config, write_dataset  
 from ohra.canonical.params import ExtendedParams  # noqa: E402
 from ohra.hands import get_hand  # noqa: E402
 from ohra.learn.grasp.condition import params_vector  # noqa: E402
-from ohra.learn.grasp.saliency import FINGERS, condition_saliency, params_groups, saliency_figure  # noqa: E402
+from ohra.learn.grasp.saliency import FINGERS, condition_saliency, mean_condition_saliency, params_groups, saliency_figure  # noqa: E402
 from ohra.learn.grasp.train import train_grasp  # noqa: E402
 
 
@@ -56,6 +56,15 @@ def test_a_finger_the_networks_cannot_see_has_zero_saliency(params_model):
     assert full["groups"]["thumb"] > 0
     again = condition_saliency(params_model, "leap_3333", "builtin:capsule", n=8, seed=1)
     assert np.array_equal(full["entries"], again["entries"])
+
+
+def test_saliency_over_objects_is_the_mean_of_each_objects(params_model):
+    objs = ["builtin:capsule", "builtin:box"]
+    each = [condition_saliency(params_model, "leap_3033", o, n=4, seed=2) for o in objs]
+    mean = mean_condition_saliency(params_model, "leap_3033", objs, n=4, seed=2)
+    assert np.allclose(mean["entries"], (each[0]["entries"] + each[1]["entries"]) / 2)
+    assert mean["groups"]["index"] == pytest.approx((each[0]["groups"]["index"] + each[1]["groups"]["index"]) / 2)
+    assert mean["n"] == 8 and mean["objects"] == 2
 
 
 def test_saliency_figure_is_written(params_model, tmp_path):

@@ -15,7 +15,7 @@ dimension.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 import torch
@@ -70,6 +70,18 @@ def condition_saliency(model: GraspModel, hand: Any, obj: Any, n: int = 64, seed
     return {"entries": entries, "groups": groups, "n": int(n)}
 
 
+def mean_condition_saliency(model: GraspModel, hand: Any, objects: Sequence[Any], n: int = 64, seed: int = 0) -> dict[str, Any]:
+    """:func:`condition_saliency` averaged over ``objects`` (each with ``n`` rotations and ``seed``):
+    one object's saliency reflects that object's grasps as much as the hand. Same return layout, with
+    ``"objects"`` (their count) and ``n`` the total number of sampled grasps."""
+    rs = [condition_saliency(model, hand, o, n=n, seed=seed) for o in objects]
+    if not rs:
+        raise ValueError("mean_condition_saliency: no objects")
+    return {"entries": np.mean([r["entries"] for r in rs], axis=0),
+            "groups": {g: float(np.mean([r["groups"][g] for r in rs])) for g in rs[0]["groups"]},
+            "n": int(n) * len(rs), "objects": len(rs)}
+
+
 def saliency_figure(results: dict[str, dict[str, Any]], path: str, title: str = "condition saliency"):
     """Bar chart of group saliency per hand (``{hand: condition_saliency(...)}``) written to ``path``."""
     from matplotlib.figure import Figure
@@ -89,4 +101,4 @@ def saliency_figure(results: dict[str, dict[str, Any]], path: str, title: str = 
     return fig
 
 
-__all__ = ["FINGERS", "condition_saliency", "params_groups", "saliency_figure"]
+__all__ = ["FINGERS", "condition_saliency", "mean_condition_saliency", "params_groups", "saliency_figure"]
