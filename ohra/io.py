@@ -103,13 +103,13 @@ def folder_lock(folder: str | Path, what: str = "folder") -> Iterator[Path]:
     """
     from ohra.errors import FolderInUseError
 
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
     try:
         import fcntl
     except ImportError:  # no flock (Windows): run unguarded rather than refuse to run
-        yield Path(folder)
+        yield folder
         return
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
     path = folder / LOCK_NAME
     fh = open(path, "a+")
     try:

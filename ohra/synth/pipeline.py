@@ -292,29 +292,22 @@ def synthesize(hands: list[tuple], objects: list[ObjectModel], out: str | Path, 
     keys = object_keys(objects)
     descs = [o.describe() for o in objects]  # settles each body once, before workers start
     with folder_lock(out, "dataset"):  # two builds of one folder would overwrite each other's manifest
-        return _synthesize_locked(hands, objects, keys, descs, out, settings, workers, resume, progress, overwrite,
-                                  backend, address, header)
-
-
-def _synthesize_locked(hands: list[tuple], objects: list[ObjectModel], keys: list[str], descs: list, out: Path,
-                       settings: SynthSettings, workers: int, resume: bool, progress: bool, overwrite: bool,
-                       backend: str, address: str | None, header: dict | None) -> dict:
-    manifest = open_manifest(out, settings.to_dict(), settings.digest(), overwrite, {"ohra_version": __version__})
-    manifest.update(header or {})
-    entries, hand_settings = {}, {}
-    for name, params, cs in hands:
-        hand_settings[name] = replace(settings, nlp=replace(settings.nlp, couplings=cs))
-        entries[name] = hand_entry(out, manifest, name, params.to_dict(), params_hash(params), overwrite)
-        entries[name]["couplings"] = [c.to_dict() for c in cs]
-    # object-major order: an interrupted build has every hand's shards for the objects it reached,
-    # so a partial dataset stays balanced across hands
-    tasks = [(name, params, obj, key, hand_settings[name])
-             for obj, key, desc in zip(objects, keys, descs) for name, params, _ in hands
-             if not (resume and shard_complete(out, entries[name]["shards"].get(key), desc))]
-    writer = ManifestWriter(out / "manifest.json")
-    _run(out, manifest, writer, tasks, len(hands) * len(objects), workers, backend, address, progress)
-    _finish(manifest, writer)
-    return manifest
+        manifest = open_manifest(out, settings.to_dict(), settings.digest(), overwrite, {"ohra_version": __version__})
+        manifest.update(header or {})
+        entries, hand_settings = {}, {}
+        for name, params, cs in hands:
+            hand_settings[name] = replace(settings, nlp=replace(settings.nlp, couplings=cs))
+            entries[name] = hand_entry(out, manifest, name, params.to_dict(), params_hash(params), overwrite)
+            entries[name]["couplings"] = [c.to_dict() for c in cs]
+        # object-major order: an interrupted build has every hand's shards for the objects it reached,
+        # so a partial dataset stays balanced across hands
+        tasks = [(name, params, obj, key, hand_settings[name])
+                 for obj, key, desc in zip(objects, keys, descs) for name, params, _ in hands
+                 if not (resume and shard_complete(out, entries[name]["shards"].get(key), desc))]
+        writer = ManifestWriter(out / "manifest.json")
+        _run(out, manifest, writer, tasks, len(hands) * len(objects), workers, backend, address, progress)
+        _finish(manifest, writer)
+        return manifest
 
 
 def _run(out: Path, manifest: dict, writer: ManifestWriter, tasks: list, total: int, workers: int, backend: str, address: str | None, progress: bool) -> None:

@@ -190,6 +190,8 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
         FolderInUseError: another process is training into ``run_dir``.
     """
     import torch
+    from stable_baselines3.common.utils import set_random_seed
+    from stable_baselines3.common.vec_env import VecNormalize
 
     from ohra.sim.rotation.grasps import load_or_generate
     from ohra.sim.rotation.task import resolve
@@ -203,38 +205,31 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
     torch.set_num_threads(ppo.threads)
     load_or_generate(resolve(env_cfg), progress=verbose > 0)  # once here, not in every worker
     with folder_lock(run_dir, "rotation training run"):  # one writer per run folder
-        return _train_locked(env_cfg, ppo, run_dir, resume, verbose, last)
-
-
-def _train_locked(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: Path, resume: bool, verbose: int, last: Path) -> Path:
-    from stable_baselines3.common.utils import set_random_seed
-    from stable_baselines3.common.vec_env import VecNormalize
-
-    if resume:
-        _check_resume(run_dir, env_cfg, ppo)
-    else:
-        _write_config(run_dir, env_cfg, ppo)
-    set_random_seed(ppo.seed)
-    venv = _vec_env(env_cfg, ppo)
-    cls = ppo_class()
-    wall_before = 0.0
-    if resume:
-        venv = VecNormalize.load(str(run_dir / "checkpoints" / "last_vecnormalize.pkl"), venv)
-        model = cls.load(last, env=venv, device="cpu")
-        wall_before = json.loads((run_dir / "checkpoints" / "last.json").read_text())["wall_s"]
-    else:
-        venv = VecNormalize(venv, norm_obs=ppo.normalize_obs, norm_reward=ppo.normalize_reward, gamma=ppo.gamma)
-        model = _new_model(cls, venv, ppo, verbose)
-    try:
-        cb = _callback(run_dir, ppo, wall_before)
-        remaining = max(0, ppo.total_steps - model.num_timesteps)
-        model.learn(total_timesteps=remaining, callback=cb, reset_num_timesteps=False)
-        save_checkpoint(model, run_dir, cb.wall())
-        model.save(run_dir / "model.zip")
-        model.get_vec_normalize_env().save(str(run_dir / "vecnormalize.pkl"))
-    finally:
-        venv.close()
-    return run_dir / "model.zip"
+        if resume:
+            _check_resume(run_dir, env_cfg, ppo)
+        else:
+            _write_config(run_dir, env_cfg, ppo)
+        set_random_seed(ppo.seed)
+        venv = _vec_env(env_cfg, ppo)
+        cls = ppo_class()
+        wall_before = 0.0
+        if resume:
+            venv = VecNormalize.load(str(run_dir / "checkpoints" / "last_vecnormalize.pkl"), venv)
+            model = cls.load(last, env=venv, device="cpu")
+            wall_before = json.loads((run_dir / "checkpoints" / "last.json").read_text())["wall_s"]
+        else:
+            venv = VecNormalize(venv, norm_obs=ppo.normalize_obs, norm_reward=ppo.normalize_reward, gamma=ppo.gamma)
+            model = _new_model(cls, venv, ppo, verbose)
+        try:
+            cb = _callback(run_dir, ppo, wall_before)
+            remaining = max(0, ppo.total_steps - model.num_timesteps)
+            model.learn(total_timesteps=remaining, callback=cb, reset_num_timesteps=False)
+            save_checkpoint(model, run_dir, cb.wall())
+            model.save(run_dir / "model.zip")
+            model.get_vec_normalize_env().save(str(run_dir / "vecnormalize.pkl"))
+        finally:
+            venv.close()
+        return run_dir / "model.zip"
 
 
 def _new_model(cls, venv, ppo: PPOSettings, verbose: int):
