@@ -30,9 +30,10 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     from ohra.learn.rl.evaluate import Policy, evaluate_policy
     from ohra.learn.rl.plots import read_progress, reward_curves
+    from ohra.sim.rotation.rewards import TERMS
 
     runs = dict(r.split("=", 1) for r in args.runs) if args.runs else _shipped()
-    rows, data = [], {}
+    rows, data, ret_rows = [], {}, []
     for label, d in runs.items():
         pol = Policy(d)
         res = evaluate_policy(pol, pol.env_cfg, args.episodes, args.seed, str(d), grasps=pol.grasps)
@@ -49,9 +50,13 @@ def main(argv: list[str] | None = None) -> int:
                     f"{budget['steps'] / 1e3:.0f}k steps, {budget['minutes']:.0f} min, seed {budget['seed']} | "
                     f"{'%.1f / %.2f' % paper if paper else '-'} |")
         print(rows[-1], file=sys.stderr)
-        zero = evaluate_policy(lambda o, n=pol.space_dim: np.zeros(n), cfg, args.episodes, args.seed,
-                               grasps=pol.grasps).summary()
+        zero_res = evaluate_policy(lambda o, n=pol.space_dim: np.zeros(n), cfg, args.episodes, args.seed,
+                                   grasps=pol.grasps)
+        zero = zero_res.summary()
         data[label]["zero_actions"] = zero
+        data[label]["returns"], data[label]["zero_actions_returns"] = res.return_summary(), zero_res.return_summary()
+        for name, ret in ((label, res.return_summary()), (f"{label} (zero actions)", zero_res.return_summary())):
+            ret_rows.append(f"| {name} | {ret['total']:.1f} | " + " | ".join(f"{ret[k]:+.1f}" for k in TERMS) + " |")
         rows.append(f"| (zero actions) | {cfg.hand} | {cfg.urdf} | {zero['steps_to_fall_mean']:.1f} +- "
                     f"{zero['steps_to_fall_std']:.1f} | {zero['rotation_mean']:.2f} +- {zero['rotation_std']:.2f} | "
                     f"{100 * zero['survived']:.0f} % | no training | - |")
@@ -68,7 +73,10 @@ def main(argv: list[str] | None = None) -> int:
         "episodes with the targets held, the baseline a policy must beat (the grasps hold; the object creeps a little).", "",
         "| policy | hand | urdf | Steps-to-Fall | Cumulative Rotation [rad] | survived | budget | paper (steps / rad) |",
         "|---|---|---|---|---|---|---|---|", *rows, "",
-        f"Training curves: `{curve.relative_to(RESULTS.parent.parent)}` (return), `rotation_curves_rotation.png` (rotation)."])
+        f"Training curves: `{curve.relative_to(RESULTS.parent.parent)}` (return), `rotation_curves_rotation.png` (rotation).",
+        "", "Mean episode return split into its weighted reward terms (same episodes; what the policy was trained "
+        "to maximise, penalties negative):", "",
+        "| policy | return | " + " | ".join(TERMS) + " |", "|---|---|" + "---|" * len(TERMS), *ret_rows])
     write_results("rotation_table3", {"episodes": args.episodes, "seed": args.seed, "runs": data}, table)
     return 0
 

@@ -169,3 +169,83 @@ def test_canonical_hand_can_carry_the_original_finger_masses(hands_dir):
         RotationConfig(urdf="original", inertials="original")
     with pytest.raises(RotationConfigError, match="inertials"):
         RotationConfig(inertials="steel")
+
+
+def test_evaluation_splits_each_episode_return_into_its_weighted_reward_terms(grasps):
+    from ohra.learn.rl.evaluate import evaluate_policy
+    from ohra.sim.rotation.rewards import TERMS
+
+    cfg = CFG.with_overrides(episode_steps=25)
+
+    def policy(obs):  # deterministic in the observation, so a second rollout repeats it
+        return np.sin(3.0 * obs[:22])
+
+    res = evaluate_policy(policy, cfg, episodes=2, seed=4, grasps=grasps)
+    env = InHandRotateEnv(cfg, grasps=grasps)
+    totals = []
+    try:
+        for i in range(2):
+            obs, _ = env.reset(seed=4 + i)
+            total = 0.0
+            while True:
+                obs, r, term, trunc, _ = env.step(policy(obs))
+                total += r
+                if term or trunc:
+                    break
+            totals.append(total)
+            assert sum(res.returns[k][i] for k in TERMS) == pytest.approx(total, abs=1e-9)
+    finally:
+        env.close()
+    summary = res.return_summary()
+    assert set(summary) == set(TERMS) | {"total"}
+    assert summary["total"] == pytest.approx(np.mean(totals), abs=1e-9)
+    assert all(summary[k] <= 0.0 for k in TERMS if k != "rotation")  # penalties only subtract
+    assert summary["pose"] < 0.0  # the policy moves the joints away from the start pose
+
+
+def test_urdf_joint_damping_is_dropped_unless_asked_for(hands_dir):
+    """PyBullet applies URDF damping explicitly, which made the original Shadow's light links chatter."""
+    from ohra.sim.rotation.scene import RotationScene
+
+    def speed_after_a_free_step(cfg, joint="FFJ1"):
+        """Speed of a fingertip joint one sub-step after it starts at 1 rad/s (motors off, no gravity)."""
+        task = resolve(cfg)
+        scene = RotationScene(task.hand, task.obj, cfg, task.palm_radius)
+        c, b, h = scene.client, scene.body, task.hand
+        try:
+            pb.setGravity(0, 0, 0, physicsClientId=c)
+            pb.setJointMotorControlArray(b, scene.jidx, pb.VELOCITY_CONTROL, forces=[0.0] * len(scene.jidx),
+                                         physicsClientId=c)
+            for k, j in enumerate(scene.jidx):
+                pb.resetJointState(b, j, 0.5 * (h.lower[k] + h.upper[k]), float(h.joints[k] == joint), physicsClientId=c)
+            pb.stepSimulation(physicsClientId=c)
+            return pb.getJointState(b, scene.jidx[h.joints.index(joint)], physicsClientId=c)[1]
+        finally:
+            scene.close()
+
+    shadow = RotationConfig(hand="shadow_hand_right", urdf="original", self_collision=False)
+    assert abs(speed_after_a_free_step(shadow.with_overrides(joint_damping=True))) > 10.0  # explicit damping overshoots
+    assert speed_after_a_free_step(shadow) == pytest.approx(1.0, abs=0.2)  # no damping: it keeps turning
+
+
+def test_work_penalty_uses_the_joint_motion_over_the_control_step(env):
+    env.reset(seed=1)
+    before = env.scene.read()
+    a = np.zeros(env.action_space.shape)
+    a[env.space.movable] = 1.0  # close every finger: the joints move and the motors work
+    _, _, _, _, info = env.step(a)
+    after = env.scene.read()
+    step_velocity = (after.q - before.q) / env.cfg.control_dt
+    assert info["reward/work"] > 0.0
+    assert info["reward/work"] == pytest.approx(float(after.tau @ step_velocity) ** 2, rel=1e-12)
+    assert info["reward/work"] != pytest.approx(float(after.tau @ after.dq) ** 2, rel=1e-3)
+
+
+def test_configs_saved_before_a_setting_existed_read_back_as_they_ran():
+    saved = {k: v for k, v in RotationConfig().to_dict().items() if k not in R.config.SAVED_BEFORE}
+    old = RotationConfig.from_saved(saved)
+    assert (old.joint_damping, old.work_velocity) == (True, "instant")
+    assert (RotationConfig.from_dict(saved).joint_damping, RotationConfig().work_velocity) == (False, "step")
+    assert RotationConfig.from_saved(RotationConfig().to_dict()) == RotationConfig()
+    with pytest.raises(RotationConfigError, match="work_velocity"):
+        RotationConfig(work_velocity="mean")

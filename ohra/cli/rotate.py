@@ -127,6 +127,8 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     print(f"Steps-to-Fall {s['steps_to_fall_mean']:.1f} +- {s['steps_to_fall_std']:.1f} (of {res.episode_steps}), "
           f"Cumulative Rotation {s['rotation_mean']:.2f} +- {s['rotation_std']:.2f} rad, "
           f"survived {100 * s['survived']:.0f} % over {res.episodes} episodes; wrote {Path(args.run) / 'eval.json'}")
+    ret = res.return_summary()
+    print("mean episode return " + f"{ret['total']:.1f} = " + " ".join(f"{k} {v:+.1f}" for k, v in ret.items() if k != "total"))
     if args.render or args.replay:
         ep = record_episode(args.run, Path(args.run) / "episode", seed=args.seed, which=args.checkpoint)
         print(f"episode (seed {args.seed}): {ep['steps']} steps, {ep['rotation']:.2f} rad; wrote {ep['gif']}, {ep['strip']}")

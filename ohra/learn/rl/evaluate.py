@@ -33,6 +33,15 @@ class EvalResult:
     cumulative_rotation: list[float]
     termination: list[str | None]
     episode_steps: int
+    returns: dict[str, list[float]] | None = None  # per reward term: weighted sum over each episode
+
+    def return_summary(self) -> dict[str, float]:
+        """Mean episode return per reward term (weighted, as the policy was trained on) and in total."""
+        if not self.returns:
+            return {}
+        out = {k: float(np.mean(v)) for k, v in self.returns.items()}
+        out["total"] = float(np.sum([np.asarray(v, float) for v in self.returns.values()], axis=0).mean())
+        return out
 
     def summary(self) -> dict[str, float]:
         s, r = np.asarray(self.steps_to_fall, float), np.asarray(self.cumulative_rotation, float)
@@ -41,7 +50,7 @@ class EvalResult:
                 "survived": float(np.mean([t is None for t in self.termination]))}
 
     def to_dict(self) -> dict:
-        return {**asdict(self), "summary": self.summary()}
+        return {**asdict(self), "summary": self.summary(), "return_summary": self.return_summary()}
 
 
 def shipped(name: str) -> Path:
@@ -142,9 +151,13 @@ def export_policy(run_dir: str | Path, out_dir: str | Path, which: str = "model"
 
 
 def run_episode(env, policy, seed: int, frames_every: int = 0, render=None) -> dict:
-    """One episode; returns steps, rotation, termination, the trajectory and, every ``frames_every``
-    steps, a frame from ``render()`` (default ``env.render()``)."""
+    """One episode; returns steps, rotation, termination, the weighted return of each reward term, the
+    trajectory and, every ``frames_every`` steps, a frame from ``render()`` (default ``env.render()``)."""
+    from ohra.sim.rotation.rewards import TERMS
+
     render = render or env.render
+    weights = env.cfg.weights
+    returns = {k: 0.0 for k in TERMS}
     obs, info = env.reset(seed=seed)
     frames, traj = [], {"q": [env.scene.read().q], "obj_pos": [env.scene.read().obj_pos],
                         "obj_quat": [env.scene.read().obj_quat]}
@@ -152,6 +165,8 @@ def run_episode(env, policy, seed: int, frames_every: int = 0, render=None) -> d
         frames.append(render())
     while True:
         obs, _, term, trunc, info = env.step(policy(obs))
+        for k in TERMS:
+            returns[k] += getattr(weights, k) * info[f"reward/{k}"]
         s = env.scene.read()
         traj["q"].append(s.q)
         traj["obj_pos"].append(s.obj_pos)
@@ -161,7 +176,7 @@ def run_episode(env, policy, seed: int, frames_every: int = 0, render=None) -> d
         if term or trunc:
             break
     return {"steps": int(info["steps"]), "rotation": float(info["cumulative_rotation"]),
-            "termination": info["termination"], "frames": frames, "trajectory": {k: np.array(v) for k, v in traj.items()}}
+            "termination": info["termination"], "returns": returns, "frames": frames, "trajectory": {k: np.array(v) for k, v in traj.items()}}
 
 
 def evaluate_policy(policy, env_cfg: RotationConfig, episodes: int = 20, seed: int = 0, run: str = "",
@@ -175,7 +190,8 @@ def evaluate_policy(policy, env_cfg: RotationConfig, episodes: int = 20, seed: i
     finally:
         env.close()
     return EvalResult(run, episodes, seed, [e["steps"] for e in eps], [e["rotation"] for e in eps],
-                      [e["termination"] for e in eps], env_cfg.episode_steps)
+                      [e["termination"] for e in eps], env_cfg.episode_steps,
+                      {k: [e["returns"][k] for e in eps] for k in eps[0]["returns"]} if eps else None)
 
 
 def evaluate_run(run_dir: str | Path, episodes: int = 20, seed: int = 1000, which: str = "model",

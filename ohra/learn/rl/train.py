@@ -166,9 +166,9 @@ def _vec_env(env_cfg: RotationConfig, ppo: PPOSettings):
 def _check_resume(run_dir: Path, env_cfg: RotationConfig, ppo: PPOSettings) -> None:
     """Refuse a resume whose environment or (non-budget) PPO settings differ from the run's. The saved
     config is read through the dataclasses, so a setting added to ohra after the run was made counts
-    at its default (which keeps the earlier behaviour) instead of failing the comparison."""
+    at the value the run had (``SAVED_BEFORE``) or its default instead of failing the comparison."""
     saved = json.loads((run_dir / "config.json").read_text())
-    theirs = _plain(RotationConfig.from_dict(saved["env"], f"{run_dir}/config.json").to_dict())
+    theirs = _plain(RotationConfig.from_saved(saved["env"], f"{run_dir}/config.json").to_dict())
     mine = _plain(env_cfg.to_dict())
     diff = sorted(k for k in set(theirs) | set(mine) if theirs.get(k) != mine.get(k))
     if diff:
@@ -272,7 +272,7 @@ def load_run(run_dir: str | Path) -> tuple[RotationConfig, PPOSettings]:
     if not path.is_file():
         raise CheckpointError(f"{run_dir} is not a rotation run or exported policy: {path} does not exist")
     d = json.loads(path.read_text())
-    return RotationConfig.from_dict(d["env"], f"{run_dir}/config.json"), PPOSettings.from_dict(d["ppo"])
+    return RotationConfig.from_saved(d["env"], f"{run_dir}/config.json"), PPOSettings.from_dict(d["ppo"])
 
 
 def with_budget(ppo: PPOSettings, total_steps: int | None = None, max_minutes: float | None = None) -> PPOSettings:

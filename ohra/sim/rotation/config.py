@@ -31,6 +31,11 @@ class RotationConfigError(OhraError, ValueError):
 URDF_KINDS = ("canonical", "original")
 INERTIALS = ("capsule", "original")  # canonical finger masses: the template's capsules or the original URDF's
 SPACES = ("canonical", "native")
+WORK_VELOCITIES = ("step", "instant")
+
+# Settings added after rotation runs were saved, with the value those runs ran with: a saved config
+# without the key is read with this value (RotationConfig.from_saved), so resuming it changes nothing.
+SAVED_BEFORE = {"joint_damping": True, "work_velocity": "instant"}
 
 # Reference ranges of the per-joint noise around the holding pose for the initial grasps (issue 15,
 # from the paper's setup): LEAP +-0.25 rad, Shadow +-0.1 rad; other hands take Shadow's, the safer one.
@@ -79,6 +84,17 @@ class RotationConfig:
     motor_force: float = 1.0  # N m, torque cap of every joint motor
     position_gain: float = 0.3  # PyBullet position-motor gains (per sub-step)
     velocity_gain: float = 1.0
+    # Keep the URDF's <dynamics damping>? PyBullet applies it explicitly (tau = -d * dq each sub-step),
+    # which diverges when d * sim_dt exceeds ~2x the joint's effective inertia: measured on the original
+    # Shadow URDF (d 0.1-0.2 N m s/rad, thumb and knuckle links of 1e-7 kg m^2) as joints chattering at
+    # 10-40 rad/s in 60 % of the control steps of a 0.2-noise policy, so the work penalty reached
+    # -4,000 per step. The motors' velocity gain damps implicitly; LEAP's URDFs and the canonical ones
+    # have no damping, so dropping it changes nothing there.
+    joint_damping: bool = False
+    # Joint velocity in the work penalty: "step" = change of the joint angle over the control step / its
+    # duration (what the joint did, like the rotation term); "instant" = PyBullet's velocity at the
+    # last sub-step, which samples any sub-step oscillation (runs saved before this setting used it).
+    work_velocity: str = "step"
 
     # -- episode, observation, reward, termination ---------------------------------------------
     episode_steps: int = 400  # control steps (20 s) before truncation
@@ -103,6 +119,8 @@ class RotationConfig:
         if self.inertials == "original" and self.urdf != "canonical":
             raise RotationConfigError("inertials='original' gives the canonical URDF the original's finger masses; "
                                       "the original URDF has them already (use urdf='canonical')")
+        if self.work_velocity not in WORK_VELOCITIES:
+            raise RotationConfigError(f"work_velocity must be one of {WORK_VELOCITIES}, got {self.work_velocity!r}")
         if self.space is not None and self.space not in SPACES:
             raise RotationConfigError(f"space must be one of {SPACES} or None, got {self.space!r}")
         if self.form is not None and self.form not in ("base", "extended"):
@@ -163,6 +181,12 @@ class RotationConfig:
         if "weights" in kw:
             kw["weights"] = _weights(kw["weights"], f"{source}: weights")
         return cls(**kw)
+
+    @classmethod
+    def from_saved(cls, d: Mapping[str, Any], source: str = "config") -> "RotationConfig":
+        """Like :meth:`from_dict` for a config saved by a run: a setting added to ohra after the run was
+        made takes the value the run had (:data:`SAVED_BEFORE`), others their defaults."""
+        return cls.from_dict({**{k: v for k, v in SAVED_BEFORE.items() if k not in d}, **d}, source)
 
     def with_overrides(self, **kw: Any) -> "RotationConfig":
         """A copy with some settings changed (unknown names raise)."""

@@ -88,7 +88,7 @@ class InHandRotateEnv(gym.Env):
         self._target = np.clip(self._target + cfg.action_scale * a, self._lo, self._hi)
         self.scene.drive(self.space.to_sim(self._target))
         self.scene.step()
-        self._snap = snap = self.scene.read()
+        prev, self._snap = self._snap, (snap := self.scene.read())
         self._steps += 1
         why = termination.reason(snap.obj_pos, self._obj_start, cfg.fall_height, cfg.max_distance, snap.obj_quat,
                                  snap.q, snap.dq, snap.tau, snap.obj_linvel, snap.obj_angvel)
@@ -98,7 +98,7 @@ class InHandRotateEnv(gym.Env):
         else:
             dyaw = rewards.delta_yaw(self._quat, snap.obj_quat)
             self._quat = snap.obj_quat
-            terms = self._terms(snap, dyaw)
+            terms = self._terms(snap, prev, dyaw)
         self._rotation += dyaw
         reward = rewards.total(terms, cfg.weights)
         terminated = why is not None
@@ -120,15 +120,17 @@ class InHandRotateEnv(gym.Env):
             self.scene = None
 
     # -- pieces -----------------------------------------------------------------------------------
-    def _terms(self, snap, dyaw: float) -> dict[str, float]:
-        """Unweighted reward terms of this step (see :mod:`ohra.sim.rotation.rewards`)."""
+    def _terms(self, snap, prev, dyaw: float) -> dict[str, float]:
+        """Unweighted reward terms of this step (see :mod:`ohra.sim.rotation.rewards`); ``prev`` is the
+        snapshot before it."""
         cfg = self.cfg
+        dq = (snap.q - prev.q) / cfg.control_dt if cfg.work_velocity == "step" else snap.dq
         q = self.space.from_sim(snap.q)
         return {"rotation": rewards.rotation(dyaw, cfg.control_dt, cfg.angvel_clip),
                 "drift": rewards.drift(snap.obj_pos, self._obj_start),
                 "pose": rewards.pose(q, self._q_start),
                 "torque": rewards.torque(snap.tau),
-                "work": rewards.work(snap.tau, snap.dq),
+                "work": rewards.work(snap.tau, dq),
                 "linvel": rewards.linvel(snap.obj_linvel)}
 
     def _observe(self, snap) -> np.ndarray:

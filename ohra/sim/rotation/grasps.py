@@ -178,7 +178,8 @@ def cache_key(task: Task) -> str:
     cfg = task.cfg
     fields = {k: getattr(cfg, k) for k in ("friction", "sim_dt", "control_hz", "solver_iterations", "self_collision",
                                            "gravity", "motor_force", "position_gain", "velocity_gain", "grasp_count",
-                                           "grasp_seed", "settle_time", "min_contacts", "fall_height", "max_distance")}
+                                           "grasp_seed", "settle_time", "min_contacts", "fall_height", "max_distance",
+                                           "joint_damping")}
     fields.update(noise=cfg.resolved_grasp_noise, object=task.obj.name, mass=task.obj.mass,
                   prims=[dict(p) for p in task.obj.prims], version=VERSION, palm_radius=task.palm_radius,
                   pybullet=pb.getAPIVersion())

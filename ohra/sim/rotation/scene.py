@@ -96,6 +96,9 @@ class RotationScene:
         self.body = b = loaded.body
         self.links, self.mimic, self.link_finger = loaded.links, loaded.mimic, loaded.link_finger
         self.jidx = loaded.jidx
+        if not cfg.joint_damping:  # see RotationConfig.joint_damping
+            for j in range(pb.getNumJoints(b, physicsClientId=c)):
+                pb.changeDynamics(b, j, jointDamping=0.0, physicsClientId=c)
         # loadURDF places the base by its inertial frame's origin only when no pose is given; set the link frame
         d = pb.getDynamicsInfo(b, -1, physicsClientId=c)
         Ti = np.eye(4)
