@@ -54,9 +54,10 @@ def main(argv: list[str] | None = None) -> int:
                                    grasps=pol.grasps)
         zero = zero_res.summary()
         data[label]["zero_actions"] = zero
-        data[label]["returns"], data[label]["zero_actions_returns"] = res.return_summary(), zero_res.return_summary()
-        for name, ret in ((label, res.return_summary()), (f"{label} (zero actions)", zero_res.return_summary())):
-            ret_rows.append(f"| {name} | {ret['total']:.1f} | " + " | ".join(f"{ret[k]:+.1f}" for k in TERMS) + " |")
+        ret, zero_ret = res.return_summary(), zero_res.return_summary()
+        data[label]["returns"], data[label]["zero_actions_returns"] = ret, zero_ret
+        for name, r in ((label, ret), (f"{label} (zero actions)", zero_ret)):
+            ret_rows.append(f"| {name} | {r['total']:.1f} | " + " | ".join(f"{r[k]:+.1f}" for k in TERMS) + " |")
         rows.append(f"| (zero actions) | {cfg.hand} | {cfg.urdf} | {zero['steps_to_fall_mean']:.1f} +- "
                     f"{zero['steps_to_fall_std']:.1f} | {zero['rotation_mean']:.2f} +- {zero['rotation_std']:.2f} | "
                     f"{100 * zero['survived']:.0f} % | no training | - |")

@@ -71,11 +71,14 @@ class LoadedHand:
     link_finger: dict[int, int]
 
 
-def load_hand(hand: "SimHand", urdf: str, flags: int, friction: float, client: int) -> LoadedHand:
+def load_hand(hand: "SimHand", urdf: str, flags: int, friction: float, client: int,
+              joint_damping: bool = True) -> LoadedHand:
     """Load ``urdf`` (``hand.urdf`` or a variant of it with the same joints) fixed-base with
     ``flags``, resolve the hand's joint and link names, and give every link lateral friction
     ``sqrt(friction)`` (PyBullet multiplies the two bodies' coefficients, so a contact with an
     object of the same coefficient gets ``friction``), no spinning/rolling friction, no restitution.
+    ``joint_damping=False`` drops the URDF's ``<dynamics damping>``, which PyBullet applies explicitly
+    and which diverges on light links (see ``ohra.sim.rotation.config.RotationConfig.joint_damping``).
 
     Raises ``RuntimeError`` when PyBullet did not load a driven joint (e.g. merged away).
     """
@@ -95,5 +98,7 @@ def load_hand(hand: "SimHand", urdf: str, flags: int, friction: float, client: i
     for j, _ in links:
         pb.changeDynamics(b, j, lateralFriction=mu, spinningFriction=0.0, rollingFriction=0.0, restitution=0.0,
                           physicsClientId=client)
+        if not joint_damping and j >= 0:
+            pb.changeDynamics(b, j, jointDamping=0.0, physicsClientId=client)
     return LoadedHand(b, links, [by_name[n] for n in hand.joints], mimic,
                       {j: hand.link_finger.get(name, -1) for j, name in links})

@@ -40,8 +40,7 @@ class EvalResult:
         if not self.returns:
             return {}
         out = {k: float(np.mean(v)) for k, v in self.returns.items()}
-        out["total"] = float(np.sum([np.asarray(v, float) for v in self.returns.values()], axis=0).mean())
-        return out
+        return {**out, "total": sum(out.values())}
 
     def summary(self) -> dict[str, float]:
         s, r = np.asarray(self.steps_to_fall, float), np.asarray(self.cumulative_rotation, float)
@@ -156,8 +155,8 @@ def run_episode(env, policy, seed: int, frames_every: int = 0, render=None) -> d
     from ohra.sim.rotation.rewards import TERMS
 
     render = render or env.render
-    weights = env.cfg.weights
-    returns = {k: 0.0 for k in TERMS}
+    weights = {k: getattr(env.cfg.weights, k) for k in TERMS}
+    returns = dict.fromkeys(TERMS, 0.0)
     obs, info = env.reset(seed=seed)
     frames, traj = [], {"q": [env.scene.read().q], "obj_pos": [env.scene.read().obj_pos],
                         "obj_quat": [env.scene.read().obj_quat]}
@@ -166,7 +165,7 @@ def run_episode(env, policy, seed: int, frames_every: int = 0, render=None) -> d
     while True:
         obs, _, term, trunc, info = env.step(policy(obs))
         for k in TERMS:
-            returns[k] += getattr(weights, k) * info[f"reward/{k}"]
+            returns[k] += weights[k] * info[f"reward/{k}"]
         s = env.scene.read()
         traj["q"].append(s.q)
         traj["obj_pos"].append(s.obj_pos)

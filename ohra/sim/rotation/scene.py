@@ -92,13 +92,10 @@ class RotationScene:
         if not self.visual:
             flags |= pb.URDF_IGNORE_VISUAL_SHAPES
         self.T_world_root = T_WORLD_PALM @ h.T_palm_root
-        loaded = load_hand(h, fill_inertials(h.urdf), flags, cfg.friction, c)
+        loaded = load_hand(h, fill_inertials(h.urdf), flags, cfg.friction, c, joint_damping=cfg.joint_damping)
         self.body = b = loaded.body
         self.links, self.mimic, self.link_finger = loaded.links, loaded.mimic, loaded.link_finger
         self.jidx = loaded.jidx
-        if not cfg.joint_damping:  # see RotationConfig.joint_damping
-            for j in range(pb.getNumJoints(b, physicsClientId=c)):
-                pb.changeDynamics(b, j, jointDamping=0.0, physicsClientId=c)
         # loadURDF places the base by its inertial frame's origin only when no pose is given; set the link frame
         d = pb.getDynamicsInfo(b, -1, physicsClientId=c)
         Ti = np.eye(4)
