@@ -12,9 +12,10 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 import sys
 import time
-from dataclasses import asdict, is_dataclass
+from dataclasses import asdict, fields, is_dataclass
 from pathlib import Path
 from typing import Any, Callable, TypeVar
 
@@ -88,8 +89,37 @@ def run_key(run: Path) -> dict:
     return json.loads((run / KEY_FILE).read_text())
 
 
+def _protocol_repr(protocol: Any, omit: tuple[str, ...] = ()) -> str:
+    """A protocol as the study keys hold it: its dataclass repr, without the fields ``omit``."""
+    return f"{type(protocol).__name__}(" + ", ".join(
+        f"{f.name}={getattr(protocol, f.name)!r}" for f in fields(protocol) if f.name not in omit) + ")"
+
+
 def eval_key(model_key: dict, **settings: Any) -> dict:
+    prot = settings.get("protocol")
+    if is_dataclass(prot):
+        # canonical URDFs carry no <dynamics damping>: Protocol.urdf_joint_damping cannot change a
+        # canonical evaluation, and leaving it out keeps the keys of the evaluations cached before it
+        settings["protocol"] = _protocol_repr(prot, () if settings.get("original") else ("urdf_joint_damping",))
     return _jsonable({"model": model_key, **settings})
+
+
+def carried_over(path: Path, key: dict, hands_unaffected: Callable[[str], bool]) -> dict | None:
+    """The cached result at ``path`` when it differs from ``key`` only in having been made before
+    ``Protocol.urdf_joint_damping`` existed (it ran with the URDF damping applied): its pairs of the
+    hands for which ``hands_unaffected(hand)`` (their URDFs carry no damping; every hand when ``key``
+    keeps the damping too) are still valid. Returns ``{"hands": [...], "result": old}`` or None."""
+    from ohra.sim.protocol import URDF_DAMPING_BEFORE
+
+    m = re.search(r", urdf_joint_damping=(True|False)\)$", str(key.get("protocol", "")))
+    if m is None or not path.exists():
+        return None
+    old = json.loads(path.read_text())
+    if old.get("key") != {**key, "protocol": key["protocol"][:m.start()] + ")"}:
+        return None
+    keeps = (m.group(1) == "True") == URDF_DAMPING_BEFORE
+    hands = [h for h in old["key"].get("hands", []) if keeps or hands_unaffected(h)]
+    return {"hands": hands, "result": old} if hands else None
 
 
 def cached(path: Path, key: dict) -> dict | None:

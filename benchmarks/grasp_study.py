@@ -29,7 +29,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import RESULTS, natural_sorted, write_results  # noqa: E402
-from _study_cache import cached, claim_run, eval_key, run_key, store, train_key, when_free  # noqa: E402
+from _study_cache import cached, carried_over, claim_run, eval_key, run_key, store, train_key, when_free  # noqa: E402
 
 import numpy as np  # noqa: E402
 import yaml  # noqa: E402
@@ -43,6 +43,7 @@ from ohra.learn.grasp.refine import RefineSettings  # noqa: E402
 from ohra.learn.grasp.train import train_grasp  # noqa: E402
 from ohra.hands import get_hand  # noqa: E402
 from ohra.sim import Protocol, SimHand  # noqa: E402
+from ohra.sim.bullet import urdf_joint_damping  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = {"allegro_hand_left": 84.2, "barrett_hand": 88.1, "shadow_hand_right": 62.9}  # OHRA Table 5, Isaac Gym
@@ -96,13 +97,28 @@ def evaluated(model, key: str, hands: list[str], objects: list, original: bool, 
                     original=original, protocol=protocol, **extra)
     if (hit := cached(path, ekey)) is not None:
         return hit
+    # an original-URDF evaluation made before Protocol.urdf_joint_damping: hands whose URDFs carry no
+    # damping ran exactly as they would now; only the others are evaluated again
+    carry = carried_over(path, ekey, lambda h: not urdf_joint_damping(SimHand.registered_original(h).urdf)) if original else None
+    kept = carry["hands"] if carry else []
+    todo = [h for h in hands if h not in kept]
     t0 = time.perf_counter()
-    rep = evaluate_model(model, hands, objects, n=args.n, seed=0, original=original, protocol=protocol, workers=args.workers,
-                         inertials=inertials, refine=refine)
-    out = {"per_hand": rep.per_hand(), "pairs": [{"hand": p.hand, "object": p.object, "successes": int(p.success.sum()),
-                                                  "n": int(len(p.success))} for p in rep.pairs],
-           "success": {p.hand + "/" + p.object: p.success.astype(int).tolist() for p in rep.pairs},
-           "seconds": time.perf_counter() - t0}
+    out = {"per_hand": {}, "pairs": [], "success": {}}
+    if todo:
+        rep = evaluate_model(model, todo, objects, n=args.n, seed=0, original=original, protocol=protocol,
+                             workers=args.workers, inertials=inertials, refine=refine)
+        out = {"per_hand": rep.per_hand(), "pairs": [{"hand": p.hand, "object": p.object, "successes": int(p.success.sum()),
+                                                      "n": int(len(p.success))} for p in rep.pairs],
+               "success": {p.hand + "/" + p.object: p.success.astype(int).tolist() for p in rep.pairs}}
+    if carry:
+        old = carry["result"]
+        out = {"per_hand": {h: (old if h in kept else out)["per_hand"][h] for h in hands},
+               "pairs": [p for h in hands for p in (old if h in kept else out)["pairs"] if p["hand"] == h],
+               "success": {k: v for h in hands for k, v in (old if h in kept else out)["success"].items()
+                           if k.split("/", 1)[0] == h},
+               "carried_over": {"hands": kept, "seconds": old.get("seconds"),
+                                "why": "evaluated before Protocol.urdf_joint_damping; these hands' URDFs carry no damping"}}
+    out["seconds"] = time.perf_counter() - t0
     return store(path, ekey, out)
 
 

@@ -309,3 +309,33 @@ def test_a_stored_float32_grasp_at_a_locked_joint_is_not_clamped():
         rep = ev.evaluate(stored[None])
     ev.close()
     assert not out.any() and rep.clamped_count == 0
+
+
+def test_the_evaluator_drops_urdf_joint_damping_unless_the_protocol_keeps_it(hands_dir):
+    """PyBullet applies a URDF's <dynamics damping> explicitly; on the original Shadow's light links it
+    diverges (a free fingertip joint flies off), so the evaluator drops it by default."""
+    from ohra.sim.bullet import urdf_joint_damping
+    from ohra.sim.world import World
+
+    hand = SimHand.registered_original("shadow_hand_right")
+    assert urdf_joint_damping(hand.urdf) and not urdf_joint_damping(SimHand.from_params(pinch_hand()).urdf)
+
+    def speed_after_a_free_step(protocol, joint="FFJ1"):
+        """Speed of a fingertip joint one step after it starts at 1 rad/s (motors off, no gravity)."""
+        world = World(hand, pinch_box(), protocol)
+        c, b = world.client, world.body
+        try:
+            pb.setGravity(0, 0, 0, physicsClientId=c)
+            pb.setJointMotorControlArray(b, world.jidx, pb.VELOCITY_CONTROL, forces=[0.0] * len(world.jidx),
+                                         physicsClientId=c)
+            for k, j in enumerate(world.jidx):
+                pb.resetJointState(b, int(j), 0.5 * (hand.lower[k] + hand.upper[k]), float(hand.joints[k] == joint),
+                                   physicsClientId=c)
+            pb.stepSimulation(physicsClientId=c)
+            return pb.getJointState(b, int(world.jidx[hand.joints.index(joint)]), physicsClientId=c)[1]
+        finally:
+            world.close()
+
+    assert Protocol().urdf_joint_damping is False
+    assert abs(speed_after_a_free_step(Protocol(urdf_joint_damping=True))) > 10.0  # explicit damping overshoots
+    assert speed_after_a_free_step(Protocol()) == pytest.approx(1.0, abs=0.2)  # dropped: the joint keeps turning

@@ -33,3 +33,30 @@ def test_a_run_in_training_elsewhere_is_waited_for_then_taken(tmp_path, capsys):
     assert when_free(get, poll_s=0.2) == "trained here"
     p.wait()
     assert len(calls) >= 2 and "is writing this training run" in (err := capsys.readouterr().err) and "waiting 0.2 s" in err
+
+
+def test_evaluations_cached_before_the_urdf_damping_setting_stay_valid_where_it_cannot_matter(tmp_path):
+    """Protocol.urdf_joint_damping cannot change a canonical evaluation (canonical URDFs carry no
+    damping), nor an original one of a hand whose URDF has none: those cached verdicts are kept."""
+    from dataclasses import replace
+
+    from ohra.sim import Protocol
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    try:
+        from _study_cache import _protocol_repr, carried_over, eval_key, store
+    finally:
+        sys.path.pop(0)
+    drop, keep = Protocol(), replace(Protocol(), urdf_joint_damping=True)
+    model, hands = {"run": "m"}, ["allegro", "shadow"]
+    assert eval_key(model, hands=hands, original=False, protocol=drop) == eval_key(model, hands=hands, original=False, protocol=keep)
+    new = eval_key(model, hands=hands, original=True, protocol=drop)
+    assert new != eval_key(model, hands=hands, original=True, protocol=keep)
+
+    before = {"model": model, "hands": hands, "original": True, "protocol": _protocol_repr(drop, ("urdf_joint_damping",))}
+    store(path := tmp_path / "eval.json", before, {"per_hand": {}})
+    undamped = lambda h: h == "allegro"  # noqa: E731
+    assert carried_over(path, new, undamped)["hands"] == ["allegro"]  # shadow ran with the damping: evaluate again
+    assert carried_over(path, eval_key(model, hands=hands, original=True, protocol=keep), undamped)["hands"] == hands
+    assert carried_over(path, eval_key(model, hands=hands, original=True, protocol=replace(drop, friction=1.0)), undamped) is None
+    assert carried_over(path, {**new, "n": 5}, undamped) is None

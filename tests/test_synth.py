@@ -139,3 +139,17 @@ def test_empty_object_file_is_rejected(tmp_path):
     empty.write_text("")
     proc = subprocess.run([sys.executable, "-m", "ohra.synth", "--hand", "leap_3303", "--objects", str(empty), "--quiet"], capture_output=True, text=True)
     assert proc.returncode == 2 and "no faces" in proc.stderr
+
+
+def test_the_urdf_damping_setting_leaves_synthesis_digests_alone():
+    """Synthesis simulates canonical URDFs, which carry no damping: Protocol.urdf_joint_damping cannot
+    change a shard, so it stays out of the settings (datasets made before it keep their digest)."""
+    from dataclasses import replace
+
+    from ohra.sim import Protocol
+    from ohra.synth.pipeline import SynthSettings
+
+    kept = SynthSettings(protocol=replace(Protocol(), urdf_joint_damping=True))
+    assert "urdf_joint_damping" not in SynthSettings().to_dict()["protocol"]
+    assert kept.digest() == SynthSettings().digest()
+    assert SynthSettings(protocol=replace(Protocol(), friction=1.0)).digest() != SynthSettings().digest()

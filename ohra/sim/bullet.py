@@ -71,6 +71,13 @@ class LoadedHand:
     link_finger: dict[int, int]
 
 
+def urdf_joint_damping(urdf: str) -> bool:
+    """Whether the URDF text gives any joint a nonzero ``<dynamics damping>`` (which PyBullet applies
+    explicitly; see :attr:`ohra.sim.protocol.Protocol.urdf_joint_damping`)."""
+    root = ET.fromstring(urdf)
+    return any(float(d.get("damping", 0.0) or 0.0) != 0.0 for d in root.iterfind("joint/dynamics"))
+
+
 def load_hand(hand: "SimHand", urdf: str, flags: int, friction: float, client: int,
               joint_damping: bool = True) -> LoadedHand:
     """Load ``urdf`` (``hand.urdf`` or a variant of it with the same joints) fixed-base with

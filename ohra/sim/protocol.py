@@ -25,6 +25,9 @@ DIRECTION_NAMES = ("+x", "+y", "+z", "-x", "-y", "-z")
 ISAAC_STEP = {"dt": 0.01, "substeps": 2, "solver_iterations": 50}
 # The reference's Isaac joint drive: stiffness [N m/rad] and damping [N m s/rad] of every DoF
 ISAAC_DRIVE = {"stiffness": 1000.0, "damping": 200.0}
+# Protocol.urdf_joint_damping of results saved before the setting existed (a saved protocol without
+# the key ran with the URDF's damping applied)
+URDF_DAMPING_BEFORE = True
 
 
 @dataclass(frozen=True)
@@ -56,6 +59,13 @@ class Protocol:
     early_exit_margin: float = 0.05  # m beyond the threshold a predicted free flight must end
     early_exit_every: int = 5  # steps between early-exit checks
     merge_fixed_links: bool = True  # like Isaac's collapse_fixed_joints; 2-3x faster stepping
+    # The URDF's <dynamics damping>: PyBullet applies it explicitly per step, and on light links
+    # (Shadow's 0.1-0.2 N m s/rad on ~1e-7 kg m^2) damping * dt >> inertia diverges and the joints
+    # chatter (the rotation environment's RotationConfig.joint_damping). Isaac's drive damps the
+    # joints itself, as PyBullet's velocity gain does; canonical, Allegro, Barrett and LEAP URDFs
+    # carry none, so only a hand whose URDF has it is affected. Evaluations made before this setting
+    # kept the damping (URDF_DAMPING_BEFORE).
+    urdf_joint_damping: bool = False
 
     def __post_init__(self) -> None:
         for name in ("dt", "squeeze_time", "direction_time", "density", "motor_force", "success_displacement"):

@@ -63,7 +63,7 @@ class World:
         flags = pb.URDF_USE_SELF_COLLISION | pb.URDF_IGNORE_VISUAL_SHAPES | pb.URDF_USE_INERTIA_FROM_FILE
         if prot.merge_fixed_links:
             flags |= pb.URDF_MERGE_FIXED_LINKS
-        loaded = load_hand(h, h.urdf, flags, prot.friction, c)
+        loaded = load_hand(h, h.urdf, flags, prot.friction, c, joint_damping=prot.urdf_joint_damping)
         self.body = b = loaded.body
         self.links: list[tuple[int, str]] = loaded.links
         self.root_link = self.links[0][1]

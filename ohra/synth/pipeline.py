@@ -87,7 +87,11 @@ class SynthSettings:
             raise OhraError(f"cap must be >= 1 (or None), got {self.cap}")
 
     def to_dict(self) -> dict:
-        return json.loads(json.dumps(asdict(self), default=str))
+        d = json.loads(json.dumps(asdict(self), default=str))
+        # Synthesis simulates canonical URDFs only, which carry no <dynamics damping>: the setting
+        # cannot change a shard, and leaving it out keeps the digests of datasets made before it.
+        d["protocol"].pop("urdf_joint_damping", None)
+        return d
 
     def digest(self) -> str:
         return hashlib.sha256(json.dumps(self.to_dict(), sort_keys=True).encode()).hexdigest()[:12]
