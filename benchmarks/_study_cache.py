@@ -44,9 +44,11 @@ def _jsonable(x: Any) -> Any:
     return json.loads(json.dumps(asdict(x) if is_dataclass(x) else x, default=str))
 
 
-def train_key(data: list[str], hands: list[str], steps: int, seed: int, condition: str, test_hands: tuple = ()) -> dict:
+def train_key(data: list[str], hands: list[str], steps: int, seed: int, condition: str, test_hands: tuple = (),
+              condition_noise: float = 0.0) -> dict:
+    extra = {"condition_noise": float(condition_noise)} if condition_noise else {}  # earlier runs keep their keys
     return _jsonable({"data": data_fingerprint(data), "hands": list(hands), "test_hands": list(test_hands),
-                      "steps": int(steps), "seed": int(seed), "condition": condition})
+                      "steps": int(steps), "seed": int(seed), "condition": condition, **extra})
 
 
 def _differences(old: dict, new: dict) -> str:

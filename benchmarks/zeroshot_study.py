@@ -71,9 +71,10 @@ def trained(name: str, data: list[str], hands: list[str], test_hands: tuple, arg
     run = Path(args.runs) / name
 
     def get():
-        if claim_run(run, train_key(data, hands, args.steps, args.seed, "params", test_hands)):
+        if claim_run(run, train_key(data, hands, args.steps, args.seed, "params", test_hands, args.condition_noise)):
             return load_grasp_model(run), json.loads((run / "metrics.json").read_text())
-        tcfg = GraspTrainConfig(steps=args.steps, seed=args.seed, threads=args.threads, hands=tuple(hands), test_hands=test_hands)
+        tcfg = GraspTrainConfig(steps=args.steps, seed=args.seed, threads=args.threads, hands=tuple(hands), test_hands=test_hands,
+                                condition_noise=args.condition_noise)
         res = train_grasp(data, GraspModelConfig(condition="params"), tcfg, run,
                           resume=(run / "checkpoints" / "last.pt").exists(), progress=not args.quiet)
         return res.model, res.metrics
@@ -120,6 +121,9 @@ def main() -> None:
     add_run_args(ap, steps=12000, n=100, runs="zeroshot_study", name="zeroshot_study")
     ap.add_argument("--refine", action="store_true", help="evaluate the sampled grasps with their fingers refined "
                     "(ohra.learn.grasp.refine); cached apart from the plain evaluations")
+    ap.add_argument("--condition-noise", type=float, default=0.0,
+                    help="GraspTrainConfig.condition_noise of every model (std in standardised condition units; 0: none); "
+                         "use another --runs and --name")
     ap.add_argument("--train-only", nargs="+", metavar="RUN",
                     help="train these runs (all, zs-<variant>, only-<variant>) and stop: several study processes with "
                          "different runs use one core each; a last run without the flag reuses them")
@@ -144,7 +148,7 @@ def main() -> None:
         return
     objects = eval_objects(args.objects_file)
     protocol = data_protocol(args.data)
-    res: dict = {"steps": args.steps, "n": args.n, "refine": bool(args.refine), "objects": [o.name for o in objects],
+    res: dict = {"steps": args.steps, "n": args.n, "refine": bool(args.refine), "condition_noise": args.condition_noise, "objects": [o.name for o in objects],
                  "variants_with_grasps": len(high), "tables": sorted(args.tables)}
     all_model, counts = trained("all", args.data, *specs["all"], args)
     res["train_counts"] = counts
@@ -213,6 +217,7 @@ def main() -> None:
     for h, g in res["saliency"].items():
         lines.append(f"| {h} | " + " | ".join(f"{v:.3g}" for v in g.values()) + " |")
     lines += ["", f"Budget: {args.steps} steps per model; {args.n} grasps per (variant, object) on {len(objects)} unseen objects"
+              + (f"; condition noise {args.condition_noise:g} (std, standardised units) in training" if args.condition_noise else "")
               + ("; fingers refined before simulation (`--refine`)." if args.refine else ".")]
     train_h = sum(COMPUTE["training"].values()) / 3600
     sim_h = sum(COMPUTE["simulation"].values()) / 3600

@@ -15,6 +15,7 @@ from grasp_fixtures import HANDS, tiny_model_config, tiny_train_config, write_da
 
 from ohra.errors import CheckpointError, DatasetError, GraspError  # noqa: E402
 from ohra.hands import get_hand  # noqa: E402
+from ohra.learn.grasp.config import GraspConfigError  # noqa: E402
 from ohra.learn.grasp.data import TrainingData, check_disjoint, make_batch  # noqa: E402
 from ohra.learn.grasp.evaluate import check_unseen, diversity, evaluate_model, pair_seed  # noqa: E402
 from ohra.learn.grasp.model import load_grasp_model  # noqa: E402
@@ -150,6 +151,23 @@ def test_batches_are_robot_balanced_and_deterministic(tmp_path):
     for step in range(4):  # a pool of one object per step: one cloud, still every hand
         b = make_batch(td, one, 16, step, *_tables(td), t_scale=1.0)
         assert len(b.clouds) == 1 and len(np.unique(b.present.sum(1).numpy())) == 3
+
+
+def test_condition_noise_perturbs_each_row_and_nothing_else(tmp_path):
+    root = write_dataset(tmp_path, objects=("sphere", "box"))
+    cfg = tiny_train_config(batch_size=512, test_objects=())
+    td = TrainingData.load(root, cfg)
+    plain = make_batch(td, cfg, 16, 3, *_tables(td), t_scale=1.0)
+    noisy = make_batch(td, replace(cfg, condition_noise=0.25), 16, 3, *_tables(td), t_scale=1.0)
+    assert torch.equal(plain.t_norm, noisy.t_norm) and torch.equal(plain.clouds, noisy.clouds)  # same rows and clouds
+    assert torch.equal(plain.generator.get_state(), noisy.generator.get_state())  # same diffusion noise
+    assert torch.equal(plain.hand, torch.zeros_like(plain.hand))
+    d = noisy.hand - plain.hand
+    assert float(d.std()) == pytest.approx(0.25, rel=0.05) and len(torch.unique(d[:, 0])) == len(d)  # one draw per row
+    again = make_batch(td, replace(cfg, condition_noise=0.25), 16, 3, *_tables(td), t_scale=1.0)
+    assert torch.equal(again.hand, noisy.hand)
+    with pytest.raises(GraspConfigError, match="condition_noise"):
+        replace(cfg, condition_noise=-0.1)
 
 
 def test_objects_are_encoded_once_per_copy_and_rotated_with_their_grasps(tmp_path):

@@ -86,6 +86,8 @@ def register_train(train_sub: Any) -> None:
     p.add_argument("--rotated-copies", type=int, default=t.rotated_copies, help="rotated copies per object and batch (0: none)")
     p.add_argument("--objects-per-step", type=int, default=t.objects_per_step, help="cap on distinct objects per batch (0: none)")
     p.add_argument("--max-per-pair", type=int, default=t.max_per_pair, help="cap on grasps per (hand, object) (0: all)")
+    p.add_argument("--condition-noise", type=float, default=t.condition_noise,
+                   help="std of Gaussian noise on each training row's hand condition (standardised units for params; 0: none)")
     p.add_argument("--checkpoint-every", type=int, default=t.checkpoint_every)
     p.add_argument("--vae", help="VAE for the 'vae' condition (default: the shipped one)")
     p.add_argument("-o", "--output", required=True, help="run directory")
@@ -116,7 +118,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     tcfg = GraspTrainConfig(steps=args.steps, batch_size=args.batch_size, lr=args.lr, seed=args.seed, threads=args.threads,
                             rotated_copies=args.rotated_copies, objects_per_step=args.objects_per_step,
                             max_per_pair=args.max_per_pair, checkpoint_every=args.checkpoint_every,
-                            hands=tuple(args.hands), test_objects=tuple(args.test_objects),
+                            condition_noise=args.condition_noise, hands=tuple(args.hands), test_objects=tuple(args.test_objects),
                             test_hands=tuple(args.test_hands))
     res = train_grasp(args.data, mcfg, tcfg, out, resume=args.resume, progress=not args.quiet, vae_path=args.vae)
     m = res.metrics

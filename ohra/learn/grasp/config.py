@@ -120,6 +120,10 @@ class GraspTrainConfig(_JSONSettings):
     # held out too): the zero-shot models of the LEAP study never see a grasp of their test variant
     test_hands: tuple[str, ...] = ()
     max_per_pair: int = 0  # cap on grasps per (hand, object) (0: all)
+    # std of i.i.d. Gaussian noise added to each training row's hand condition, in the condition's
+    # units (params: standardised units; vae: latent units); 0: none. A regulariser for hands never
+    # trained on: the model may not key on the exact condition of one training hand.
+    condition_noise: float = 0.0
 
     RESUMABLE_CHANGES = ("steps", "checkpoint_every", "log_every")
 
@@ -130,8 +134,10 @@ class GraspTrainConfig(_JSONSettings):
         for name in ("rotated_copies", "objects_per_step", "max_per_pair"):
             if int(getattr(self, name)) < 0:
                 raise GraspConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
-        if not (self.lr > 0 and self.lr_min >= 0 and self.point_noise >= 0 and self.joint_loss_weight >= 0):
-            raise GraspConfigError("lr must be positive; lr_min, point_noise and joint_loss_weight non-negative")
+        if not (self.lr > 0 and self.lr_min >= 0 and self.point_noise >= 0 and self.joint_loss_weight >= 0
+                and self.condition_noise >= 0):
+            raise GraspConfigError("lr must be positive; lr_min, point_noise, joint_loss_weight and condition_noise "
+                                   "non-negative")
 
 
 

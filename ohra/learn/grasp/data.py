@@ -332,7 +332,10 @@ def make_batch(data: TrainingData, cfg: GraspTrainConfig, n_points: int, step: i
     hi = torch.from_numpy(data.hand_idx[rows])
     gen = torch.Generator().manual_seed(int(rng.integers(2**62)))
     f32 = lambda a: torch.from_numpy(np.asarray(a, dtype=np.float32))  # noqa: E731
-    return Batch(f32(np.stack(clouds)), torch.from_numpy(cloud_idx), hand_table[hi], f32(r6), f32(t / t_scale),
+    hand = hand_table[hi]
+    if cfg.condition_noise > 0:  # drawn last: runs without it keep their batches
+        hand = hand + f32(rng.normal(0.0, cfg.condition_noise, tuple(hand.shape)))
+    return Batch(f32(np.stack(clouds)), torch.from_numpy(cloud_idx), hand, f32(r6), f32(t / t_scale),
                  f32(data.q[rows]), present_table[hi], gen)
 
 
