@@ -33,3 +33,43 @@ def test_grasps_command_generates_and_reports_the_cache(tmp_path, monkeypatch, c
     out = capsys.readouterr().out
     assert out.startswith("3 starting states") and str(tmp_path) in out
     assert len(list((tmp_path / "rotation").glob("leap_hand_right_canonical_cube_*.npz"))) == 1
+
+
+def test_ppo_settings_from_the_command_line_are_checked_and_refused_on_resume(tmp_path, capsys, monkeypatch):
+    pytest.importorskip("stable_baselines3", reason="ohra rotate train needs stable-baselines3")
+    import ohra.learn.rl.train as rl_train
+
+    def must_not_train(*args, **kwargs):
+        raise AssertionError("bad --ppo settings reached training")
+
+    monkeypatch.setattr(rl_train, "train_rotation", must_not_train)
+    out = str(tmp_path / "run")
+    assert main(["train", "-o", out, "--ppo", "frobnicate=1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "frobnicate" in err and "kl_target" in err  # names the known settings
+    assert main(["train", "-o", out, "--ppo", "kl_target=-0.1"]) == 2
+    assert "kl_target" in capsys.readouterr().err
+    assert main(["train", "-o", out, "--ppo", "learning_rate=fast"]) == 2
+    assert "learning_rate" in capsys.readouterr().err
+    assert main(["train", "-o", out, "--resume", "--ppo", "kl_target=null"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--resume" in err and not (tmp_path / "run").exists()
+
+
+def test_ppo_settings_from_the_command_line_reach_training(tmp_path, monkeypatch):
+    pytest.importorskip("stable_baselines3", reason="ohra rotate train needs stable-baselines3")
+    import ohra.learn.rl.train as rl_train
+
+    seen = {}
+
+    def fake_train(env_cfg, ppo, out, resume=False, verbose=0):
+        seen.update(ppo=ppo, resume=resume)
+        return out
+
+    monkeypatch.setattr(rl_train, "train_rotation", fake_train)
+    argv = ["train", "-o", str(tmp_path / "run"), "--steps", "4096", "--ppo", "kl_target=null", "--ppo", "learning_rate=1e-4"]
+    assert main(argv) == 0
+    ppo = seen["ppo"]
+    assert ppo.kl_target is None and ppo.learning_rate == 1e-4
+    assert ppo.total_steps == 4096 and ppo.n_epochs == 5  # the rest keeps its flags and defaults
+    assert main(argv[:-4]) == 0 and seen["ppo"].kl_target == 0.02

@@ -34,15 +34,22 @@ def _env_config(args: argparse.Namespace):
 
     kw: dict[str, Any] = {"hand": args.hand, "urdf": args.urdf, "inertials": args.inertials, "form": args.form, "space": args.space,
                           "object": args.object, "grasp_count": args.grasps}
-    for item in args.set:
+    kw.update(_key_values(args.set, "--set", RotationConfigError))
+    return RotationConfig.from_dict(kw, "command line")
+
+
+def _key_values(items: Sequence[str], flag: str, error: type[OhraError]) -> dict[str, Any]:
+    """``KEY=JSON`` items as a dict (a value that is not JSON stays a string)."""
+    kw: dict[str, Any] = {}
+    for item in items:
         key, sep, value = item.partition("=")
         if not sep:
-            raise RotationConfigError(f"--set expects KEY=VALUE, got {item!r}")
+            raise error(f"{flag} expects KEY=VALUE, got {item!r}")
         try:
             kw[key] = json.loads(value)
         except json.JSONDecodeError:
             kw[key] = value
-    return RotationConfig.from_dict(kw, "command line")
+    return kw
 
 
 def register(sub: Any) -> None:
@@ -66,6 +73,9 @@ def register(sub: Any) -> None:
     p.add_argument("--n-steps", type=int, default=d.n_steps, help=f"steps per env per rollout (default {d.n_steps})")
     p.add_argument("--batch-size", type=int, default=d.batch_size)
     p.add_argument("--checkpoint-every", type=int, default=d.checkpoint_every, help="steps between checkpoints")
+    p.add_argument("--ppo", action="append", default=[], metavar="KEY=JSON",
+                   help="any other PPOSettings field, e.g. --ppo kl_target=null for a constant learning rate (repeatable; "
+                        "not with --resume: a resumed run keeps its settings)")
     p.add_argument("-o", "--output", required=True, help="run directory")
     p.add_argument("--resume", action="store_true", help="continue OUTPUT from its last checkpoint")
     p.set_defaults(func=_cmd_train)
@@ -101,16 +111,23 @@ def _cmd_train(args: argparse.Namespace) -> int:
     from ohra.learn.rl.config import PPOSettings
 
     require_rl()
+    from ohra.learn.rl.config import RLConfigError
     from ohra.learn.rl.train import load_run, train_rotation, with_budget
 
     out = Path(args.output)
+    extra = _key_values(args.ppo, "--ppo", RLConfigError)
     if args.resume:
+        if extra:
+            raise RLConfigError(f"--ppo {' '.join(args.ppo)}: a resumed run keeps the PPO settings in {out / 'config.json'}; "
+                                "only --steps and --minutes change on --resume")
         env_cfg, ppo = load_run(out)
         ppo = with_budget(ppo, args.steps, args.minutes)
     else:
         env_cfg = _env_config(args)
-        ppo = PPOSettings(total_steps=args.steps or PPOSettings().total_steps, max_minutes=args.minutes, seed=args.seed, n_envs=args.envs,
-                          n_steps=args.n_steps, batch_size=args.batch_size, checkpoint_every=args.checkpoint_every)
+        base = {"total_steps": args.steps or PPOSettings().total_steps, "max_minutes": args.minutes, "seed": args.seed,
+                "n_envs": args.envs, "n_steps": args.n_steps, "batch_size": args.batch_size,
+                "checkpoint_every": args.checkpoint_every}
+        ppo = PPOSettings.from_dict({**base, **extra}, "command line (--ppo)")
     path = train_rotation(env_cfg, ppo, out, resume=args.resume, verbose=0)
     print(f"wrote {path}")
     return 0

@@ -55,6 +55,13 @@ class PPOSettings:
     threads: int = 1  # torch CPU threads in the learner
 
     def __post_init__(self) -> None:
+        for name in ("learning_rate", "clip_range", "gamma", "gae_lambda", "ent_coef", "vf_coef", "max_grad_norm", "log_std_init"):
+            if isinstance(getattr(self, name), bool) or not isinstance(getattr(self, name), (int, float)):
+                raise RLConfigError(f"PPOSettings.{name} must be a number, got {getattr(self, name)!r}")
+        if not self.learning_rate > 0:
+            raise RLConfigError(f"PPOSettings.learning_rate must be > 0, got {self.learning_rate}")
+        if self.kl_target is not None and (not isinstance(self.kl_target, (int, float)) or not self.kl_target > 0):
+            raise RLConfigError(f"PPOSettings.kl_target must be > 0 or None (constant learning rate), got {self.kl_target!r}")
         for name in ("total_steps", "n_envs", "n_steps", "batch_size", "n_epochs", "checkpoint_every", "threads"):
             if int(getattr(self, name)) < 1:
                 raise RLConfigError(f"PPOSettings.{name} must be >= 1, got {getattr(self, name)}")
