@@ -244,7 +244,10 @@ def test_work_penalty_uses_the_joint_motion_over_the_control_step(env):
 def test_configs_saved_before_a_setting_existed_read_back_as_they_ran():
     saved = {k: v for k, v in RotationConfig().to_dict().items() if k not in R.config.SAVED_BEFORE}
     old = RotationConfig.from_saved(saved)
-    assert (old.joint_damping, old.work_velocity) == (True, "instant")
+    assert (old.joint_damping, old.work_velocity, old.grasp_hold) == (True, "instant", "own")
+    assert RotationConfig().grasp_hold == "canonical"
+    with pytest.raises(RotationConfigError, match="grasp_hold"):
+        RotationConfig(grasp_hold="mine")
     assert (RotationConfig.from_dict(saved).joint_damping, RotationConfig().work_velocity) == (False, "step")
     assert RotationConfig.from_saved(RotationConfig().to_dict()) == RotationConfig()
     with pytest.raises(RotationConfigError, match="work_velocity"):

@@ -118,3 +118,35 @@ def test_grasp_cache_round_trips_and_is_keyed_by_the_settings(grasp_set, tmp_pat
     back = G.GraspSet.load(path)
     assert np.array_equal(back.target, grasp_set.target) and back.key == grasp_set.key
     assert G.cache_key(resolve(CFG)) != G.cache_key(resolve(CFG.with_overrides(friction=2.0)))
+
+
+def test_original_urdf_starts_from_the_canonical_holding_pose_through_its_action_map(hands_dir):
+    """grasp_hold='canonical' (default): the original LEAP perturbs the canonical hand's holding pose,
+    mapped joint for joint; 'own' closes the original's own fingers (a different pose)."""
+    cfg = CFG.with_overrides(urdf="original")
+    task = resolve(cfg)
+    canon = G.canonical_holding_pose(task)
+    sc_c = _scene(CFG)
+    try:
+        assert np.allclose(canon, sc_c.hand.to_canonical(G.holding_pose(sc_c)))  # the canonical URDF's own hold
+    finally:
+        sc_c.close()
+    sc = RotationScene(task.hand, task.obj, cfg, task.palm_radius)
+    try:
+        hold = G._hold(task, sc)
+        assert np.allclose(hold, np.clip(task.hand.to_sim(canon), task.hand.lower, task.hand.upper))
+        driven = task.hand.to_canonical(hold)
+        moved = np.abs(task.hand.to_canonical(hold + 0.1) - driven) > 0  # canonical slots the original drives
+        inside = (canon >= task.hand.canon_lower) & (canon <= task.hand.canon_upper)
+        assert np.allclose(driven[moved & inside], canon[moved & inside], atol=1e-9)
+        own_task = resolve(cfg.with_overrides(grasp_hold="own"))
+        own = G._hold(own_task, RotationScene(own_task.hand, own_task.obj, own_task.cfg, own_task.palm_radius))
+        assert np.abs(own - hold).max() > 0.3  # the original closing its own fingers ends elsewhere
+    finally:
+        sc.close()
+
+
+def test_grasp_hold_keys_the_cache_of_original_urdfs_only(hands_dir):
+    orig = CFG.with_overrides(urdf="original")
+    assert G.cache_key(resolve(orig)) != G.cache_key(resolve(orig.with_overrides(grasp_hold="own")))
+    assert G.cache_key(resolve(CFG)) == G.cache_key(resolve(CFG.with_overrides(grasp_hold="own")))

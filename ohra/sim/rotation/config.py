@@ -32,10 +32,11 @@ URDF_KINDS = ("canonical", "original")
 INERTIALS = ("capsule", "original")  # canonical finger masses: the template's capsules or the original URDF's
 SPACES = ("canonical", "native")
 WORK_VELOCITIES = ("step", "instant")
+GRASP_HOLDS = ("canonical", "own")
 
 # Settings added after rotation runs were saved, with the value those runs ran with: a saved config
 # without the key is read with this value (RotationConfig.from_saved), so resuming it changes nothing.
-SAVED_BEFORE = {"joint_damping": True, "work_velocity": "instant"}
+SAVED_BEFORE = {"joint_damping": True, "work_velocity": "instant", "grasp_hold": "own"}
 
 # Reference ranges of the per-joint noise around the holding pose for the initial grasps (issue 15,
 # from the paper's setup): LEAP +-0.25 rad, Shadow +-0.1 rad; other hands take Shadow's, the safer one.
@@ -110,6 +111,13 @@ class RotationConfig:
     grasp_seed: int = 0
     settle_time: float = 1.5  # s of simulation a perturbed grasp must survive (still over the last 0.5 s)
     min_contacts: int = 2  # distinct hand links touching the object at the end of the settle
+    # The holding pose the starting states perturb, for an original URDF: "canonical" = the canonical
+    # hand's holding pose (its fingers closed onto the object) mapped through the hand's action map, so
+    # both URDFs start from the same hand pose; "own" = the original URDF closes its own fingers (runs
+    # saved before this setting). Measured with "own" on the original LEAP: the thumb base touches the
+    # object at q = 0 so the thumb never closes and one finger's middle joint bends backwards, leaving the
+    # cube held by the thumb base alone (grasps.py). A canonical URDF always closes its own fingers.
+    grasp_hold: str = "canonical"
 
     def __post_init__(self) -> None:
         if self.urdf not in URDF_KINDS:
@@ -119,6 +127,8 @@ class RotationConfig:
         if self.inertials == "original" and self.urdf != "canonical":
             raise RotationConfigError("inertials='original' gives the canonical URDF the original's finger masses; "
                                       "the original URDF has them already (use urdf='canonical')")
+        if self.grasp_hold not in GRASP_HOLDS:
+            raise RotationConfigError(f"grasp_hold must be one of {GRASP_HOLDS}, got {self.grasp_hold!r}")
         if self.work_velocity not in WORK_VELOCITIES:
             raise RotationConfigError(f"work_velocity must be one of {WORK_VELOCITIES}, got {self.work_velocity!r}")
         if self.space is not None and self.space not in SPACES:

@@ -7,7 +7,9 @@ Procedure (HORA's grasp cache, made hand-agnostic):
 2. *Holding pose*: with the object pinned there, every driven joint sweeps from 0 (clipped into
    its limits) towards its closing limit: the one whose rotation swings the joint's subtree
    (the links it moves) towards the object. Each finger stops when it touches the object (or
-   70 % of the way); the settled joint values are the holding pose.
+   70 % of the way); the settled joint values are the holding pose. An original URDF takes the
+   canonical hand's holding pose through its action map (``grasp_hold="canonical"``, the default),
+   so canonical and original start from the same hand pose; ``"own"`` closes its own fingers.
 3. *Samples*: the holding pose plus uniform per-joint noise of +-``grasp_noise`` rad (reference
    ranges: LEAP 0.25, Shadow 0.1), clipped into the limits; the object at the nominal position with
    a uniform random yaw; the motors hold the noisy pose for ``settle_time`` s under gravity. A
@@ -173,6 +175,27 @@ def holding_pose(scene: RotationScene) -> np.ndarray:
     return scene.read().q
 
 
+def canonical_holding_pose(task: Task) -> np.ndarray:
+    """(22,) canonical joint values of the holding pose of ``task``'s canonical hand (same params,
+    object and physics; the template's finger masses) closed onto the pinned object."""
+    from ohra.sim.rotation.task import resolve
+
+    ctask = resolve(task.cfg.with_overrides(urdf="canonical", space=None, inertials="capsule"))
+    scene = RotationScene(ctask.hand, ctask.obj, ctask.cfg, ctask.palm_radius)
+    try:
+        return ctask.hand.to_canonical(holding_pose(scene))
+    finally:
+        scene.close()
+
+
+def _hold(task: Task, scene: RotationScene) -> np.ndarray:
+    """The holding pose the samples perturb, in the simulator's joint order (see module doc)."""
+    hand = task.hand
+    if hand.canonical or task.cfg.grasp_hold == "own":
+        return holding_pose(scene)
+    return np.clip(hand.to_sim(canonical_holding_pose(task)), hand.lower, hand.upper)
+
+
 def cache_key(task: Task) -> str:
     """Hash of everything the starting states depend on."""
     cfg = task.cfg
@@ -180,6 +203,8 @@ def cache_key(task: Task) -> str:
                                            "gravity", "motor_force", "position_gain", "velocity_gain", "grasp_count",
                                            "grasp_seed", "settle_time", "min_contacts", "fall_height", "max_distance",
                                            "joint_damping")}
+    if not task.hand.canonical and cfg.grasp_hold != "own":  # keys of states made before the setting stay valid
+        fields["grasp_hold"] = cfg.grasp_hold
     fields.update(noise=cfg.resolved_grasp_noise, object=task.obj.name, mass=task.obj.mass,
                   prims=[dict(p) for p in task.obj.prims], version=VERSION, palm_radius=task.palm_radius,
                   pybullet=pb.getAPIVersion())
@@ -215,7 +240,7 @@ def generate(task: Task, progress: bool = False) -> GraspSet:
     cfg, hand = task.cfg, task.hand
     scene = RotationScene(hand, task.obj, cfg, task.palm_radius)
     try:
-        hold = holding_pose(scene)
+        hold = _hold(task, scene)
         pos, rest = nominal_pose(scene)
         rng = np.random.default_rng(cfg.grasp_seed)
         r = cfg.resolved_grasp_noise
