@@ -12,7 +12,7 @@ from ohra.learn.rl.config import PPOSettings, RLConfigError
 sb3 = pytest.importorskip("stable_baselines3", reason="rotation training needs the rl extra (stable-baselines3)")
 pytest.importorskip("gymnasium", reason="rotation training needs the rl extra (gymnasium)")
 
-from ohra.learn.rl.train import adapt_learning_rate, train_rotation, with_budget  # noqa: E402
+from ohra.learn.rl.train import adapt_learning_rate, train_rotation, truncate_progress, with_budget  # noqa: E402
 from ohra.sim.rotation.config import RotationConfig  # noqa: E402
 
 
@@ -63,6 +63,8 @@ def test_train_resume_evaluate_and_plot_a_tiny_run(tiny):
     saved = json.loads(cfg_file.read_text())
     del saved["env"]["inertials"]
     cfg_file.write_text(json.dumps(saved))
+    with open(run / "progress.csv", "a") as fh:  # a rollout an interrupted session logged after its checkpoint
+        fh.write("60,1.0,1,-1.0,24.0,0.0,0.0003,0.01,0.5,0.1\n")
     train_rotation(env_cfg, with_budget(ppo, total_steps=96), run, resume=True)
     prog = read_progress(run)
     assert list(prog["timesteps"]) == [24, 48, 72, 96]  # appended, continuing the step count
@@ -106,3 +108,15 @@ def test_resume_reads_an_older_run_with_current_defaults_and_names_real_differen
         _check_resume(tmp_path, env_cfg.with_overrides(inertials="original"), ppo)
     with pytest.raises(RLConfigError, match=r"PPO settings \['gamma'\]"):
         _check_resume(tmp_path, env_cfg, PPOSettings(gamma=0.9))
+
+
+def test_resume_drops_progress_rows_logged_after_the_checkpoint(tmp_path):
+    path = tmp_path / "progress.csv"
+    rows = ["timesteps,wall_s,episodes,ep_reward_mean,ep_length_mean,rotation_mean,learning_rate,approx_kl,"
+            "explained_variance,value_loss"] + [f"{t},{t / 10},1,-1.0,400.0,0.1,0.0003,0.02,0.5,0.1" for t in (2048, 4096, 6144)]
+    path.write_text("\n".join(rows) + "\n")
+    assert truncate_progress(path, 6144) == 0 and path.read_text().count("\n") == 4  # nothing past it: untouched
+    assert truncate_progress(path, 4096) == 1
+    lines = path.read_text().splitlines()
+    assert lines[0] == rows[0] and [ln.split(",")[0] for ln in lines[1:]] == ["2048", "4096"]
+    assert truncate_progress(tmp_path / "absent.csv", 0) == 0

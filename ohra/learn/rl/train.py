@@ -141,6 +141,25 @@ def _append_csv(path: Path, row: dict[str, Any]) -> None:
         w.writerow(row)
 
 
+def truncate_progress(path: Path, timesteps: int) -> int:
+    """Drop the rows of ``path`` (progress.csv) logged past ``timesteps`` (atomic rewrite); returns how
+    many were dropped. A run interrupted between two checkpoints logged rollouts its resume repeats."""
+    if not path.is_file():
+        return 0
+    with open(path, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    keep = [r for r in rows if int(float(r["timesteps"])) <= timesteps]
+    if len(keep) == len(rows):
+        return 0
+    tmp = path.with_name(f".{path.name}.tmp")
+    with open(tmp, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=CSV_FIELDS, extrasaction="ignore")
+        w.writeheader()
+        w.writerows(keep)
+    os.replace(tmp, path)
+    return len(rows) - len(keep)
+
+
 def save_checkpoint(model, run_dir: Path, wall_s: float) -> None:
     """Write ``checkpoints/last.*`` atomically (model, observation statistics, progress)."""
     d = run_dir / "checkpoints"
@@ -217,6 +236,8 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
             venv = VecNormalize.load(str(run_dir / "checkpoints" / "last_vecnormalize.pkl"), venv)
             model = cls.load(last, env=venv, device="cpu")
             wall_before = json.loads((run_dir / "checkpoints" / "last.json").read_text())["wall_s"]
+            # rows logged after the checkpoint by an interrupted session are redone from it
+            truncate_progress(run_dir / "progress.csv", int(model.num_timesteps))
         else:
             venv = VecNormalize(venv, norm_obs=ppo.normalize_obs, norm_reward=ppo.normalize_reward, gamma=ppo.gamma)
             model = _new_model(cls, venv, ppo, verbose)
