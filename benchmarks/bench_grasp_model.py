@@ -145,7 +145,7 @@ def table(res: dict) -> str:
         tr = res["training"]
         lines.append(f"| model trained: {tr['steps']} steps, {tr['data']['grasps']} grasps "
                      f"({', '.join(f'{h} {c}' for h, c in tr['data']['per_hand'].items())}), "
-                     f"objects {', '.join(tr['data']['train_objects'])} | {tr['train_seconds_total'] / 60:.1f} min | <= 60 min |")
+                     f"{_objects(tr['data']['train_objects'])} | {tr['train_seconds_total'] / 60:.1f} min | <= 60 min |")
     if "evaluation" in res:
         lines += ["", "| hand | object | success (canonical) | success (original URDF) | change | stored dataset grasps re-evaluated | approach spread | joint std | ms/grasp | paper (reported, Isaac Gym) |",
                   "|---|---|---|---|---|---|---|---|---|---|"]
@@ -165,6 +165,10 @@ def table(res: dict) -> str:
     if res.get("model_note"):
         lines += ["", f"Model: {res['model_note']}"]
     return "\n".join(lines)
+
+
+def _objects(names: list[str]) -> str:
+    return f"objects {', '.join(names)}" if len(names) <= 8 else f"{len(names)} objects"
 
 
 def main() -> None:
