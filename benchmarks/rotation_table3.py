@@ -27,15 +27,21 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--episodes", type=int, default=20)
     ap.add_argument("--seed", type=int, default=1000)
     ap.add_argument("--runs", nargs="*", metavar="LABEL=DIR", help="default: the shipped rotate_* policies")
+    ap.add_argument("--name", default="rotation_table3",
+                    help="results name: benchmarks/results/NAME.{json,md} and NAME_curves*.png (default: the shipped "
+                         "table, whose curves are rotation_curves*.png)")
     args = ap.parse_args(argv)
     from ohra.learn.rl.evaluate import Policy, evaluate_policy
     from ohra.learn.rl.plots import read_progress, reward_curves
     from ohra.sim.rotation.rewards import TERMS
 
     runs = dict(r.split("=", 1) for r in args.runs) if args.runs else _shipped()
-    rows, data, ret_rows = [], {}, []
+    rows, data, ret_rows, grip_rows = [], {}, [], []
     for label, d in runs.items():
         pol = Policy(d)
+        grip = starting_grip(pol)
+        grip_rows.append(f"| {label} | {grip['mean_gap_rad']:.4f} | {grip['max_gap_rad']:.3f} | "
+                         f"{100 * grip['pressed_fraction']:.0f} % |")
         res = evaluate_policy(pol, pol.env_cfg, args.episodes, args.seed, str(d), grasps=pol.grasps)
         prog = read_progress(d)
         budget = {"steps": int(prog["timesteps"][-1]), "minutes": float(prog["wall_s"][-1]) / 60.0,
@@ -44,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
         cfg = pol.env_cfg
         paper = PAPER.get(cfg.hand, {}).get(cfg.urdf)
         data[label] = {"hand": cfg.hand, "urdf": cfg.urdf, "space": cfg.resolved_space, "summary": s, "budget": budget,
-                       "per_episode": res.to_dict(), "paper": paper}
+                       "per_episode": res.to_dict(), "paper": paper, "starting_grip": grip}
         rows.append(f"| {label} | {cfg.hand} | {cfg.urdf} | {s['steps_to_fall_mean']:.1f} +- {s['steps_to_fall_std']:.1f} | "
                     f"{s['rotation_mean']:.2f} +- {s['rotation_std']:.2f} | {100 * s['survived']:.0f} % | "
                     f"{budget['steps'] / 1e3:.0f}k steps, {budget['minutes']:.0f} min, seed {budget['seed']} | "
@@ -62,9 +68,10 @@ def main(argv: list[str] | None = None) -> int:
                     f"{zero['steps_to_fall_std']:.1f} | {zero['rotation_mean']:.2f} +- {zero['rotation_std']:.2f} | "
                     f"{100 * zero['survived']:.0f} % | no training | - |")
     groups = {k: [v] for k, v in runs.items()}
-    curve = reward_curves(groups, RESULTS / "rotation_curves.png",
+    stem = "rotation_curves" if args.name == "rotation_table3" else f"{args.name}_curves"
+    curve = reward_curves(groups, RESULTS / f"{stem}.png",
                           title="PPO on in-hand rotation (cube, 20 Hz): canonical vs original URDF")
-    reward_curves(groups, RESULTS / "rotation_curves_rotation.png", key="rotation_mean",
+    reward_curves(groups, RESULTS / f"{stem}_rotation.png", key="rotation_mean",
                   title="Rotation about +z per training episode")
     table = "\n".join([
         f"Rotation policies, {args.episodes} episodes each (seeds {args.seed}..{args.seed + args.episodes - 1}, "
@@ -74,12 +81,31 @@ def main(argv: list[str] | None = None) -> int:
         "episodes with the targets held, the baseline a policy must beat (the grasps hold; the object creeps a little).", "",
         "| policy | hand | urdf | Steps-to-Fall | Cumulative Rotation [rad] | survived | budget | paper (steps / rad) |",
         "|---|---|---|---|---|---|---|---|", *rows, "",
-        f"Training curves: `{curve.relative_to(RESULTS.parent.parent)}` (return), `rotation_curves_rotation.png` (rotation).",
+        f"Training curves: `{curve.relative_to(RESULTS.parent.parent)}` (return), `{stem}_rotation.png` (rotation).",
         "", "Mean episode return split into its weighted reward terms (same episodes; what the policy was trained "
         "to maximise, penalties negative):", "",
-        "| policy | return | " + " | ".join(TERMS) + " |", "|---|---|" + "---|" * len(TERMS), *ret_rows])
-    write_results("rotation_table3", {"episodes": args.episodes, "seed": args.seed, "runs": data}, table)
+        "| policy | return | " + " | ".join(TERMS) + " |", "|---|---|" + "---|" * len(TERMS), *ret_rows,
+        "", f"Grip of the starting states each policy was trained and evaluated from ({GRIP_NOTE}):", "",
+        "| policy | mean abs(target - q) [rad] | mean over states of the largest joint gap [rad] | "
+        f"states with a joint pressed > {PRESSED} rad |", "|---|---|---|---|", *grip_rows])
+    write_results(args.name, {"episodes": args.episodes, "seed": args.seed, "runs": data}, table)
     return 0
+
+
+PRESSED = 0.05  # rad: a joint whose motor target lies this far past its settled angle is pressing on something
+GRIP_NOTE = ("every cached starting state; a finger the object blocks keeps its motor target inside the object, so "
+             "abs(target - q) measures how hard the start grasp squeezes")
+
+
+def starting_grip(pol) -> dict:
+    """How hard the starting states squeeze the object: statistics of abs(motor target - settled joint angle)."""
+    from ohra.sim.rotation.grasps import load_or_generate
+    from ohra.sim.rotation.task import resolve
+
+    gs = pol.grasps if pol.grasps is not None else load_or_generate(resolve(pol.env_cfg))
+    gap = np.abs(np.asarray(gs.target) - np.asarray(gs.q))
+    return {"states": int(len(gap)), "mean_gap_rad": float(gap.mean()), "max_gap_rad": float(gap.max(axis=1).mean()),
+            "pressed_fraction": float((gap.max(axis=1) > PRESSED).mean())}
 
 
 def _shipped() -> dict[str, Path]:
