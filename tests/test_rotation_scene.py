@@ -140,7 +140,11 @@ def test_original_urdf_starts_from_the_canonical_holding_pose_through_its_action
         inside = (canon >= task.hand.canon_lower) & (canon <= task.hand.canon_upper)
         assert np.allclose(driven[moved & inside], canon[moved & inside], atol=1e-9)
         own_task = resolve(cfg.with_overrides(grasp_hold="own"))
-        own = G._hold(own_task, RotationScene(own_task.hand, own_task.obj, own_task.cfg, own_task.palm_radius))
+        sc_own = RotationScene(own_task.hand, own_task.obj, own_task.cfg, own_task.palm_radius)
+        try:
+            own = G._hold(own_task, sc_own)
+        finally:
+            sc_own.close()
         assert np.abs(own - hold).max() > 0.3  # the original closing its own fingers ends elsewhere
     finally:
         sc.close()

@@ -108,10 +108,9 @@ def _cmd_grasps(args: argparse.Namespace) -> int:
 
 def _cmd_train(args: argparse.Namespace) -> int:
     from ohra.learn.rl import require_rl
-    from ohra.learn.rl.config import PPOSettings
+    from ohra.learn.rl.config import PPOSettings, RLConfigError
 
     require_rl()
-    from ohra.learn.rl.config import RLConfigError
     from ohra.learn.rl.train import load_run, train_rotation, with_budget
 
     out = Path(args.output)
