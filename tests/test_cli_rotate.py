@@ -73,3 +73,13 @@ def test_ppo_settings_from_the_command_line_reach_training(tmp_path, monkeypatch
     assert ppo.kl_target is None and ppo.learning_rate == 1e-4
     assert ppo.total_steps == 4096 and ppo.n_epochs == 5  # the rest keeps its flags and defaults
     assert main(argv[:-4]) == 0 and seen["ppo"].kl_target == 0.02
+
+
+def test_eval_on_the_other_urdf_refuses_a_policy_of_the_original_joints(capsys):
+    pytest.importorskip("stable_baselines3", reason="ohra rotate eval needs stable-baselines3")
+    from ohra.learn.rl.evaluate import shipped
+
+    run = shipped("rotate_leap_original")  # acts in the original LEAP's 16 own joints
+    assert main(["eval", str(run), "--on-urdf", "canonical", "--episodes", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "canonical joint space" in err and not (run / "eval_on_canonical.json").exists()

@@ -93,6 +93,32 @@ def test_train_resume_evaluate_and_plot_a_tiny_run(tiny):
     shipped = evaluate_run(small, episodes=2, seed=10, write=False)
     assert shipped.cumulative_rotation == res.cumulative_rotation  # same weights, stats and starting states
 
+    # the canonical-URDF policy on the original URDF, through the action map (its own cached starts)
+    moved = evaluate_run(run, episodes=1, seed=10, urdf="original")
+    assert (run / "eval_on_original.json").is_file() and 0 < moved.steps_to_fall[0] <= 24
+    ep = record_episode(run, run / "episode_on_original", seed=10, every=6, size=64, urdf="original")
+    assert np.load(ep["trajectory"])["q"].shape[1] == 16  # the original LEAP's driven joints
+
+
+def test_a_canonical_space_policy_moves_to_the_other_urdf_through_the_action_map():
+    """``on_urdf``: same hand and settings, the other URDF, actions and observations in the canonical
+    joint space; an original URDF starts from the canonical holding pose (the pose the policy knows)."""
+    from ohra.errors import CheckpointError
+    from ohra.learn.rl.evaluate import on_urdf
+
+    canon = RotationConfig(hand="leap_hand_right", friction=0.8, grasp_hold="own")  # as older runs read back
+    orig = on_urdf(canon, "original")
+    assert (orig.urdf, orig.resolved_space, orig.grasp_hold, orig.friction) == ("original", "canonical", "canonical", 0.8)
+    assert on_urdf(canon, None) is canon and on_urdf(canon, "canonical") is canon
+    back = on_urdf(orig, "canonical")
+    assert (back.urdf, back.resolved_space) == ("canonical", "canonical")
+    # an old run's original URDF policy trained in canonical space, started from its own pose
+    own = RotationConfig(urdf="original", space="canonical", grasp_hold="own")
+    assert on_urdf(own, "canonical").urdf == "canonical"
+    native = RotationConfig(urdf="original")  # acts in the original LEAP's 16 own joints
+    with pytest.raises(CheckpointError, match="own joints.*space 'native'.*canonical joint space"):
+        on_urdf(native, "canonical")
+
 
 def test_resume_reads_an_older_run_with_current_defaults_and_names_real_differences(tmp_path):
     """A run saved before a setting existed (here ``inertials``) resumes with that setting at its

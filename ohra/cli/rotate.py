@@ -87,6 +87,9 @@ def register(sub: Any) -> None:
     p.add_argument("--checkpoint", choices=("model", "last"), default="model", help="final model or last checkpoint")
     p.add_argument("--render", action="store_true", help="also write RUN/episode/{rollout.gif,strip.png}")
     p.add_argument("--replay", action="store_true", help="also write RUN/episode/replay.html (meshcat)")
+    p.add_argument("--on-urdf", choices=("canonical", "original"),
+                   help="run the policy on the hand's other URDF through the canonical joint space (a policy "
+                        "trained with space canonical); writes RUN/eval_on_URDF.json and RUN/episode_on_URDF/")
     p.set_defaults(func=_cmd_eval)
 
     p = rs.add_parser("plot", help="reward curves, mean +- std over seeds: LABEL=RUN[,RUN...] per group")
@@ -136,23 +139,27 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     from ohra.learn.rl import require_rl
 
     require_rl()
-    from ohra.learn.rl.evaluate import evaluate_run, record_episode, replay_html
+    from ohra.learn.rl.evaluate import Policy, evaluate_run, on_urdf, record_episode, replay_html
 
-    res = evaluate_run(args.run, args.episodes, args.seed, args.checkpoint)
+    run = Path(args.run)
+    res = evaluate_run(run, args.episodes, args.seed, args.checkpoint, urdf=args.on_urdf)
+    own = Policy(run, args.checkpoint).env_cfg
+    cfg = on_urdf(own, args.on_urdf)
+    moved = cfg is not own
+    where = f" on the {cfg.urdf} URDF" if moved else ""
     s = res.summary()
     print(f"Steps-to-Fall {s['steps_to_fall_mean']:.1f} +- {s['steps_to_fall_std']:.1f} (of {res.episode_steps}), "
           f"Cumulative Rotation {s['rotation_mean']:.2f} +- {s['rotation_std']:.2f} rad, "
-          f"survived {100 * s['survived']:.0f} % over {res.episodes} episodes; wrote {Path(args.run) / 'eval.json'}")
+          f"survived {100 * s['survived']:.0f} % over {res.episodes} episodes{where}; "
+          f"wrote {run / (f'eval_on_{cfg.urdf}.json' if moved else 'eval.json')}")
     ret = res.return_summary()
     print("mean episode return " + f"{ret['total']:.1f} = " + " ".join(f"{k} {v:+.1f}" for k, v in ret.items() if k != "total"))
     if args.render or args.replay:
-        ep = record_episode(args.run, Path(args.run) / "episode", seed=args.seed, which=args.checkpoint)
+        out = run / (f"episode_on_{cfg.urdf}" if moved else "episode")
+        ep = record_episode(run, out, seed=args.seed, which=args.checkpoint, urdf=args.on_urdf)
         print(f"episode (seed {args.seed}): {ep['steps']} steps, {ep['rotation']:.2f} rad; wrote {ep['gif']}, {ep['strip']}")
         if args.replay:
-            from ohra.learn.rl.evaluate import Policy
-
-            html = replay_html(Policy(args.run, args.checkpoint).env_cfg, ep["trajectory"],
-                               Path(args.run) / "episode" / "replay.html")
+            html = replay_html(cfg, ep["trajectory"], out / "replay.html")
             print(f"wrote {html}")
     return 0
 

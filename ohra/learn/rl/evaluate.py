@@ -193,13 +193,42 @@ def evaluate_policy(policy, env_cfg: RotationConfig, episodes: int = 20, seed: i
                       {k: [e["returns"][k] for e in eps] for k in eps[0]["returns"]} if eps else None)
 
 
+def on_urdf(env_cfg: RotationConfig, urdf: str | None) -> RotationConfig:
+    """The environment of ``env_cfg`` with the same hand's ``urdf`` ("canonical" or "original") instead,
+    driven and observed in the canonical 22-D joint space (an original URDF through its action map,
+    starting from the canonical holding pose), so a policy trained in the canonical joint space on one
+    URDF can be run on the other. ``None`` or the run's own URDF returns ``env_cfg`` unchanged.
+
+    Raises :class:`CheckpointError` when the policy acts in an original URDF's own joints (``space``
+    "native": its actions mean nothing to another URDF).
+    """
+    import dataclasses
+
+    if urdf is None or urdf == env_cfg.urdf:
+        return env_cfg
+    if env_cfg.resolved_space != "canonical":
+        raise CheckpointError(
+            f"the policy acts in the {env_cfg.urdf} URDF's own joints (space {env_cfg.resolved_space!r}); running it on "
+            f"the {urdf} URDF needs a policy trained in the canonical joint space (ohra rotate train --space canonical)")
+    if urdf == "original":
+        return dataclasses.replace(env_cfg, urdf="original", space="canonical", grasp_hold="canonical",
+                                   inertials="capsule")
+    return dataclasses.replace(env_cfg, urdf=urdf, space=None)
+
+
 def evaluate_run(run_dir: str | Path, episodes: int = 20, seed: int = 1000, which: str = "model",
-                 write: bool = True) -> EvalResult:
-    """Evaluate a trained run (seeds from 1000 by default: training used 0..n_envs); writes ``RUN/eval.json``."""
+                 write: bool = True, urdf: str | None = None) -> EvalResult:
+    """Evaluate a trained run (seeds from 1000 by default: training used 0..n_envs); writes ``RUN/eval.json``.
+
+    ``urdf``: run the policy on the hand's other URDF (:func:`on_urdf`; starting states from that URDF's
+    own cache) and write ``RUN/eval_on_<urdf>.json`` instead.
+    """
     pol = Policy(run_dir, which)
-    res = evaluate_policy(pol, pol.env_cfg, episodes, seed, str(run_dir), grasps=pol.grasps)
+    cfg = on_urdf(pol.env_cfg, urdf)
+    moved = cfg is not pol.env_cfg
+    res = evaluate_policy(pol, cfg, episodes, seed, str(run_dir), grasps=None if moved else pol.grasps)
     if write:
-        path = Path(run_dir) / "eval.json"
+        path = Path(run_dir) / (f"eval_on_{cfg.urdf}.json" if moved else "eval.json")
         tmp = path.with_suffix(".tmp")
         tmp.write_text(json.dumps(res.to_dict(), indent=2) + "\n")
         os.replace(tmp, path)
@@ -207,14 +236,18 @@ def evaluate_run(run_dir: str | Path, episodes: int = 20, seed: int = 1000, whic
 
 
 def record_episode(run_dir: str | Path, out_dir: str | Path, seed: int = 1000, every: int = 2, strip_frames: int = 8,
-                   which: str = "model", size: int = 240) -> dict:
+                   which: str = "model", size: int = 240, urdf: str | None = None) -> dict:
     """Render one episode of a run: ``rollout.gif`` (every ``every``-th step), ``strip.png`` (evenly spaced
-    frames), ``trajectory.npz`` (joints and object poses per step, for :func:`replay_html`)."""
+    frames), ``trajectory.npz`` (joints and object poses per step, for :func:`replay_html`). ``urdf``: on
+    the hand's other URDF (:func:`on_urdf`)."""
     from ohra.sim.render import write_png
+    from ohra.sim.rotation.env import InHandRotateEnv
     from ohra.sim.rotation.render import render, strip, write_gif
 
     pol = Policy(run_dir, which)
-    env = pol.make_env(render_mode="rgb_array")
+    cfg = on_urdf(pol.env_cfg, urdf)
+    env = (pol.make_env(render_mode="rgb_array") if cfg is pol.env_cfg
+           else InHandRotateEnv(cfg, render_mode="rgb_array"))
     try:
         ep = run_episode(env, pol, seed, frames_every=every, render=lambda: render(env.scene, size))
     finally:
