@@ -4,7 +4,10 @@ Evaluates each policy (Steps-to-Fall, Cumulative Rotation) over the same seeded 
 their training curves. Default: the policies shipped in ``ohra/learn/models/rotate_*`` (each an
 export of a run trained with ``ohra rotate train``; the budget is read from its progress.csv).
 
-    python benchmarks/rotation_table3.py [--episodes 20] [--runs LABEL=DIR ...]
+    python benchmarks/rotation_table3.py [--episodes 20] [--runs LABEL=DIR ...] [--no-transfer]
+
+Each canonical-URDF policy is also run on the hand's original URDF through the action map
+(``ohra.learn.rl.on_urdf``), the same seeded episodes.
 """
 
 from __future__ import annotations
@@ -30,13 +33,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--name", default="rotation_table3",
                     help="results name: benchmarks/results/NAME.{json,md} and NAME_curves*.png (default: the shipped "
                          "table, whose curves are rotation_curves*.png)")
+    ap.add_argument("--no-transfer", action="store_true",
+                    help="skip running each canonical-URDF policy on the original URDF as well")
     args = ap.parse_args(argv)
-    from ohra.learn.rl.evaluate import Policy, evaluate_policy
+    from ohra.learn.rl.evaluate import Policy, evaluate_policy, on_urdf
     from ohra.learn.rl.plots import read_progress, reward_curves
     from ohra.sim.rotation.rewards import TERMS
 
     runs = dict(r.split("=", 1) for r in args.runs) if args.runs else _shipped()
-    rows, data, ret_rows, grip_rows = [], {}, [], []
+    rows, data, ret_rows, grip_rows, moved_rows = [], {}, [], [], []
     for label, d in runs.items():
         pol = Policy(d)
         grip = starting_grip(pol)
@@ -67,6 +72,12 @@ def main(argv: list[str] | None = None) -> int:
         rows.append(f"| (zero actions) | {cfg.hand} | {cfg.urdf} | {zero['steps_to_fall_mean']:.1f} +- "
                     f"{zero['steps_to_fall_std']:.1f} | {zero['rotation_mean']:.2f} +- {zero['rotation_std']:.2f} | "
                     f"{100 * zero['survived']:.0f} % | no training | - |")
+        if cfg.urdf == "canonical" and not args.no_transfer:
+            # the same policy on the original URDF through the action map, from the canonical holding pose
+            moved = evaluate_policy(pol, on_urdf(cfg, "original"), args.episodes, args.seed, str(d)).summary()
+            data[label]["on_original_urdf"] = moved
+            moved_rows.append(f"| {label} | {cfg.hand} | {_cell(s)} | {_cell(moved)} |")
+            print(moved_rows[-1], file=sys.stderr)
     groups = {k: [v] for k, v in runs.items()}
     stem = "rotation_curves" if args.name == "rotation_table3" else f"{args.name}_curves"
     curve = reward_curves(groups, RESULTS / f"{stem}.png",
@@ -87,9 +98,19 @@ def main(argv: list[str] | None = None) -> int:
         "| policy | return | " + " | ".join(TERMS) + " |", "|---|---|" + "---|" * len(TERMS), *ret_rows,
         "", f"Grip of the starting states each policy was trained and evaluated from ({GRIP_NOTE}):", "",
         "| policy | mean abs(target - q) [rad] | mean over states of the largest joint gap [rad] | "
-        f"states with a joint pressed > {PRESSED} rad |", "|---|---|---|---|", *grip_rows])
+        f"states with a joint pressed > {PRESSED} rad |", "|---|---|---|---|", *grip_rows,
+        *(["", "Each canonical-URDF policy also run on the hand's original URDF through the action map (canonical "
+           "22-D actions and observations, starting states from the canonical holding pose on the original URDF; "
+           "same seeds; Steps-to-Fall / Cumulative Rotation [rad] / survived):", "",
+           "| policy | hand | on the canonical URDF (trained) | on the original URDF |", "|---|---|---|---|",
+           *moved_rows] if moved_rows else [])])
     write_results(args.name, {"episodes": args.episodes, "seed": args.seed, "runs": data}, table)
     return 0
+
+
+def _cell(s: dict) -> str:
+    return (f"{s['steps_to_fall_mean']:.1f} +- {s['steps_to_fall_std']:.1f} / {s['rotation_mean']:.2f} +- "
+            f"{s['rotation_std']:.2f} / {100 * s['survived']:.0f} %")
 
 
 PRESSED = 0.05  # rad: a joint whose motor target lies this far past its settled angle is pressing on something
