@@ -18,3 +18,4 @@ def test_rotation_notebook_executes(tmp_path, hands_dir):
     assert "'steps_to_fall_mean': 400.0" in texts[2]  # zero actions hold the object
     assert "Steps-to-Fall" in texts[3] and "budget" in texts[3]
     assert "rad about +z" in texts[5]
+    assert "policy on the canonical URDF (trained)" in texts[6] and "policy on the original URDF" in texts[6]
