@@ -16,6 +16,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import write_results  # noqa: E402
+from rotation_table3 import summary_cell  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -26,10 +27,6 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     from ohra.learn.rl.evaluate import Policy, evaluate_policy, shipped
 
-    def cell(s: dict) -> str:
-        return (f"{s['steps_to_fall_mean']:.1f} +- {s['steps_to_fall_std']:.1f} | {s['rotation_mean']:.2f} +- "
-                f"{s['rotation_std']:.2f} | {100 * s['survived']:.0f} %")
-
     rows, data = [], {}
     for name in args.policies:
         pol = Policy(shipped(name))
@@ -39,7 +36,8 @@ def main(argv: list[str] | None = None) -> int:
         heavy_cfg = dataclasses.replace(pol.env_cfg, inertials="original")
         heavy = evaluate_policy(pol, heavy_cfg, args.episodes, args.seed, name).summary()
         data[name] = {"hand": pol.env_cfg.hand, "capsule_inertials": own, "original_inertials": heavy}
-        rows += [f"| {name} | capsule (trained) | {cell(own)} |", f"| {name} | original finger masses | {cell(heavy)} |"]
+        rows += [f"| {name} | {kind} | {summary_cell(r, ' | ')} |"
+                 for kind, r in (("capsule (trained)", own), ("original finger masses", heavy))]
         print(rows[-2], rows[-1], sep="\n", file=sys.stderr)
     table = "\n".join([
         f"Shipped canonical-URDF rotation policies on their canonical URDF with the trained (capsule) inertials and with "

@@ -76,7 +76,7 @@ def main(argv: list[str] | None = None) -> int:
             # the same policy on the original URDF through the action map, from the canonical holding pose
             moved = evaluate_policy(pol, on_urdf(cfg, "original"), args.episodes, args.seed, str(d)).summary()
             data[label]["on_original_urdf"] = moved
-            moved_rows.append(f"| {label} | {cfg.hand} | {_cell(s)} | {_cell(moved)} |")
+            moved_rows.append(f"| {label} | {cfg.hand} | {summary_cell(s)} | {summary_cell(moved)} |")
             print(moved_rows[-1], file=sys.stderr)
     groups = {k: [v] for k, v in runs.items()}
     stem = "rotation_curves" if args.name == "rotation_table3" else f"{args.name}_curves"
@@ -108,9 +108,10 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def _cell(s: dict) -> str:
-    return (f"{s['steps_to_fall_mean']:.1f} +- {s['steps_to_fall_std']:.1f} / {s['rotation_mean']:.2f} +- "
-            f"{s['rotation_std']:.2f} / {100 * s['survived']:.0f} %")
+def summary_cell(s: dict, sep: str = " / ") -> str:
+    """Steps-to-Fall, Cumulative Rotation and survival of an ``EvalResult.summary()``, joined by ``sep``."""
+    return sep.join([f"{s['steps_to_fall_mean']:.1f} +- {s['steps_to_fall_std']:.1f}",
+                     f"{s['rotation_mean']:.2f} +- {s['rotation_std']:.2f}", f"{100 * s['survived']:.0f} %"])
 
 
 PRESSED = 0.05  # rad: a joint whose motor target lies this far past its settled angle is pressing on something

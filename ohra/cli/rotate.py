@@ -139,23 +139,22 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     from ohra.learn.rl import require_rl
 
     require_rl()
-    from ohra.learn.rl.evaluate import Policy, evaluate_run, on_urdf, record_episode, replay_html
+    from ohra.learn.rl.evaluate import evaluate_run, on_urdf, output_suffix, record_episode, replay_html
+    from ohra.learn.rl.train import load_run
 
     run = Path(args.run)
     res = evaluate_run(run, args.episodes, args.seed, args.checkpoint, urdf=args.on_urdf)
-    own = Policy(run, args.checkpoint).env_cfg
-    cfg = on_urdf(own, args.on_urdf)
-    moved = cfg is not own
-    where = f" on the {cfg.urdf} URDF" if moved else ""
+    own = load_run(run)[0]
+    cfg, suffix = on_urdf(own, args.on_urdf), output_suffix(own, args.on_urdf)
+    where = f" on the {cfg.urdf} URDF" if suffix else ""
     s = res.summary()
     print(f"Steps-to-Fall {s['steps_to_fall_mean']:.1f} +- {s['steps_to_fall_std']:.1f} (of {res.episode_steps}), "
           f"Cumulative Rotation {s['rotation_mean']:.2f} +- {s['rotation_std']:.2f} rad, "
-          f"survived {100 * s['survived']:.0f} % over {res.episodes} episodes{where}; "
-          f"wrote {run / (f'eval_on_{cfg.urdf}.json' if moved else 'eval.json')}")
+          f"survived {100 * s['survived']:.0f} % over {res.episodes} episodes{where}; wrote {run / f'eval{suffix}.json'}")
     ret = res.return_summary()
     print("mean episode return " + f"{ret['total']:.1f} = " + " ".join(f"{k} {v:+.1f}" for k, v in ret.items() if k != "total"))
     if args.render or args.replay:
-        out = run / (f"episode_on_{cfg.urdf}" if moved else "episode")
+        out = run / f"episode{suffix}"
         ep = record_episode(run, out, seed=args.seed, which=args.checkpoint, urdf=args.on_urdf)
         print(f"episode (seed {args.seed}): {ep['steps']} steps, {ep['rotation']:.2f} rad; wrote {ep['gif']}, {ep['strip']}")
         if args.replay:

@@ -121,11 +121,13 @@ class Policy:
         action, _ = self._policy.predict(self.normalize(obs).astype(np.float32), deterministic=deterministic)
         return action
 
-    def make_env(self, render_mode: str | None = None):
-        """The environment the policy was trained in (with the shipped starting states, if any)."""
+    def make_env(self, render_mode: str | None = None, urdf: str | None = None):
+        """The environment the policy was trained in (with the shipped starting states, if any), or with
+        ``urdf`` the hand's other URDF (:func:`on_urdf`; that URDF's cached starting states)."""
         from ohra.sim.rotation.env import InHandRotateEnv
 
-        return InHandRotateEnv(self.env_cfg, render_mode=render_mode, grasps=self.grasps)
+        cfg = on_urdf(self.env_cfg, urdf)
+        return InHandRotateEnv(cfg, render_mode=render_mode, grasps=self.grasps if cfg is self.env_cfg else None)
 
 
 def export_policy(run_dir: str | Path, out_dir: str | Path, which: str = "model") -> Path:
@@ -216,6 +218,11 @@ def on_urdf(env_cfg: RotationConfig, urdf: str | None) -> RotationConfig:
     return dataclasses.replace(env_cfg, urdf=urdf, space=None)
 
 
+def output_suffix(env_cfg: RotationConfig, urdf: str | None) -> str:
+    """Suffix of the file names a run's evaluation writes: "" on its own URDF, "_on_<urdf>" on the other."""
+    return "" if on_urdf(env_cfg, urdf) is env_cfg else f"_on_{urdf}"
+
+
 def evaluate_run(run_dir: str | Path, episodes: int = 20, seed: int = 1000, which: str = "model",
                  write: bool = True, urdf: str | None = None) -> EvalResult:
     """Evaluate a trained run (seeds from 1000 by default: training used 0..n_envs); writes ``RUN/eval.json``.
@@ -225,10 +232,9 @@ def evaluate_run(run_dir: str | Path, episodes: int = 20, seed: int = 1000, whic
     """
     pol = Policy(run_dir, which)
     cfg = on_urdf(pol.env_cfg, urdf)
-    moved = cfg is not pol.env_cfg
-    res = evaluate_policy(pol, cfg, episodes, seed, str(run_dir), grasps=None if moved else pol.grasps)
+    res = evaluate_policy(pol, cfg, episodes, seed, str(run_dir), grasps=pol.grasps if cfg is pol.env_cfg else None)
     if write:
-        path = Path(run_dir) / (f"eval_on_{cfg.urdf}.json" if moved else "eval.json")
+        path = Path(run_dir) / f"eval{output_suffix(pol.env_cfg, urdf)}.json"
         tmp = path.with_suffix(".tmp")
         tmp.write_text(json.dumps(res.to_dict(), indent=2) + "\n")
         os.replace(tmp, path)
@@ -241,13 +247,10 @@ def record_episode(run_dir: str | Path, out_dir: str | Path, seed: int = 1000, e
     frames), ``trajectory.npz`` (joints and object poses per step, for :func:`replay_html`). ``urdf``: on
     the hand's other URDF (:func:`on_urdf`)."""
     from ohra.sim.render import write_png
-    from ohra.sim.rotation.env import InHandRotateEnv
     from ohra.sim.rotation.render import render, strip, write_gif
 
     pol = Policy(run_dir, which)
-    cfg = on_urdf(pol.env_cfg, urdf)
-    env = (pol.make_env(render_mode="rgb_array") if cfg is pol.env_cfg
-           else InHandRotateEnv(cfg, render_mode="rgb_array"))
+    env = pol.make_env(render_mode="rgb_array", urdf=urdf)
     try:
         ep = run_episode(env, pol, seed, frames_every=every, render=lambda: render(env.scene, size))
     finally:
