@@ -42,6 +42,7 @@ def test_every_table_is_filled(study):
     assert set(res["table9"]) == {"leap_3033", "leap_3303", "leap_3330", "leap_3333"}
     for r in res["table7"].values():
         assert r["all"]["n"] == r["zero_shot"]["n"] == 2
+        assert len(r["ratio_interval"]) == 2  # nan where a side had no success (2 grasps)
     assert set(res["saliency"]) == {"leap_3333", "leap_3033"}
 
 
