@@ -46,4 +46,18 @@ def ratio_interval(num: Mapping[str, Sequence[int]], den: Mapping[str, Sequence[
     return float(lo), float(hi)
 
 
-__all__ = ["ratio_interval"]
+def pool(*evaluations: Mapping[str, Sequence[int]]) -> dict[str, list[int]]:
+    """The verdicts of several evaluations of the same pairs (e.g. models trained with different seeds) as
+    one: per ``"hand/object"`` key, their grasps concatenated. :func:`ratio_interval` of pooled evaluations
+    then resamples objects shared by all of them and grasps within each; the spread between the pooled
+    models themselves is not a level of that bootstrap (report each one's rate beside the pooled one)."""
+    if not evaluations:
+        raise ValueError("nothing to pool")
+    keys = set(evaluations[0])
+    for i, e in enumerate(evaluations[1:], 1):
+        if set(e) != keys:
+            raise ValueError(f"evaluation {i} covers different pairs than evaluation 0: {sorted(set(e) ^ keys)}")
+    return {k: [int(v) for e in evaluations for v in e[k]] for k in sorted(keys)}
+
+
+__all__ = ["pool", "ratio_interval"]

@@ -11,7 +11,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 try:
-    from _stats import ratio_interval
+    from _stats import pool, ratio_interval
 finally:
     sys.path.pop(0)
 
@@ -61,3 +61,23 @@ def test_seeded_and_checked():
     assert ratio_interval(a, b, seed=3) == ratio_interval(a, b, seed=3)
     with pytest.raises(ValueError, match="different pairs"):
         ratio_interval(a, {k: v for k, v in b.items() if k != "h/o0"})
+
+
+def test_pooling_concatenates_each_objects_grasps_across_evaluations():
+    """Two seeds' verdicts pool per object: the pooled rate is total successes over total grasps (not the
+    mean of per-object rates), and pairs missing from one seed are refused, not dropped."""
+    a = {"h/o1": [1, 1, 0, 0], "h/o2": [1, 0]}
+    b = {"h/o1": [0, 0, 0, 0], "h/o2": [1, 1]}
+    p = pool(a, b)
+    assert p == {"h/o1": [1, 1, 0, 0, 0, 0, 0, 0], "h/o2": [1, 0, 1, 1]}
+    assert sum(map(sum, p.values())) / sum(map(len, p.values())) == 5 / 12
+    with pytest.raises(ValueError, match="o2"):
+        pool(a, {"h/o1": [1]})
+
+
+def test_pooling_two_seeds_narrows_the_ratio_interval():
+    """Twice the grasps per object: the grasp-level part of the interval shrinks by about sqrt(2)."""
+    one = ratio_interval(_verdicts(RATES, seed=2), _verdicts(RATES, seed=3))
+    two = ratio_interval(pool(_verdicts(RATES, seed=2), _verdicts(RATES, seed=4)),
+                         pool(_verdicts(RATES, seed=3), _verdicts(RATES, seed=5)))
+    assert 0.6 < (two[1] - two[0]) / (one[1] - one[0]) < 0.8
