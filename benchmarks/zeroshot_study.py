@@ -230,7 +230,7 @@ def main() -> None:
     res["compute"] = {**COMPUTE, "training_core_hours": train_h, "simulation_core_hours": sim_h}
     lines += ["", f"Compute (core-hours = wall time x threads or simulation processes, cached runs included): training "
               f"{train_h:.2f} ({len(COMPUTE['training'])} models, "
-              + ", ".join(f"{k} {v / 60:.0f} min" for k, v in COMPUTE["training"].items())
+              + ", ".join(f"{k} {v / 60:.0f} core-min" for k, v in COMPUTE["training"].items())
               + f"); simulation {sim_h:.2f} ({len(COMPUTE['simulation'])} evaluations)."]
     if "pictures" in res:
         lines += ["", f"Gallery of unseen variants: `{res['pictures']['sheet']}` (contact sheet), `{res['pictures']['scene']}` "
