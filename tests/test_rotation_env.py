@@ -252,3 +252,22 @@ def test_configs_saved_before_a_setting_existed_read_back_as_they_ran():
     assert RotationConfig.from_saved(RotationConfig().to_dict()) == RotationConfig()
     with pytest.raises(RotationConfigError, match="work_velocity"):
         RotationConfig(work_velocity="mean")
+
+
+def test_env_simulates_a_hand_given_to_it_and_refuses_a_mismatched_kind(grasps):
+    """``hand=``: the task simulates that SimHand (here the canonical LEAP with 0.2 kg index finger
+    links), not the one the config names; a canonical hand under ``urdf='original'`` is refused."""
+    base = resolve(CFG).hand
+    masses = np.array(base.finger_masses, dtype=float)
+    masses[1] = 0.2
+    heavy = base.with_finger_masses(masses)
+    e = InHandRotateEnv(CFG, grasps=grasps, hand=heavy)
+    try:
+        sc = e.scene
+        index = [j for j, name in sc.links if sc.link_finger[j] == 1]
+        total = sum(pb.getDynamicsInfo(sc.body, j, physicsClientId=sc.client)[0] for j in index)
+        assert e.task.hand is heavy and total == pytest.approx(0.2, rel=1e-6)
+    finally:
+        e.close()
+    with pytest.raises(RotationConfigError, match="canonical hand but the config says urdf='original'"):
+        resolve(RotationConfig(urdf="original"), hand=base)

@@ -181,11 +181,12 @@ def run_episode(env, policy, seed: int, frames_every: int = 0, render=None) -> d
 
 
 def evaluate_policy(policy, env_cfg: RotationConfig, episodes: int = 20, seed: int = 0, run: str = "",
-                    grasps=None) -> EvalResult:
-    """Steps-to-Fall and Cumulative Rotation of ``policy`` (obs -> action) over seeded episodes."""
+                    grasps=None, hand=None) -> EvalResult:
+    """Steps-to-Fall and Cumulative Rotation of ``policy`` (obs -> action) over seeded episodes
+    (``grasps``, ``hand``: as :class:`ohra.sim.rotation.env.InHandRotateEnv` takes them)."""
     from ohra.sim.rotation.env import InHandRotateEnv
 
-    env = InHandRotateEnv(env_cfg, grasps=grasps)
+    env = InHandRotateEnv(env_cfg, grasps=grasps, hand=hand)
     try:
         eps = [run_episode(env, policy, seed + i) for i in range(episodes)]
     finally:

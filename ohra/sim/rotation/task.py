@@ -14,7 +14,7 @@ import numpy as np
 
 from ohra.errors import HandNotFoundError
 from ohra.sim.hands import SimHand
-from ohra.sim.rotation.config import RotationConfig
+from ohra.sim.rotation.config import RotationConfig, RotationConfigError
 from ohra.sim.rotation.objects import ObjectShape, make_object
 
 
@@ -91,15 +91,24 @@ def canonical_form(name: str, form: str | None) -> str | None:
     return None
 
 
-def resolve(cfg: RotationConfig) -> Task:
-    """Build the :class:`Task` of ``cfg`` (loads the hand; the original URDF needs the hand assets)."""
+def resolve(cfg: RotationConfig, hand: SimHand | None = None) -> Task:
+    """Build the :class:`Task` of ``cfg`` (loads the hand; the original URDF needs the hand assets).
+
+    ``hand``: simulate this :class:`SimHand` instead of the one ``cfg`` names (e.g. an original URDF with
+    other collision shapes); ``cfg.hand`` still gives the canonical params (object size, palm) and
+    ``cfg.urdf`` must say which kind it is (canonical or original).
+    """
     from ohra.hands import get_hand
 
     form = canonical_form(cfg.hand, cfg.form)
     params = get_hand(cfg.hand, form)
     from ohra.hands import registry
 
-    if cfg.urdf == "canonical":
+    if hand is not None:
+        if hand.canonical != (cfg.urdf == "canonical"):
+            raise RotationConfigError(f"hand {hand.name!r} is {'a canonical' if hand.canonical else 'an original'} "
+                                      f"hand but the config says urdf={cfg.urdf!r}")
+    elif cfg.urdf == "canonical":
         hand = SimHand.from_params(params, name=f"{cfg.hand}:canonical")
         if cfg.inertials == "original":
             from ohra.sim.hands import original_finger_masses
