@@ -2,12 +2,9 @@
 kinematics, joint limits, masses and inertias) with its collision geometry replaced by the canonical
 hand's (the palm disc and the finger capsules), next to the original and the canonical URDF.
 
-Each canonical collision shape rides on the original link that moves with it: for every canonical
-link that carries one, the original link of the same finger (the palm's links for the palm) whose
-frame keeps the most constant transform to it over random joint configurations, both hands posed by
-the same canonical joint vector (the original through its action map) in the canonical palm frame.
-How constant (the *fit*: the largest drift of the shape's end points over the configurations) is
-reported: it is the kinematic mismatch between the two hands that the hybrid inherits.
+The hybrid is :func:`ohra.sim.hybrid.with_canonical_collisions`: each canonical collision shape rides on
+the original link that moves with it; how well (the *drift* of the shape's end points relative to that
+link over 8 joint configurations, the kinematic mismatch the hybrid inherits) is reported.
 
 The shipped canonical-URDF policy then runs through the action map on the original URDF, on the
 hybrid and on its own URDF, from each URDF's own starting states (the canonical holding pose, as
@@ -15,7 +12,12 @@ hybrid and on its own URDF, from each URDF's own starting states (the canonical 
 canonical URDF, the original's link shapes are what stops it; if it fails like the original, the
 cause lies in what the hybrid keeps from the original (kinematics, limits, inertias).
 
-    python benchmarks/rotation_geometry.py [--policies rotate_leap_canonical ...] [--episodes 20]
+How much should a few millimetres matter? ``--sensitivity`` also runs each policy on its canonical hand
+with every finger capsule's radius 0.5 mm larger or smaller (1 mm would make a LEAP thumb capsule shorter than
+its diameter, which the params refuse) and every finger segment 1 mm longer (fingertips up to 3 mm farther out; the palm,
+hence the cube, unchanged; starting states generated for each), the scale of the hybrid's kinematic mismatch.
+
+    python benchmarks/rotation_geometry.py [--policies rotate_leap_canonical ...] [--episodes 20] [--sensitivity]
     -> benchmarks/results/rotation_geometry.{json,md}
 """
 
@@ -23,10 +25,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import copy
 import sys
-import warnings
-import xml.etree.ElementTree as ET
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -35,101 +34,18 @@ from _common import write_results  # noqa: E402
 import numpy as np  # noqa: E402
 
 
-def link_poses(hand, q_canon: np.ndarray) -> dict[str, np.ndarray]:
-    """Link frames (4x4) in the canonical palm frame of a :class:`SimHand` posed by canonical ``q_canon``."""
-    import pinocchio as pin
+def perturbed(cfg) -> dict:
+    """The canonical hand of ``cfg`` with mm-level changes (see module doc), by label."""
+    from ohra.hands import get_hand
+    from ohra.sim.hands import SimHand
+    from ohra.sim.rotation.task import canonical_form
 
-    root = ET.fromstring(hand.urdf)  # kinematics only: urdfdom does not read <capsule> collision shapes
-    for link in root.iter("link"):
-        for el in link.findall("collision") + link.findall("visual"):
-            link.remove(el)
-    model = pin.buildModelFromXML(ET.tostring(root, encoding="unicode"))
-    data = model.createData()
-    qs = dict(zip(hand.joints, hand.to_sim(q_canon)))
-    qs.update({n: mul * qs[m] + off for n, (m, mul, off) in hand.mimic.items() if m in qs})
-    q = pin.neutral(model)
-    for jid in range(1, model.njoints):
-        name = model.names[jid]
-        if name in qs and model.joints[jid].nq == 1:
-            q[model.joints[jid].idx_q] = qs[name]
-    pin.forwardKinematics(model, data, q)
-    pin.updateFramePlacements(model, data)
-    out = {}
-    for fid, f in enumerate(model.frames):
-        if f.type == pin.FrameType.BODY:
-            out[f.name] = hand.T_palm_root @ data.oMf[fid].homogeneous
-    return out
-
-
-def _origin(el: ET.Element) -> np.ndarray:
-    from ohra.transforms import xyzrpy_to_matrix
-
-    o = el.find("origin")
-    xyz = [float(v) for v in (o.get("xyz", "0 0 0") if o is not None else "0 0 0").split()]
-    rpy = [float(v) for v in (o.get("rpy", "0 0 0") if o is not None else "0 0 0").split()]
-    return xyzrpy_to_matrix(np.array(xyz + rpy))
-
-
-def _ends(geom: ET.Element) -> np.ndarray:
-    """(2, 3) points spanning a collision shape in its own frame (a capsule's segment ends, else its centre twice)."""
-    cap = geom.find("capsule")
-    cyl = geom.find("cylinder")
-    el = cap if cap is not None else cyl
-    h = float(el.get("length")) / 2 if el is not None else 0.0
-    return np.array([[0.0, 0.0, -h], [0.0, 0.0, h]])
-
-
-def hybrid(original, canonical, configs: int = 8, seed: int = 0):
-    """The original :class:`SimHand` with the canonical hand's collision shapes (see module doc), and the fit
-    per canonical link: ``{link: (original link, drift in m)}``."""
-    from ohra.transforms import matrix_to_xyzrpy
-
-    rng = np.random.default_rng(seed)
-    lo, hi = canonical.canon_lower, canonical.canon_upper
-    qs = [np.zeros(22)] + [rng.uniform(lo, np.maximum(hi, lo)) for _ in range(configs - 1)]
-    P_c = [link_poses(canonical, q) for q in qs]
-    P_o = [link_poses(original, q) for q in qs]
-    croot = ET.fromstring(canonical.urdf)
-    oroot = ET.fromstring(original.urdf)
-    olinks = {link.get("name"): link for link in oroot.iter("link")}
-    for link in olinks.values():
-        for col in link.findall("collision"):
-            link.remove(col)
-    fit = {}
-    for link in croot.iter("link"):
-        cols = link.findall("collision")
-        if not cols:
-            continue
-        lc = link.get("name")
-        f = canonical.link_finger.get(lc, -1)
-        cands = [n for n, g in original.link_finger.items() if g == f and n in P_o[0]]
-        best, best_drift, best_X = None, np.inf, None
-        for lo_name in cands:
-            X = [np.linalg.inv(po[lo_name]) @ pc[lc] for po, pc in zip(P_o, P_c)]
-            drift = 0.0
-            for col in cols:
-                ends = (_origin(col) @ np.c_[_ends(col.find("geometry")), np.ones(2)].T)
-                pts = [(x @ ends)[:3].T for x in X]
-                drift = max(drift, max(float(np.linalg.norm(p - pts[0], axis=1).max()) for p in pts))
-            if drift < best_drift - 1e-9:
-                best, best_drift, best_X = lo_name, drift, X[0]
-        if best is None:
-            raise SystemExit(f"rotation_geometry: no original link of finger {f} for canonical link {lc!r}")
-        fit[lc] = (best, best_drift)
-        for col in cols:
-            new = copy.deepcopy(col)
-            with warnings.catch_warnings():  # a gimbal-locked rpy still gives the same rotation back
-                warnings.simplefilter("ignore", UserWarning)
-                xyzrpy = matrix_to_xyzrpy(best_X @ _origin(col))
-            o = new.find("origin")
-            if o is None:
-                o = ET.SubElement(new, "origin")
-            o.set("xyz", " ".join(f"{v:.9g}" for v in xyzrpy[:3]))
-            o.set("rpy", " ".join(f"{v:.9g}" for v in xyzrpy[3:]))
-            olinks[best].append(new)
-    hand = dataclasses.replace(original, urdf=ET.tostring(oroot, encoding="unicode"),
-                               name=original.name.replace(":original", ":hybrid"))
-    return hand, fit
+    p = get_hand(cfg.hand, canonical_form(cfg.hand, cfg.form))
+    present = p.finger_radii > 0
+    changes = {"canonical URDF, finger radii +0.5 mm": {"finger_radii": np.where(present, p.finger_radii + 0.0005, 0.0)},
+               "canonical URDF, finger radii -0.5 mm": {"finger_radii": np.where(present, p.finger_radii - 0.0005, 0.0)},
+               "canonical URDF, finger segments +1 mm": {"finger_lengths": np.where(p.finger_lengths > 0, p.finger_lengths + 0.001, 0.0)}}
+    return {label: SimHand.from_params(dataclasses.replace(p, **kw), name=f"{cfg.hand}:canonical") for label, kw in changes.items()}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -137,11 +53,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--policies", nargs="+", default=["rotate_leap_canonical", "rotate_shadow_canonical"])
     ap.add_argument("--episodes", type=int, default=20)
     ap.add_argument("--seed", type=int, default=1000)
-    ap.add_argument("--grasps", type=int, default=200, help="starting states generated for the hybrid hand")
+    ap.add_argument("--grasps", type=int, default=200, help="starting states generated for the hybrid (and perturbed) hands")
+    ap.add_argument("--sensitivity", action="store_true", help="also the canonical hands with mm-level changes")
     args = ap.parse_args(argv)
     from rotation_table3 import summary_cell
 
     from ohra.learn.rl.evaluate import Policy, evaluate_policy, on_urdf, shipped
+    from ohra.sim.hybrid import with_canonical_collisions
     from ohra.sim.rotation.grasps import generate, load_or_generate
     from ohra.sim.rotation.task import resolve
 
@@ -152,11 +70,14 @@ def main(argv: list[str] | None = None) -> int:
             raise SystemExit(f"{name} was trained on the {pol.env_cfg.urdf} URDF; this runs canonical-URDF policies")
         ocfg = on_urdf(pol.env_cfg, "original")
         otask = resolve(ocfg)
-        hand, fit = hybrid(otask.hand, resolve(pol.env_cfg).hand)
+        hand, fit = with_canonical_collisions(otask.hand, resolve(pol.env_cfg).hand)
         hgrasps = generate(resolve(dataclasses.replace(ocfg, grasp_count=args.grasps), hand))
         runs = {"original URDF": (ocfg, load_or_generate(otask), None),
                 "hybrid (original, canonical collision shapes)": (ocfg, hgrasps, hand),
                 "canonical URDF": (pol.env_cfg, pol.grasps, None)}
+        if args.sensitivity:
+            for label, h in perturbed(pol.env_cfg).items():
+                runs[label] = (pol.env_cfg, generate(resolve(dataclasses.replace(pol.env_cfg, grasp_count=args.grasps), h)), h)
         res = {}
         for label, (cfg, gs, h) in runs.items():
             r = evaluate_policy(pol, cfg, args.episodes, args.seed, name, grasps=gs, hand=h).summary()
