@@ -40,7 +40,7 @@ def contacts(scene) -> dict:
     pts = pb.getContactPoints(scene.body, scene.obj_body, physicsClientId=scene.client)
     names = dict(scene.links)
     fingers = scene.link_finger
-    # the distal link of a finger: its touching link farthest down the chain (largest PyBullet index)
+    # the distal link of a finger: its link farthest down the chain (largest PyBullet index)
     by_finger: dict[int, list[int]] = {}
     for j, _ in scene.links:
         by_finger.setdefault(fingers.get(j, -1), []).append(j)
@@ -64,7 +64,7 @@ def twist(env, rate: float, slip: float, max_torque: float) -> tuple[float, bool
     start = sc.read()
     quat, turned, t = start.obj_quat, 0.0, 0.0
     while True:
-        for _ in range(sc._substeps):
+        for _ in range(cfg.substeps):
             t += cfg.sim_dt
             pb.applyExternalTorque(sc.obj_body, -1, [0.0, 0.0, min(rate * t, max_torque)], pb.WORLD_FRAME,
                                    physicsClientId=sc.client)
@@ -89,15 +89,15 @@ def relaxed(gs):
     return dataclasses.replace(gs, target=np.asarray(gs.q, dtype=float).copy())
 
 
-def transfer_rows(name: str, episodes: int, seed: int) -> tuple[list[str], dict]:
-    """Steps-to-Fall and rotation of canonical-URDF policy ``name`` on both URDFs, usual vs relaxed starts."""
+def transfer_rows(name: str, pol, episodes: int, seed: int) -> tuple[list[str], dict]:
+    """Steps-to-Fall and rotation of canonical-URDF policy ``pol`` (shipped as ``name``) on both URDFs, usual vs
+    relaxed starts."""
     from rotation_table3 import summary_cell
 
-    from ohra.learn.rl.evaluate import Policy, evaluate_policy, on_urdf, shipped
+    from ohra.learn.rl.evaluate import evaluate_policy, on_urdf
     from ohra.sim.rotation.grasps import load_or_generate
     from ohra.sim.rotation.task import resolve
 
-    pol = Policy(shipped(name))
     rows, data = [], {}
     for urdf in ("canonical", "original"):
         cfg = on_urdf(pol.env_cfg, urdf)
@@ -124,9 +124,9 @@ def main(argv: list[str] | None = None) -> int:
     from ohra.learn.rl.evaluate import Policy, shipped
     from ohra.sim.rotation.env import InHandRotateEnv
 
+    policies = {name: Policy(shipped(name)) for name in args.policies}
     rows, data = [], {}
-    for name in args.policies:
-        pol = Policy(shipped(name))
+    for name, pol in policies.items():
         env = InHandRotateEnv(pol.env_cfg, grasps=pol.grasps)
         n = min(args.states, len(env.grasps.q))
         per = []
@@ -167,9 +167,9 @@ def main(argv: list[str] | None = None) -> int:
     transfer: dict = {}
     if args.transfer:
         trows = []
-        for name in args.policies:
-            if Policy(shipped(name)).env_cfg.urdf == "canonical":
-                r, transfer[name] = transfer_rows(name, args.episodes, args.seed)
+        for name, pol in policies.items():
+            if pol.env_cfg.urdf == "canonical":
+                r, transfer[name] = transfer_rows(name, pol, args.episodes, args.seed)
                 trows += r
         table += "\n".join([
             "", "", f"Relaxed starts: each canonical-URDF policy on both URDFs (the original through the action map), "

@@ -34,18 +34,16 @@ from _common import write_results  # noqa: E402
 import numpy as np  # noqa: E402
 
 
-def perturbed(cfg) -> dict:
-    """The canonical hand of ``cfg`` with mm-level changes (see module doc), by label."""
-    from ohra.hands import get_hand
+def perturbed(task) -> dict:
+    """The canonical hand of ``task`` (a resolved canonical-URDF task) with mm-level changes (see module doc), by label."""
     from ohra.sim.hands import SimHand
-    from ohra.sim.rotation.task import canonical_form
 
-    p = get_hand(cfg.hand, canonical_form(cfg.hand, cfg.form))
+    p = task.params
     present = p.finger_radii > 0
     changes = {"canonical URDF, finger radii +0.5 mm": {"finger_radii": np.where(present, p.finger_radii + 0.0005, 0.0)},
                "canonical URDF, finger radii -0.5 mm": {"finger_radii": np.where(present, p.finger_radii - 0.0005, 0.0)},
                "canonical URDF, finger segments +1 mm": {"finger_lengths": np.where(p.finger_lengths > 0, p.finger_lengths + 0.001, 0.0)}}
-    return {label: SimHand.from_params(dataclasses.replace(p, **kw), name=f"{cfg.hand}:canonical") for label, kw in changes.items()}
+    return {label: SimHand.from_params(dataclasses.replace(p, **kw), name=task.hand.name) for label, kw in changes.items()}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -70,13 +68,14 @@ def main(argv: list[str] | None = None) -> int:
             raise SystemExit(f"{name} was trained on the {pol.env_cfg.urdf} URDF; this runs canonical-URDF policies")
         ocfg = on_urdf(pol.env_cfg, "original")
         otask = resolve(ocfg)
-        hand, fit = with_canonical_collisions(otask.hand, resolve(pol.env_cfg).hand)
+        ctask = resolve(pol.env_cfg)
+        hand, fit = with_canonical_collisions(otask.hand, ctask.hand)
         hgrasps = generate(resolve(dataclasses.replace(ocfg, grasp_count=args.grasps), hand))
         runs = {"original URDF": (ocfg, load_or_generate(otask), None),
                 "hybrid (original, canonical collision shapes)": (ocfg, hgrasps, hand),
                 "canonical URDF": (pol.env_cfg, pol.grasps, None)}
         if args.sensitivity:
-            for label, h in perturbed(pol.env_cfg).items():
+            for label, h in perturbed(ctask).items():
                 runs[label] = (pol.env_cfg, generate(resolve(dataclasses.replace(pol.env_cfg, grasp_count=args.grasps), h)), h)
         res = {}
         for label, (cfg, gs, h) in runs.items():

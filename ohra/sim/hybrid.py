@@ -19,6 +19,7 @@ import copy
 import dataclasses
 import warnings
 import xml.etree.ElementTree as ET
+from functools import lru_cache
 
 import numpy as np
 
@@ -27,15 +28,23 @@ from ohra.sim.hands import SimHand
 from ohra.transforms import matrix_to_xyzrpy, xyzrpy_to_matrix
 
 
+@lru_cache(maxsize=8)
+def _kinematic_model(urdf: str):
+    """Pinocchio model of a prepared URDF, kinematics only (urdfdom does not read ``<capsule>`` shapes)."""
+    import pinocchio as pin
+
+    root = ET.fromstring(urdf)
+    for link in root.iter("link"):
+        for el in link.findall("collision") + link.findall("visual"):
+            link.remove(el)
+    return pin.buildModelFromXML(ET.tostring(root, encoding="unicode"))
+
+
 def link_frames(hand: SimHand, q_canon: np.ndarray) -> dict[str, np.ndarray]:
     """Every link frame (4x4, metres) of ``hand`` in the canonical palm frame, posed by canonical ``q_canon`` (22,)."""
     import pinocchio as pin
 
-    root = ET.fromstring(hand.urdf)  # kinematics only: urdfdom does not read <capsule> shapes
-    for link in root.iter("link"):
-        for el in link.findall("collision") + link.findall("visual"):
-            link.remove(el)
-    model = pin.buildModelFromXML(ET.tostring(root, encoding="unicode"))
+    model = _kinematic_model(hand.urdf)
     data = model.createData()
     qs = dict(zip(hand.joints, hand.to_sim(np.asarray(q_canon, dtype=float))))
     qs.update({n: mul * qs[m] + off for n, (m, mul, off) in hand.mimic.items() if m in qs})

@@ -22,6 +22,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from ohra.sim.hands import SimHand
 from ohra.sim.rotation import observations as obs_terms
 from ohra.sim.rotation import rewards, termination
 from ohra.sim.rotation.config import RotationConfig
@@ -45,7 +46,7 @@ class InHandRotateEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
 
     def __init__(self, config: RotationConfig | dict | None = None, render_mode: str | None = None,
-                 grasps: GraspSet | None = None, hand=None, **overrides: Any):
+                 grasps: GraspSet | None = None, hand: SimHand | None = None, **overrides: Any):
         if isinstance(config, dict):
             config = RotationConfig.from_dict(config)
         cfg = (config or RotationConfig()).with_overrides(**overrides) if overrides else (config or RotationConfig())
