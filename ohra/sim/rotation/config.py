@@ -33,6 +33,7 @@ INERTIALS = ("capsule", "original")  # canonical finger masses: the template's c
 SPACES = ("canonical", "native")
 WORK_VELOCITIES = ("step", "instant")
 GRASP_HOLDS = ("canonical", "own")
+START_TARGETS = ("perturbed", "settled")
 
 # Settings added after rotation runs were saved, with the value those runs ran with: a saved config
 # without the key is read with this value (RotationConfig.from_saved), so resuming it changes nothing.
@@ -118,6 +119,11 @@ class RotationConfig:
     # object at q = 0 so the thumb never closes and one finger's middle joint bends backwards, leaving the
     # cube held by the thumb base alone (grasps.py). A canonical URDF always closes its own fingers.
     grasp_hold: str = "canonical"
+    # Motor targets at reset: "perturbed" = the perturbed pose the starting state settled under (a finger
+    # the object blocks keeps pressing: the start squeezes); "settled" = the settled joint angles, as
+    # HORA's reset does (targets = cached joint positions), so an episode starts without a squeeze and
+    # without the torque it costs. Same starting states either way.
+    start_targets: str = "perturbed"
 
     def __post_init__(self) -> None:
         if self.urdf not in URDF_KINDS:
@@ -129,6 +135,8 @@ class RotationConfig:
                                       "the original URDF has them already (use urdf='canonical')")
         if self.grasp_hold not in GRASP_HOLDS:
             raise RotationConfigError(f"grasp_hold must be one of {GRASP_HOLDS}, got {self.grasp_hold!r}")
+        if self.start_targets not in START_TARGETS:
+            raise RotationConfigError(f"start_targets must be one of {START_TARGETS}, got {self.start_targets!r}")
         if self.work_velocity not in WORK_VELOCITIES:
             raise RotationConfigError(f"work_velocity must be one of {WORK_VELOCITIES}, got {self.work_velocity!r}")
         if self.space is not None and self.space not in SPACES:

@@ -75,9 +75,11 @@ class InHandRotateEnv(gym.Env):
         i = int(options["grasp"]) if options and "grasp" in options else int(self.np_random.integers(len(self.grasps)))
         g = self.grasps
         self.scene.set_hand(g.q[i])
-        self.scene.drive(g.target[i])  # the motors continue the settled state exactly
+        # "perturbed": the motors continue the settled state exactly; "settled": they hold the joints where they are
+        target = g.target[i] if self.cfg.start_targets == "perturbed" else g.q[i]
+        self.scene.drive(target)
         self.scene.new_object(g.obj_pos[i], g.obj_quat[i])
-        self._target = np.clip(self.space.from_sim(g.target[i]), self._lo, self._hi)
+        self._target = np.clip(self.space.from_sim(target), self._lo, self._hi)
         self._q_start = self.space.from_sim(g.q[i])
         self._obj_start = np.asarray(g.obj_pos[i], dtype=float).copy()
         self._quat = np.asarray(g.obj_quat[i], dtype=float).copy()
