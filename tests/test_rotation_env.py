@@ -271,3 +271,24 @@ def test_env_simulates_a_hand_given_to_it_and_refuses_a_mismatched_kind(grasps):
         e.close()
     with pytest.raises(RotationConfigError, match="canonical hand but the config says urdf='original'"):
         resolve(RotationConfig(urdf="original"), hand=base)
+
+
+def test_settled_start_targets_hold_the_joints_where_the_starting_state_left_them(grasps):
+    """``start_targets="settled"`` (HORA's reset): the first targets are the settled joint angles, so a
+    finger the object blocks no longer presses; "perturbed" keeps the pose it settled under."""
+    pressed = int(np.argmax(np.abs(grasps.target - grasps.q).max(axis=1)))
+    assert np.abs(grasps.target[pressed] - grasps.q[pressed]).max() > 0.02  # a start that squeezes
+    tau = {}
+    for start in ("perturbed", "settled"):
+        e = InHandRotateEnv(CFG.with_overrides(start_targets=start), grasps=grasps)
+        try:
+            e.reset(options={"grasp": pressed})
+            want = grasps.q[pressed] if start == "settled" else grasps.target[pressed]
+            assert np.allclose(e.space.to_sim(e._target), np.clip(want, e.task.hand.lower, e.task.hand.upper))
+            _, _, _, _, info = e.step(np.zeros(e.action_space.shape))
+            tau[start] = info["reward/torque"]
+        finally:
+            e.close()
+    assert tau["settled"] < 0.5 * tau["perturbed"]
+    with pytest.raises(RotationConfigError, match="start_targets"):
+        RotationConfig(start_targets="relaxed")
