@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import warnings
+import xml.etree.ElementTree as ET
 
 import numpy as np
 import pybullet as pb
@@ -292,3 +293,16 @@ def test_settled_start_targets_hold_the_joints_where_the_starting_state_left_the
     assert tau["settled"] < 0.5 * tau["perturbed"]
     with pytest.raises(RotationConfigError, match="start_targets"):
         RotationConfig(start_targets="relaxed")
+
+
+def test_original_urdf_with_canonical_collisions_is_the_hybrid_hand(hands_dir):
+    """``collisions="canonical"`` simulates the original URDF carrying the canonical collision shapes
+    (capsules, no meshes or boxes), same driven joints; the canonical URDF refuses the setting."""
+    own = resolve(RotationConfig(urdf="original"))
+    hyb = resolve(RotationConfig(urdf="original", collisions="canonical"))
+    assert hyb.hand.joints == own.hand.joints and not hyb.hand.canonical
+    shapes = {g.tag for c in ET.fromstring(hyb.hand.urdf).iter("collision") for g in c.find("geometry")}
+    own_shapes = {g.tag for c in ET.fromstring(own.hand.urdf).iter("collision") for g in c.find("geometry")}
+    assert "capsule" in shapes and not shapes & {"mesh", "box"} and own_shapes & {"mesh", "box"}
+    with pytest.raises(RotationConfigError, match="collisions"):
+        RotationConfig(collisions="canonical")

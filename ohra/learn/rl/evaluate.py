@@ -216,7 +216,7 @@ def on_urdf(env_cfg: RotationConfig, urdf: str | None) -> RotationConfig:
     if urdf == "original":
         return dataclasses.replace(env_cfg, urdf="original", space="canonical", grasp_hold="canonical",
                                    inertials="capsule")
-    return dataclasses.replace(env_cfg, urdf=urdf, space=None)
+    return dataclasses.replace(env_cfg, urdf=urdf, space=None, collisions="own")
 
 
 def output_suffix(env_cfg: RotationConfig, urdf: str | None) -> str:

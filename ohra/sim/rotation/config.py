@@ -34,6 +34,7 @@ SPACES = ("canonical", "native")
 WORK_VELOCITIES = ("step", "instant")
 GRASP_HOLDS = ("canonical", "own")
 START_TARGETS = ("perturbed", "settled")
+COLLISIONS = ("own", "canonical")
 
 # Settings added after rotation runs were saved, with the value those runs ran with: a saved config
 # without the key is read with this value (RotationConfig.from_saved), so resuming it changes nothing.
@@ -68,6 +69,9 @@ class RotationConfig:
     hand: str = "leap_hand_right"
     urdf: str = "canonical"  # "canonical": the canonical URDF; "original": the hand's own URDF
     inertials: str = "capsule"  # canonical URDF only: "original" gives its fingers the original URDF's masses
+    # original URDF only: "canonical" swaps its collision shapes for the canonical hand's (the hybrid hand of
+    # ohra.sim.hybrid: original kinematics, limits, masses and inertias, canonical capsules and palm disc)
+    collisions: str = "own"
     form: str | None = None  # canonical form; None: extended when registered (closest to the original), else base
     space: str | None = None  # joint space of actions/observations: "canonical" (22) or "native" (the URDF's
     #                           driven joints); None: canonical for the canonical URDF, native for the original
@@ -135,6 +139,11 @@ class RotationConfig:
                                       "the original URDF has them already (use urdf='canonical')")
         if self.grasp_hold not in GRASP_HOLDS:
             raise RotationConfigError(f"grasp_hold must be one of {GRASP_HOLDS}, got {self.grasp_hold!r}")
+        if self.collisions not in COLLISIONS:
+            raise RotationConfigError(f"collisions must be one of {COLLISIONS}, got {self.collisions!r}")
+        if self.collisions == "canonical" and self.urdf != "original":
+            raise RotationConfigError("collisions='canonical' gives the original URDF the canonical collision shapes; "
+                                      "the canonical URDF has them already (use urdf='original')")
         if self.start_targets not in START_TARGETS:
             raise RotationConfigError(f"start_targets must be one of {START_TARGETS}, got {self.start_targets!r}")
         if self.work_velocity not in WORK_VELOCITIES:

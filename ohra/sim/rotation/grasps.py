@@ -180,7 +180,7 @@ def canonical_holding_pose(task: Task) -> np.ndarray:
     object and physics; the template's finger masses) closed onto the pinned object."""
     from ohra.sim.rotation.task import resolve
 
-    ctask = resolve(task.cfg.with_overrides(urdf="canonical", space=None, inertials="capsule"))
+    ctask = resolve(task.cfg.with_overrides(urdf="canonical", space=None, inertials="capsule", collisions="own"))
     scene = RotationScene(ctask.hand, ctask.obj, ctask.cfg, ctask.palm_radius)
     try:
         return ctask.hand.to_canonical(holding_pose(scene))

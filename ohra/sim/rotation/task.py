@@ -118,6 +118,10 @@ def resolve(cfg: RotationConfig, hand: SimHand | None = None) -> Task:
         if cfg.hand not in registry.registered_hands():
             raise HandNotFoundError(f"urdf='original' needs a registered hand with an original URDF, not {cfg.hand!r}")
         hand = SimHand.registered_original(cfg.hand, params.form)
+        if cfg.collisions == "canonical":
+            from ohra.sim.hybrid import with_canonical_collisions
+
+            hand, _ = with_canonical_collisions(hand, SimHand.from_params(params, name=f"{cfg.hand}:canonical"))
     if cfg.resolved_space == "canonical":
         space = JointSpace(tuple(_canonical_names()), hand.canon_lower.copy(), hand.canon_upper.copy(), True, hand)
     else:
