@@ -53,10 +53,12 @@ def main(argv: list[str] | None = None) -> int:
                   "envs": pol.ppo.n_envs, "seed": pol.ppo.seed}
         s = res.summary()
         cfg = pol.env_cfg
-        paper = PAPER.get(cfg.hand, {}).get(cfg.urdf)
-        data[label] = {"hand": cfg.hand, "urdf": cfg.urdf, "space": cfg.resolved_space, "summary": s, "budget": budget,
+        hybrid = cfg.collisions == "canonical"  # the original URDF with the canonical collision shapes
+        urdf = f"{cfg.urdf} + canonical collisions" if hybrid else cfg.urdf
+        paper = None if hybrid else PAPER.get(cfg.hand, {}).get(cfg.urdf)
+        data[label] = {"hand": cfg.hand, "urdf": urdf, "space": cfg.resolved_space, "summary": s, "budget": budget,
                        "per_episode": res.to_dict(), "paper": paper, "starting_grip": grip}
-        rows.append(f"| {label} | {cfg.hand} | {cfg.urdf} | {s['steps_to_fall_mean']:.1f} +- {s['steps_to_fall_std']:.1f} | "
+        rows.append(f"| {label} | {cfg.hand} | {urdf} | {s['steps_to_fall_mean']:.1f} +- {s['steps_to_fall_std']:.1f} | "
                     f"{s['rotation_mean']:.2f} +- {s['rotation_std']:.2f} | {100 * s['survived']:.0f} % | "
                     f"{budget['steps'] / 1e3:.0f}k steps, {budget['minutes']:.0f} min, seed {budget['seed']} | "
                     f"{'%.1f / %.2f' % paper if paper else '-'} |")
@@ -69,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
         data[label]["returns"], data[label]["zero_actions_returns"] = ret, zero_ret
         for name, r in ((label, ret), (f"{label} (zero actions)", zero_ret)):
             ret_rows.append(f"| {name} | {r['total']:.1f} | " + " | ".join(f"{r[k]:+.1f}" for k in TERMS) + " |")
-        rows.append(f"| (zero actions) | {cfg.hand} | {cfg.urdf} | {zero['steps_to_fall_mean']:.1f} +- "
+        rows.append(f"| (zero actions) | {cfg.hand} | {urdf} | {zero['steps_to_fall_mean']:.1f} +- "
                     f"{zero['steps_to_fall_std']:.1f} | {zero['rotation_mean']:.2f} +- {zero['rotation_std']:.2f} | "
                     f"{100 * zero['survived']:.0f} % | no training | - |")
         if cfg.urdf == "canonical" and not args.no_transfer:
@@ -116,7 +118,8 @@ def summary_cell(s: dict, sep: str = " / ") -> str:
 
 PRESSED = 0.05  # rad: a joint whose motor target lies this far past its settled angle is pressing on something
 GRIP_NOTE = ("every cached starting state; a finger the object blocks keeps its motor target inside the object, so "
-             "abs(target - q) measures how hard the start grasp squeezes")
+             "abs(target - q) measures how hard the start grasp squeezes; 0 for a run with start_targets='settled', "
+             "whose motors start at the settled angles")
 
 
 def starting_grip(pol) -> dict:
@@ -125,7 +128,9 @@ def starting_grip(pol) -> dict:
     from ohra.sim.rotation.task import resolve
 
     gs = pol.grasps if pol.grasps is not None else load_or_generate(resolve(pol.env_cfg))
-    gap = np.abs(np.asarray(gs.target) - np.asarray(gs.q))
+    # start_targets="settled" resets the motors to the settled angles: no joint starts pressed
+    target = gs.q if pol.env_cfg.start_targets == "settled" else gs.target
+    gap = np.abs(np.asarray(target) - np.asarray(gs.q))
     return {"states": int(len(gap)), "mean_gap_rad": float(gap.mean()), "max_gap_rad": float(gap.max(axis=1).mean()),
             "pressed_fraction": float((gap.max(axis=1) > PRESSED).mean())}
 
