@@ -130,24 +130,17 @@ class RotationConfig:
     start_targets: str = "perturbed"
 
     def __post_init__(self) -> None:
-        if self.urdf not in URDF_KINDS:
-            raise RotationConfigError(f"urdf must be one of {URDF_KINDS}, got {self.urdf!r}")
-        if self.inertials not in INERTIALS:
-            raise RotationConfigError(f"inertials must be one of {INERTIALS}, got {self.inertials!r}")
+        choices = {"urdf": URDF_KINDS, "inertials": INERTIALS, "grasp_hold": GRASP_HOLDS, "collisions": COLLISIONS,
+                   "start_targets": START_TARGETS, "work_velocity": WORK_VELOCITIES}
+        for name, allowed in choices.items():
+            if getattr(self, name) not in allowed:
+                raise RotationConfigError(f"{name} must be one of {allowed}, got {getattr(self, name)!r}")
         if self.inertials == "original" and self.urdf != "canonical":
             raise RotationConfigError("inertials='original' gives the canonical URDF the original's finger masses; "
                                       "the original URDF has them already (use urdf='canonical')")
-        if self.grasp_hold not in GRASP_HOLDS:
-            raise RotationConfigError(f"grasp_hold must be one of {GRASP_HOLDS}, got {self.grasp_hold!r}")
-        if self.collisions not in COLLISIONS:
-            raise RotationConfigError(f"collisions must be one of {COLLISIONS}, got {self.collisions!r}")
         if self.collisions == "canonical" and self.urdf != "original":
             raise RotationConfigError("collisions='canonical' gives the original URDF the canonical collision shapes; "
                                       "the canonical URDF has them already (use urdf='original')")
-        if self.start_targets not in START_TARGETS:
-            raise RotationConfigError(f"start_targets must be one of {START_TARGETS}, got {self.start_targets!r}")
-        if self.work_velocity not in WORK_VELOCITIES:
-            raise RotationConfigError(f"work_velocity must be one of {WORK_VELOCITIES}, got {self.work_velocity!r}")
         if self.space is not None and self.space not in SPACES:
             raise RotationConfigError(f"space must be one of {SPACES} or None, got {self.space!r}")
         if self.form is not None and self.form not in ("base", "extended"):
