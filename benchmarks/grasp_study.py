@@ -87,26 +87,30 @@ def trained(name: str, data: list[str], hands: list[str], args, condition: str =
 
 
 def evaluated(model, key: str, hands: list[str], objects: list, original: bool, protocol: Protocol, args,
-              inertials: str = "capsule", refine: bool = False) -> dict:
-    suffix = ("_original" if original else "") + ("_origmass" if inertials != "capsule" else "") + ("_refined" if refine else "")
+              inertials: str = "capsule", refine: bool = False, collisions: str = "own") -> dict:
+    suffix = (("_original" if original else "") + ("_hybrid" if collisions != "own" else "")
+              + ("_origmass" if inertials != "capsule" else "") + ("_refined" if refine else ""))
     path = Path(args.runs) / f"eval_{key}{suffix}.json"
     extra = {"inertials": inertials} if inertials != "capsule" else {}  # the capsule evaluations keep their keys
     if refine:
         extra["refine"] = RefineSettings()
+    if collisions != "own":  # the other evaluations keep their keys
+        extra["collisions"] = collisions
     ekey = eval_key(run_key(Path(args.runs) / key), hands=hands, objects=[o.name for o in objects], n=args.n, seed=0,
                     original=original, protocol=protocol, **extra)
     if (hit := cached(path, ekey)) is not None:
         return hit
     # an original-URDF evaluation made before Protocol.urdf_joint_damping: hands whose URDFs carry no
     # damping ran exactly as they would now; only the others are evaluated again
-    carry = carried_over(path, ekey, lambda h: not urdf_joint_damping(SimHand.registered_original(h).urdf)) if original else None
+    carry = (carried_over(path, ekey, lambda h: not urdf_joint_damping(SimHand.registered_original(h).urdf))
+             if original and collisions == "own" else None)
     kept = carry["hands"] if carry else []
     todo = [h for h in hands if h not in kept]
     t0 = time.perf_counter()
     out = {"per_hand": {}, "pairs": [], "success": {}}
     if todo:
         rep = evaluate_model(model, todo, objects, n=args.n, seed=0, original=original, protocol=protocol,
-                             workers=args.workers, inertials=inertials, refine=refine)
+                             workers=args.workers, inertials=inertials, refine=refine, collisions=collisions)
         out = {"per_hand": rep.per_hand(), "pairs": [{"hand": p.hand, "object": p.object, "successes": int(p.success.sum()),
                                                       "n": int(len(p.success))} for p in rep.pairs],
                "success": {p.hand + "/" + p.object: p.success.astype(int).tolist() for p in rep.pairs}}
@@ -195,6 +199,18 @@ def tables(res: dict) -> str:
     if rro:
         lines += ["", "Fingers refined: the same grasps with their fingers opened out of the object first (`refine=True`), "
                   "then simulated on the canonical and the original URDF."]
+    if um and (uh := res.get("unified_hybrid")):
+        lines += ["", "Table 4 attribution: the same grasps on four hands, each one step from the canonical hand to the "
+                  "original URDF (paired changes over the same grasps, points ± SE): the finger masses (canonical "
+                  "geometry, original masses), then the rest of the URDF but its link shapes (the hybrid hand, "
+                  "`ohra.sim.hybrid`: original kinematics, joint limits, masses and inertias carrying the canonical "
+                  "capsules and palm disc; `ohra grasp eval --original --collisions canonical`), then the link shapes", "",
+                  "| hand | canonical | + original masses | hybrid (original URDF, canonical shapes) | original | "
+                  "masses | rest of the URDF | link shapes | total |", "|---|---|---|---|---|---|---|---|---|"]
+        for h in res["hands"]:
+            steps = [paired_change(a, b, h) for a, b in ((u, um), (um, uh), (uh, uo), (u, uo))]
+            lines.append(f"| {h} | " + " | ".join(f"{100 * v['per_hand'][h]['success_rate']:.1f} %" for v in (u, um, uh, uo))
+                         + " | " + " | ".join(f"{c:+.1f} ± {se:.1f}" for c, se in steps) + " |")
     if um:
         lines += ["", "Finger masses: the sum over fingers of the links' `<inertial>` masses; canonical = the template's "
                   "capsules at 1000 kg/m^3, original = the original URDF's links moved by each finger "
@@ -298,6 +314,7 @@ def main() -> None:
     res["unified"] = evaluated(unified, "unified", args.hands, objects, False, protocol, args)
     res["unified_original"] = evaluated(unified, "unified", args.hands, objects, True, protocol, args)
     res["unified_origmass"] = evaluated(unified, "unified", args.hands, objects, False, protocol, args, inertials="original")
+    res["unified_hybrid"] = evaluated(unified, "unified", args.hands, objects, True, protocol, args, collisions="canonical")
     res["unified_refined"] = evaluated(unified, "unified", args.hands, objects, False, protocol, args, refine=True)
     res["unified_refined_original"] = evaluated(unified, "unified", args.hands, objects, True, protocol, args, refine=True)
     res["finger_masses"] = {h: {"canonical": SimHand.from_params(get_hand(h), name=h).finger_masses.tolist(),

@@ -72,3 +72,46 @@ def test_hands_of_the_wrong_kind_are_refused(leap):
     original, canonical, _, _ = leap
     with pytest.raises(GraspError, match="an original and a canonical hand"):
         with_canonical_collisions(canonical, original)
+
+
+def test_model_evaluation_replays_on_the_hybrid_on_request(tmp_path, monkeypatch):
+    """``evaluate_model(original=True, collisions="canonical")`` runs the same grasps on the hybrid of the
+    hand's original URDF: original joints and masses, the canonical capsules; refused without ``original``."""
+    pytest.importorskip("torch")
+    _require(hands_root())
+    import ohra.sim
+    from grasp_fixtures import tiny_model_config, tiny_train_config, write_dataset
+
+    from ohra.learn.grasp.evaluate import evaluate_model
+    from ohra.learn.grasp.train import train_grasp
+    from ohra.objects import ObjectModel
+
+    model = train_grasp(write_dataset(tmp_path), tiny_model_config(condition="params"), tiny_train_config(),
+                        progress=False).model
+    seen: list[SimHand] = []
+    real = ohra.sim.GraspEvaluator
+
+    class Spy(real):
+        def __init__(self, hand, *a, **kw):
+            seen.append(hand)
+            super().__init__(hand, *a, **kw)
+
+    monkeypatch.setattr(ohra.sim, "GraspEvaluator", Spy)
+    obj = ObjectModel.builtin("cylinder")
+    hyb = evaluate_model(model, ["barrett_hand"], [obj], n=2, original=True, collisions="canonical", allow_seen=True)
+    own = evaluate_model(model, ["barrett_hand"], [obj], n=2, original=True, allow_seen=True)
+    hybrid, original = seen
+    assert hybrid.name.endswith(":hybrid") and hybrid.joints == original.joints
+    np.testing.assert_array_equal(hybrid.finger_masses, original.finger_masses)
+
+    def shapes(hand: SimHand) -> set[str]:
+        return {g.tag for c in ET.fromstring(hand.urdf).iter("collision") for g in c.find("geometry")}
+
+    assert shapes(hybrid) == {"capsule", "cylinder"}  # finger capsules, palm disc
+    assert "mesh" in shapes(original) and "capsule" not in shapes(original)
+    np.testing.assert_array_equal(hyb.pairs[0].grasps, own.pairs[0].grasps)
+    assert hyb.meta["collisions"] == "canonical" and own.meta["collisions"] == "own"
+    with pytest.raises(GraspError, match="needs original=True"):
+        evaluate_model(model, ["barrett_hand"], [obj], n=1, collisions="canonical", allow_seen=True)
+    with pytest.raises(GraspError, match="collisions must be one of"):
+        evaluate_model(model, ["barrett_hand"], [obj], n=1, original=True, collisions="boxes", allow_seen=True)

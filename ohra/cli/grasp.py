@@ -4,7 +4,7 @@
                      [--encoder pointnet|dgcnn] [--steps N] [--batch-size B] [--seed S] [--threads T]
                      -o RUN [--resume]
     ohra grasp sample --hand H --object O [-n 100] [--seed S] [--refine] [--model RUN] -o grasps.npz
-    ohra grasp eval --hands H ... --objects O ... [-n 100] [--seed S] [--original | --inertials original] [--condition-hand H] [--refine] [--model RUN] [-o report.json]
+    ohra grasp eval --hands H ... --objects O ... [-n 100] [--seed S] [--original [--collisions canonical] | --inertials original] [--condition-hand H] [--refine] [--model RUN] [-o report.json]
 
 Plugged into :mod:`ohra.cli.main` by ``register(subparsers)`` (adds the ``grasp`` group and
 ``grasp`` under the ``train`` group, creating ``train`` if no other plugin did). torch is imported
@@ -53,6 +53,9 @@ def register(sub: Any) -> None:
     p.add_argument("--inertials", choices=("capsule", "original"), default="capsule",
                    help="finger masses of the canonical hand: the template's 1000 kg/m^3 capsules (default) or the "
                         "original URDF's (registered hands; geometry stays canonical)")
+    p.add_argument("--collisions", choices=("own", "canonical"), default="own",
+                   help="with --original: the original URDF's collision shapes (default) or the canonical capsules on "
+                        "its links (the hybrid hand: tells the link shapes' effect from the rest of the URDF's)")
     p.add_argument("--refine", action="store_true", help=REFINE_HELP)
     p.add_argument("--condition-hand", help="condition the model on this hand instead (paper Table 9); the grasps run on "
                    "the true hand, within its joint limits")
@@ -163,7 +166,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     rep = evaluate_model(model, args.hands, args.objects, n=args.n, seed=args.seed, original=args.original,
                          workers=args.workers, progress=not args.quiet, allow_seen=args.allow_seen,
                          protocol=Protocol.preset(args.protocol), inertials=args.inertials,
-                         condition_hand=args.condition_hand, refine=args.refine)
+                         condition_hand=args.condition_hand, refine=args.refine, collisions=args.collisions)
     if args.output:
         from ohra.data.dataset import atomic_write_json
 
@@ -174,7 +177,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
               f"({100 * p.success_rate:5.1f} %)  {1e3 * p.sample_seconds / len(p.success):6.2f} ms/grasp  "
               f"approach spread {d.get('approach_spread', float('nan')):.2f}")
     for h, r in rep.per_hand().items():
-        print(f"{h}: {100 * r['success_rate']:.1f} % of {r['n']} grasps{' (original URDF)' if args.original else ''}"
+        print(f"{h}: {100 * r['success_rate']:.1f} % of {r['n']} grasps{(' (original URDF, canonical collision shapes)' if args.collisions == 'canonical' else ' (original URDF)') if args.original else ''}"
               f"{' (canonical, original finger masses)' if args.inertials == 'original' and not args.original else ''}"
               f"{f' (model told {args.condition_hand})' if args.condition_hand else ''}")
     if args.output:

@@ -41,6 +41,7 @@ from ohra.learn.grasp.refine import RefineSettings, as_refine_settings
 
 
 INERTIALS = ("capsule", "original")  # finger masses of the canonical hand: template capsules, or the original URDF's
+COLLISIONS = ("own", "canonical")  # collision shapes of the original hand: its URDF's, or the canonical capsules (hybrid)
 
 
 def _spread(v: np.ndarray) -> float:
@@ -138,8 +139,13 @@ def check_unseen(model: GraspModel, objects: Sequence[Any]) -> None:
 def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequence[ObjectLike], n: int = 100,
                    seed: int = 0, original: bool = False, workers: int = 1, protocol: Any = None,
                    progress: bool = False, allow_seen: bool = False, inertials: str = "capsule",
-                   condition_hand: HandLike | None = None, refine: bool | RefineSettings = False) -> GraspEvalReport:
+                   condition_hand: HandLike | None = None, refine: bool | RefineSettings = False,
+                   collisions: str = "own") -> GraspEvalReport:
     """Sample ``n`` grasps per (hand, object) and run the six-direction test (module docstring).
+
+    ``collisions="canonical"`` (with ``original=True``): replay on the *hybrid* hand, the original URDF
+    (kinematics, limits, masses, inertias, action map) carrying the canonical collision shapes
+    (:mod:`ohra.sim.hybrid`), to tell what the original's link shapes do from what the rest of it does.
 
     ``condition_hand``: tell the model this hand instead of the true one (paper Table 9: does the
     condition matter?); the grasps keep the true hand's joint limits and run on the true hand.
@@ -154,6 +160,10 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
         raise GraspError("evaluation needs at least one hand and one object")
     if inertials not in INERTIALS:
         raise GraspError(f"inertials must be one of {INERTIALS}, got {inertials!r}")
+    if collisions not in COLLISIONS:
+        raise GraspError(f"collisions must be one of {COLLISIONS}, got {collisions!r}")
+    if collisions != "own" and not original:
+        raise GraspError("collisions='canonical' replays on the original URDF's hybrid: it needs original=True")
     objs = [resolve_object(o) for o in objects]
     if not allow_seen:
         check_unseen(model, objs)
@@ -165,11 +175,19 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
         params = resolve_hand(hand)
         name = hand if isinstance(hand, str) else getattr(hand, "name", "hand")
         movable = np.asarray(params.movable_joints)
+        hybrid = None
+        if original and collisions == "canonical":  # one fit per hand, shared by its objects
+            from ohra.sim.hybrid import with_canonical_collisions
+
+            hybrid, _ = with_canonical_collisions(SimHand.registered_original(name), SimHand.from_params(params, name=str(name)))
         for obj in objs:
             s = pair_seed(seed, str(name), obj.mesh_hash)
             timing: dict = {}
             grasps = model.sample(params, obj, int(n), seed=s, timing=timing, condition_hand=condition_hand, refine=refine)
-            sim_hand = SimHand.registered_original(name) if original else SimHand.from_params(params, name=str(name))
+            if hybrid is not None:
+                sim_hand = hybrid
+            else:
+                sim_hand = SimHand.registered_original(name) if original else SimHand.from_params(params, name=str(name))
             if inertials == "original" and not original:
                 sim_hand = sim_hand.with_finger_masses(original_finger_masses(name))
             t0 = time.perf_counter()
@@ -182,11 +200,12 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
                                     diversity(grasps[ok], movable), diversity(grasps, movable), timing.get("refine_seconds", 0.0)))
     cond = None if condition_hand is None else (condition_hand if isinstance(condition_hand, str) else hand_key(resolve_hand(condition_hand)))
     ref = None if (rs := as_refine_settings(refine)) is None else asdict(rs)
-    meta = {"n_per_pair": int(n), "seed": int(seed), "original": bool(original), "inertials": inertials, "condition_hand": cond,
+    meta = {"n_per_pair": int(n), "seed": int(seed), "original": bool(original), "inertials": inertials, "collisions": collisions,
+            "condition_hand": cond,
             "refine": ref,
             "model": str(model.path),
             "model_meta": model.meta, "protocol": protocol.__dict__ if protocol is not None else "default"}
     return GraspEvalReport(pairs, meta)
 
 
-__all__ = ["evaluate_model", "GraspEvalReport", "PairResult", "diversity", "pair_seed", "check_unseen"]
+__all__ = ["COLLISIONS", "evaluate_model", "GraspEvalReport", "PairResult", "diversity", "pair_seed", "check_unseen"]
