@@ -54,6 +54,9 @@ def test_ppo_settings_from_the_command_line_are_checked_and_refused_on_resume(tm
     assert main(["train", "-o", out, "--resume", "--ppo", "kl_target=null"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--resume" in err and not (tmp_path / "run").exists()
+    assert main(["train", "-o", out, "--resume", "--policy", "lstm"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--policy lstm" in err and "--resume" in err
 
 
 def test_ppo_settings_from_the_command_line_reach_training(tmp_path, monkeypatch):
@@ -72,7 +75,8 @@ def test_ppo_settings_from_the_command_line_reach_training(tmp_path, monkeypatch
     ppo = seen["ppo"]
     assert ppo.kl_target is None and ppo.learning_rate == 1e-4
     assert ppo.total_steps == 4096 and ppo.n_epochs == 5  # the rest keeps its flags and defaults
-    assert main(argv[:-4]) == 0 and seen["ppo"].kl_target == 0.02
+    assert main(argv[:-4]) == 0 and seen["ppo"].kl_target == 0.02 and seen["ppo"].policy == "mlp"
+    assert main(argv[:-4] + ["--policy", "lstm"]) == 0 and seen["ppo"].policy == "lstm"
 
 
 def test_eval_on_the_other_urdf_refuses_a_policy_of_the_original_joints(capsys):

@@ -146,3 +146,51 @@ def test_resume_drops_progress_rows_logged_after_the_checkpoint(tmp_path):
     lines = path.read_text().splitlines()
     assert lines[0] == rows[0] and [ln.split(",")[0] for ln in lines[1:]] == ["2048", "4096"]
     assert truncate_progress(tmp_path / "absent.csv", 0) == 0
+
+
+def test_a_recurrent_policy_trains_resumes_and_carries_its_state_within_an_episode_only(tiny):
+    """``policy="lstm"`` (sb3-contrib RecurrentPPO): trains and resumes like the MLP; the evaluated policy
+    feeds its LSTM state from step to step and starts every episode blank, so a seeded evaluation repeats
+    whatever state the policy was left in; an export reloads as the same recurrent policy."""
+    pytest.importorskip("sb3_contrib", reason="the recurrent policy needs sb3-contrib (rl extra)")
+    from dataclasses import replace
+
+    from sb3_contrib.common.recurrent.policies import RecurrentActorCriticPolicy
+
+    from ohra.learn.rl.evaluate import Policy, evaluate_policy, export_policy
+    from ohra.learn.rl.plots import read_progress
+
+    env_cfg, ppo, run = tiny
+    ppo = replace(ppo, policy="lstm", lstm_hidden=16, total_steps=24)
+    train_rotation(env_cfg, ppo, run)
+    train_rotation(env_cfg, with_budget(ppo, total_steps=48), run, resume=True)
+    assert list(read_progress(run)["timesteps"]) == [24, 48]
+    pol = Policy(run)
+    assert pol.recurrent and isinstance(pol._policy, RecurrentActorCriticPolicy)
+    assert pol._policy.lstm_actor.hidden_size == 16
+
+    env = pol.make_env()
+    obs, _ = env.reset(seed=10)
+    env.close()
+    first, second = pol(obs), pol(obs)
+    pol.reset()
+    assert not np.allclose(first, second)  # the second call saw the state the first one left
+    np.testing.assert_array_equal(pol(obs), first)  # reset: blank again
+
+    blank = evaluate_policy(Policy(run), env_cfg, episodes=2, seed=10)
+    for _ in range(5):
+        pol(obs)  # a state left over from elsewhere
+    again = evaluate_policy(pol, env_cfg, episodes=2, seed=10)
+    assert again.cumulative_rotation == blank.cumulative_rotation and again.steps_to_fall == blank.steps_to_fall
+    small = Policy(export_policy(run, run.parent / "export"))
+    assert small.recurrent and evaluate_policy(small, env_cfg, episodes=2, seed=10).cumulative_rotation == blank.cumulative_rotation
+
+
+def test_the_recurrent_option_is_a_checked_setting():
+    with pytest.raises(RLConfigError, match=r"policy must be one of \('mlp', 'lstm'\), got 'gru'"):
+        PPOSettings(policy="gru")
+    with pytest.raises(RLConfigError, match="lstm_hidden must be >= 1"):
+        PPOSettings(policy="lstm", lstm_hidden=0)
+    old = PPOSettings().to_dict()
+    del old["policy"], old["lstm_hidden"]  # a run saved before the option reads back as an MLP run
+    assert PPOSettings.from_dict(old).policy == "mlp"

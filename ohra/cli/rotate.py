@@ -73,6 +73,8 @@ def register(sub: Any) -> None:
     p.add_argument("--n-steps", type=int, default=d.n_steps, help=f"steps per env per rollout (default {d.n_steps})")
     p.add_argument("--batch-size", type=int, default=d.batch_size)
     p.add_argument("--checkpoint-every", type=int, default=d.checkpoint_every, help="steps between checkpoints")
+    p.add_argument("--policy", choices=("mlp", "lstm"), help=f"policy network: MLP {'-'.join(map(str, d.net_arch))} "
+                   f"(default) or a recurrent one, an LSTM of {d.lstm_hidden} units before it (sb3-contrib RecurrentPPO)")
     p.add_argument("--ppo", action="append", default=[], metavar="KEY=JSON",
                    help="any other PPOSettings field, e.g. --ppo kl_target=null for a constant learning rate (repeatable; "
                         "not with --resume: a resumed run keeps its settings)")
@@ -119,8 +121,9 @@ def _cmd_train(args: argparse.Namespace) -> int:
     out = Path(args.output)
     extra = _key_values(args.ppo, "--ppo", RLConfigError)
     if args.resume:
-        if extra:
-            raise RLConfigError(f"--ppo {' '.join(args.ppo)}: a resumed run keeps the PPO settings in {out / 'config.json'}; "
+        if extra or args.policy:
+            given = f"--ppo {' '.join(args.ppo)}" if extra else f"--policy {args.policy}"
+            raise RLConfigError(f"{given}: a resumed run keeps the PPO settings in {out / 'config.json'}; "
                                 "only --steps and --minutes change on --resume")
         env_cfg, ppo = load_run(out)
         ppo = with_budget(ppo, args.steps, args.minutes)
@@ -128,7 +131,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         env_cfg = _env_config(args)
         base = {"total_steps": args.steps or PPOSettings().total_steps, "max_minutes": args.minutes, "seed": args.seed,
                 "n_envs": args.envs, "n_steps": args.n_steps, "batch_size": args.batch_size,
-                "checkpoint_every": args.checkpoint_every}
+                "checkpoint_every": args.checkpoint_every, **({"policy": args.policy} if args.policy else {})}
         ppo = PPOSettings.from_dict({**base, **extra}, "command line (--ppo)")
     path = train_rotation(env_cfg, ppo, out, resume=args.resume, verbose=0)
     print(f"wrote {path}")

@@ -12,6 +12,10 @@ starts at std 1 (10^9 samples to shrink it); with std 1 the targets random-walk 
 (0.3 x sum of squared deviations, growing with the walk) dominates: measured on LEAP, returns fell
 from -230 to -1000 over the first 100k steps, while a policy that holds still scores ~0. At std 0.2
 (log -1.6) that noise costs ~-27 per 400-step episode, so the rotation term is visible from the start.
+
+``policy="lstm"``: a recurrent policy, sb3-contrib's ``RecurrentPPO`` (the paper's policy has a GRU;
+sb3-contrib offers an LSTM only): observations -> LSTM of ``lstm_hidden`` units (actor and critic
+each their own) -> the ``net_arch`` MLP. Same adaptive learning rate and other settings.
 """
 
 from __future__ import annotations
@@ -24,6 +28,9 @@ from ohra.errors import OhraError, reject_unknown
 
 class RLConfigError(OhraError, ValueError):
     """A PPO setting is unknown or out of range."""
+
+
+POLICIES = ("mlp", "lstm")
 
 
 @dataclass(frozen=True)
@@ -53,6 +60,8 @@ class PPOSettings:
     normalize_reward: bool = True
     checkpoint_every: int = 50_000  # steps
     threads: int = 1  # torch CPU threads in the learner
+    policy: str = "mlp"  # "mlp" (SB3 PPO) or "lstm" (sb3-contrib RecurrentPPO; needs the rl extra's sb3-contrib)
+    lstm_hidden: int = 256  # units of each LSTM (policy="lstm")
 
     def __post_init__(self) -> None:
         for name in ("learning_rate", "clip_range", "gamma", "gae_lambda", "ent_coef", "vf_coef", "max_grad_norm", "log_std_init"):
@@ -62,7 +71,9 @@ class PPOSettings:
             raise RLConfigError(f"PPOSettings.learning_rate must be > 0, got {self.learning_rate}")
         if self.kl_target is not None and (not isinstance(self.kl_target, (int, float)) or not self.kl_target > 0):
             raise RLConfigError(f"PPOSettings.kl_target must be > 0 or None (constant learning rate), got {self.kl_target!r}")
-        for name in ("total_steps", "n_envs", "n_steps", "batch_size", "n_epochs", "checkpoint_every", "threads"):
+        if self.policy not in POLICIES:
+            raise RLConfigError(f"PPOSettings.policy must be one of {POLICIES}, got {self.policy!r}")
+        for name in ("total_steps", "n_envs", "n_steps", "batch_size", "n_epochs", "checkpoint_every", "threads", "lstm_hidden"):
             if int(getattr(self, name)) < 1:
                 raise RLConfigError(f"PPOSettings.{name} must be >= 1, got {getattr(self, name)}")
         if (self.n_envs * self.n_steps) % self.batch_size:

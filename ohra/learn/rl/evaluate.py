@@ -69,6 +69,9 @@ class Policy:
     ``run_dir`` is a training run (``model.zip`` + ``vecnormalize.pkl``, or with ``which="last"`` the
     last checkpoint) or an exported policy (:func:`export_policy`: ``policy.pth`` + ``obs_stats.npz``,
     no optimizer state, no pickles). ``grasps`` holds the starting states shipped with an export.
+
+    A recurrent policy (``PPOSettings.policy="lstm"``) carries its LSTM state from call to call;
+    :meth:`reset` clears it at the start of each episode (:func:`run_episode` does).
     """
 
     def __init__(self, run_dir: str | Path, which: str = "model"):
@@ -78,12 +81,16 @@ class Policy:
         self.env_cfg, self.ppo = load_run(run)
         self.grasps = None
         self._mean = self._var = None
+        self.reset()
         if (run / "policy.pth").is_file():
-            from stable_baselines3.common.policies import ActorCriticPolicy
-
             from ohra.sim.rotation.grasps import GraspSet
 
-            self._policy = ActorCriticPolicy.load(str(run / "policy.pth"), device="cpu")
+            if self.recurrent:
+                from sb3_contrib.common.recurrent.policies import RecurrentActorCriticPolicy as policy_class
+            else:
+                from stable_baselines3.common.policies import ActorCriticPolicy as policy_class
+
+            self._policy = policy_class.load(str(run / "policy.pth"), device="cpu")
             st = np.load(run / "obs_stats.npz")
             self._mean, self._var, self._clip, self._eps = st["mean"], st["var"], float(st["clip"]), float(st["eps"])
             if (run / "grasps.npz").is_file():
@@ -98,7 +105,7 @@ class Policy:
             raise CheckpointError(f"no trained policy at {zip_path}")
         from ohra.learn.rl.train import ppo_class
 
-        self._policy = ppo_class().load(zip_path, device="cpu").policy
+        self._policy = ppo_class(self.ppo.policy).load(zip_path, device="cpu").policy
         if stats.is_file():
             import pickle
 
@@ -106,6 +113,14 @@ class Policy:
                 vn = pickle.load(fh)
             if vn.norm_obs:
                 self._mean, self._var, self._clip, self._eps = vn.obs_rms.mean, vn.obs_rms.var, vn.clip_obs, vn.epsilon
+
+    @property
+    def recurrent(self) -> bool:
+        return self.ppo.policy != "mlp"
+
+    def reset(self) -> None:
+        """Forget the recurrent state (a new episode starts); nothing to do for an MLP policy."""
+        self._state, self._start = None, True
 
     @property
     def space_dim(self) -> int:
@@ -118,7 +133,12 @@ class Policy:
         return np.clip((obs - self._mean) / np.sqrt(self._var + self._eps), -self._clip, self._clip)
 
     def __call__(self, obs: np.ndarray, deterministic: bool = True) -> np.ndarray:
-        action, _ = self._policy.predict(self.normalize(obs).astype(np.float32), deterministic=deterministic)
+        x = self.normalize(obs).astype(np.float32)
+        if not self.recurrent:
+            return self._policy.predict(x, deterministic=deterministic)[0]
+        action, self._state = self._policy.predict(x, state=self._state, episode_start=np.array([self._start]),
+                                                   deterministic=deterministic)
+        self._start = False
         return action
 
     def make_env(self, render_mode: str | None = None, urdf: str | None = None):
@@ -142,13 +162,26 @@ def export_policy(run_dir: str | Path, out_dir: str | Path, which: str = "model"
     run, out = Path(run_dir), Path(out_dir)
     pol = Policy(run, which)
     out.mkdir(parents=True, exist_ok=True)
-    pol._policy.save(str(out / "policy.pth"))
+    _save_policy(pol._policy, out / "policy.pth")
     np.savez(out / "obs_stats.npz", mean=pol._mean, var=pol._var, clip=pol._clip, eps=pol._eps)
     load_or_generate(resolve(pol.env_cfg)).save(out / "grasps.npz")
     for name in ("config.json", "progress.csv", "eval.json"):
         if (run / name).is_file():
             shutil.copy(run / name, out / name)
     return out
+
+
+def _save_policy(policy, path: Path) -> None:
+    """SB3's ``policy.save``, plus the LSTM shape a recurrent policy's saved constructor arguments leave out
+    (sb3-contrib's ``RecurrentActorCriticPolicy`` would otherwise reload at its default 256 units)."""
+    import torch
+
+    data = policy._get_constructor_parameters()
+    lstm = getattr(policy, "lstm_actor", None)
+    if lstm is not None:
+        data.update(lstm_hidden_size=lstm.hidden_size, n_lstm_layers=lstm.num_layers,
+                    shared_lstm=policy.shared_lstm, enable_critic_lstm=policy.lstm_critic is not None)
+    torch.save({"state_dict": policy.state_dict(), "data": data}, path)
 
 
 def run_episode(env, policy, seed: int, frames_every: int = 0, render=None) -> dict:
@@ -160,6 +193,8 @@ def run_episode(env, policy, seed: int, frames_every: int = 0, render=None) -> d
     weights = {k: getattr(env.cfg.weights, k) for k in TERMS}
     returns = dict.fromkeys(TERMS, 0.0)
     obs, info = env.reset(seed=seed)
+    if hasattr(policy, "reset"):  # a recurrent policy starts each episode from a blank state
+        policy.reset()
     frames, traj = [], {"q": [env.scene.read().q], "obj_pos": [env.scene.read().obj_pos],
                         "obj_quat": [env.scene.read().obj_quat]}
     if frames_every:

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from ohra.io import folder_lock
-from ohra.learn.rl.config import PPOSettings, RLConfigError
+from ohra.learn.rl.config import POLICIES, PPOSettings, RLConfigError
 from ohra.sim.rotation.config import RotationConfig
 
 CSV_FIELDS = ("timesteps", "wall_s", "episodes", "ep_reward_mean", "ep_length_mean", "rotation_mean",
@@ -63,11 +63,36 @@ class _AdaptiveLR:
         return self.lr
 
 
-def ppo_class():
-    """PPO with rl_games' adaptive learning rate (a factory, so that importing this module needs no SB3)."""
-    from stable_baselines3 import PPO
+def ppo_class(policy: str = "mlp"):
+    """PPO with rl_games' adaptive learning rate (a factory, so that importing this module needs no SB3):
+    SB3's ``PPO`` for ``policy="mlp"``, sb3-contrib's ``RecurrentPPO`` for ``"lstm"``."""
+    if policy not in _PPO_CLASSES:
+        _PPO_CLASSES[policy] = _adaptive(_base_class(policy))
+    return _PPO_CLASSES[policy]
 
-    class AdaptiveKLPPO(PPO):
+
+_PPO_CLASSES: dict = {}
+
+
+def _base_class(policy: str):
+    if policy == "mlp":
+        from stable_baselines3 import PPO
+
+        return PPO
+    if policy == "lstm":
+        try:
+            from sb3_contrib import RecurrentPPO
+        except ImportError:  # pragma: no cover - exercised only without the extra
+            from ohra.learn import MissingDependencyError
+
+            raise MissingDependencyError("policy 'lstm' needs sb3-contrib (RecurrentPPO); install it with "
+                                         "`pip install ohra[learn,rl]`") from None
+        return RecurrentPPO
+    raise RLConfigError(f"policy must be one of {POLICIES}, got {policy!r}")
+
+
+def _adaptive(base):
+    class AdaptiveKLPPO(base):
         """After every update: lr / 1.5 if the mean KL exceeded 2 x ``kl_target``, x 1.5 below half of it."""
 
         def __init__(self, *args, kl_target: float | None = 0.02, lr_bounds=(1e-6, 1e-2), **kwargs):
@@ -85,6 +110,7 @@ def ppo_class():
             if self.kl_target is not None and kl is not None:
                 self.lr_schedule.lr = adapt_learning_rate(self.lr_schedule.lr, float(kl), self.kl_target, self.lr_bounds)
 
+    AdaptiveKLPPO.__name__ = AdaptiveKLPPO.__qualname__ = f"AdaptiveKL{base.__name__}"
     return AdaptiveKLPPO
 
 
@@ -230,7 +256,7 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
             _write_config(run_dir, env_cfg, ppo)
         set_random_seed(ppo.seed)
         venv = _vec_env(env_cfg, ppo)
-        cls = ppo_class()
+        cls = ppo_class(ppo.policy)
         wall_before = 0.0
         if resume:
             venv = VecNormalize.load(str(run_dir / "checkpoints" / "last_vecnormalize.pkl"), venv)
@@ -258,12 +284,14 @@ def _new_model(cls, venv, ppo: PPOSettings, verbose: int):
 
     act = {"elu": nn.ELU, "relu": nn.ReLU, "tanh": nn.Tanh}[ppo.activation]
     arch = list(ppo.net_arch)
-    return cls("MlpPolicy", venv, learning_rate=ppo.learning_rate, n_steps=ppo.n_steps, batch_size=ppo.batch_size,
+    policy_kwargs = {"net_arch": {"pi": arch, "vf": arch}, "activation_fn": act, "log_std_init": ppo.log_std_init}
+    if ppo.policy == "lstm":
+        policy_kwargs.update(lstm_hidden_size=ppo.lstm_hidden, n_lstm_layers=1, shared_lstm=False, enable_critic_lstm=True)
+    return cls("MlpLstmPolicy" if ppo.policy == "lstm" else "MlpPolicy", venv, learning_rate=ppo.learning_rate, n_steps=ppo.n_steps, batch_size=ppo.batch_size,
                n_epochs=ppo.n_epochs, gamma=ppo.gamma, gae_lambda=ppo.gae_lambda, clip_range=ppo.clip_range,
                ent_coef=ppo.ent_coef, vf_coef=ppo.vf_coef, max_grad_norm=ppo.max_grad_norm, target_kl=None,
                kl_target=ppo.kl_target, lr_bounds=ppo.lr_bounds, seed=ppo.seed, device="cpu", verbose=verbose,
-               policy_kwargs={"net_arch": {"pi": arch, "vf": arch}, "activation_fn": act,
-                              "log_std_init": ppo.log_std_init})
+               policy_kwargs=policy_kwargs)
 
 
 def _plain(d: dict) -> dict:
