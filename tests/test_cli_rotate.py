@@ -87,3 +87,18 @@ def test_eval_on_the_other_urdf_refuses_a_policy_of_the_original_joints(capsys):
     assert main(["eval", str(run), "--on-urdf", "canonical", "--episodes", "1"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "canonical joint space" in err and not (run / "eval_on_canonical.json").exists()
+
+
+def test_ohra_train_rotate_is_ohra_rotate_train(tmp_path, monkeypatch):
+    """The issue's spelling, ``ohra train rotate``, beside ``ohra train vae|grasp``: same options, same call."""
+    pytest.importorskip("stable_baselines3", reason="ohra rotate train needs stable-baselines3")
+    import ohra.learn.rl.train as rl_train
+    from ohra.cli.main import main as ohra_main
+
+    calls = []
+    monkeypatch.setattr(rl_train, "train_rotation", lambda env_cfg, ppo, out, resume=False, verbose=0: calls.append(
+        (env_cfg, ppo, str(out), resume)) or out)
+    flags = ["--hand", "shadow_hand_right", "--urdf", "original", "--steps", "4096", "--policy", "lstm", "-o", str(tmp_path / "r")]
+    assert ohra_main(["train", "rotate", *flags]) == 0
+    assert ohra_main(["rotate", "train", *flags]) == 0
+    assert calls[0] == calls[1] and calls[0][0].hand == "shadow_hand_right" and calls[0][1].policy == "lstm"

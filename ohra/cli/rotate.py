@@ -1,4 +1,4 @@
-"""``ohra rotate grasps|train|eval|plot``: in-hand rotation from the shell.
+"""``ohra rotate grasps|train|eval|plot`` (training also as ``ohra train rotate``): in-hand rotation from the shell.
 
 Plugged into :mod:`ohra.cli.main` through ``register(subparsers)``; every parser sets
 ``func(args) -> int``. Also runnable alone: ``python -m ohra.cli.rotate train ...``.
@@ -52,19 +52,14 @@ def _key_values(items: Sequence[str], flag: str, error: type[OhraError]) -> dict
     return kw
 
 
-def register(sub: Any) -> None:
+TRAIN_HELP = "train a PPO rotation policy (resumable)"
+
+
+def _train_args(p: argparse.ArgumentParser) -> None:
+    """``ohra rotate train`` = ``ohra train rotate``."""
     from ohra.learn.rl.config import PPOSettings
 
     d = PPOSettings()
-    rot = sub.add_parser("rotate", help="in-hand rotation: starting grasps, PPO training, evaluation")
-    rs = rot.add_subparsers(dest="rotate_command", metavar="WHAT", parser_class=type(rot))
-    rs.required = True
-
-    p = rs.add_parser("grasps", help="generate (or load) the cached starting states and print where they are")
-    _env_args(p)
-    p.set_defaults(func=_cmd_grasps)
-
-    p = rs.add_parser("train", help="train a PPO rotation policy (resumable)")
     _env_args(p)
     p.add_argument("--steps", type=int, help=f"total env steps (default {d.total_steps}; on --resume: the run's)")
     p.add_argument("--minutes", type=float, help="wall-clock budget over all sessions (stops and saves)")
@@ -81,6 +76,23 @@ def register(sub: Any) -> None:
     p.add_argument("-o", "--output", required=True, help="run directory")
     p.add_argument("--resume", action="store_true", help="continue OUTPUT from its last checkpoint")
     p.set_defaults(func=_cmd_train)
+
+
+def register(sub: Any) -> None:
+    from ohra.cli.main import subcommand_group
+
+    rot = sub.add_parser("rotate", help="in-hand rotation: starting grasps, PPO training, evaluation")
+    rs = rot.add_subparsers(dest="rotate_command", metavar="WHAT", parser_class=type(rot))
+    rs.required = True
+
+    p = rs.add_parser("grasps", help="generate (or load) the cached starting states and print where they are")
+    _env_args(p)
+    p.set_defaults(func=_cmd_grasps)
+
+    _train_args(rs.add_parser("train", help=TRAIN_HELP))
+    # the same command under the train group, beside ``ohra train vae`` and ``ohra train grasp``
+    _train_args(subcommand_group(sub, "train", "train learned models (vae, grasp, rotate)", "train_command")
+                .add_parser("rotate", help=TRAIN_HELP))
 
     p = rs.add_parser("eval", help="Steps-to-Fall and Cumulative Rotation of a trained run; renders an episode")
     p.add_argument("run", help="run directory")
