@@ -41,8 +41,8 @@ setup(
         # a cluster backend for dataset builds and evaluation (the default is a local process pool)
         "ray": ["ray>=2.9"],
         # in-hand rotation: the Gymnasium env (gymnasium) and PPO training (stable-baselines3, needs torch;
-        # sb3-contrib for the recurrent policy option)
-        "rl": ["gymnasium>=1.0", "stable-baselines3>=2.3", "sb3-contrib>=2.3"],
+        # sb3-contrib for the recurrent policy option, tensorboard for the optional training logs)
+        "rl": ["gymnasium>=1.0", "stable-baselines3>=2.3", "sb3-contrib>=2.3", "tensorboard>=2.10"],
         "dev": ["pytest>=7", "pytest-xdist>=3", "hypothesis>=6", "nbclient>=0.8", "nbformat>=5", "ipykernel>=6"],
     },
     entry_points={"console_scripts": ["ohra=ohra.cli:main"]},

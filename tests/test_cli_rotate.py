@@ -65,8 +65,8 @@ def test_ppo_settings_from_the_command_line_reach_training(tmp_path, monkeypatch
 
     seen = {}
 
-    def fake_train(env_cfg, ppo, out, resume=False, verbose=0):
-        seen.update(ppo=ppo, resume=resume)
+    def fake_train(env_cfg, ppo, out, resume=False, verbose=0, tensorboard=False):
+        seen.update(ppo=ppo, resume=resume, tensorboard=tensorboard)
         return out
 
     monkeypatch.setattr(rl_train, "train_rotation", fake_train)
@@ -76,7 +76,8 @@ def test_ppo_settings_from_the_command_line_reach_training(tmp_path, monkeypatch
     assert ppo.kl_target is None and ppo.learning_rate == 1e-4
     assert ppo.total_steps == 4096 and ppo.n_epochs == 5  # the rest keeps its flags and defaults
     assert main(argv[:-4]) == 0 and seen["ppo"].kl_target == 0.02 and seen["ppo"].policy == "mlp"
-    assert main(argv[:-4] + ["--policy", "lstm"]) == 0 and seen["ppo"].policy == "lstm"
+    assert main(argv[:-4] + ["--policy", "lstm"]) == 0 and seen["ppo"].policy == "lstm" and not seen["tensorboard"]
+    assert main(argv[:-4] + ["--tensorboard"]) == 0 and seen["tensorboard"]
 
 
 def test_eval_on_the_other_urdf_refuses_a_policy_of_the_original_joints(capsys):
@@ -96,8 +97,8 @@ def test_ohra_train_rotate_is_ohra_rotate_train(tmp_path, monkeypatch):
     from ohra.cli.main import main as ohra_main
 
     calls = []
-    monkeypatch.setattr(rl_train, "train_rotation", lambda env_cfg, ppo, out, resume=False, verbose=0: calls.append(
-        (env_cfg, ppo, str(out), resume)) or out)
+    monkeypatch.setattr(rl_train, "train_rotation", lambda env_cfg, ppo, out, resume=False, verbose=0, tensorboard=False:
+                        calls.append((env_cfg, ppo, str(out), resume)) or out)
     flags = ["--hand", "shadow_hand_right", "--urdf", "original", "--steps", "4096", "--policy", "lstm", "-o", str(tmp_path / "r")]
     assert ohra_main(["train", "rotate", *flags]) == 0
     assert ohra_main(["rotate", "train", *flags]) == 0

@@ -162,9 +162,20 @@ def test_a_recurrent_policy_trains_resumes_and_carries_its_state_within_an_episo
 
     env_cfg, ppo, run = tiny
     ppo = replace(ppo, policy="lstm", lstm_hidden=16, total_steps=24)
-    train_rotation(env_cfg, ppo, run)
-    train_rotation(env_cfg, with_budget(ppo, total_steps=48), run, resume=True)
+    train_rotation(env_cfg, ppo, run, tensorboard=True)
+    train_rotation(env_cfg, with_budget(ppo, total_steps=48), run, resume=True, tensorboard=True)
     assert list(read_progress(run)["timesteps"]) == [24, 48]
+    # TensorBoard: one event stream continued by the resume, SB3's scalars and the rotation per episode
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    assert [p.name for p in (run / "tensorboard").iterdir()] == ["ppo_0"]
+    steps = {}
+    for f in sorted((run / "tensorboard" / "ppo_0").glob("events.*")):
+        acc = EventAccumulator(str(f))
+        acc.Reload()
+        for tag in ("rollout/rotation_mean", "rollout/ep_rew_mean"):
+            steps.setdefault(tag, []).extend(e.step for e in acc.Scalars(tag))
+    assert steps["rollout/rotation_mean"] == [24, 48] and steps["rollout/ep_rew_mean"] == [24, 48]
     pol = Policy(run)
     assert pol.recurrent and isinstance(pol._policy, RecurrentActorCriticPolicy)
     assert pol._policy.lstm_actor.hidden_size == 16

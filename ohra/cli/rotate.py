@@ -75,6 +75,7 @@ def _train_args(p: argparse.ArgumentParser) -> None:
                         "not with --resume: a resumed run keeps its settings)")
     p.add_argument("-o", "--output", required=True, help="run directory")
     p.add_argument("--resume", action="store_true", help="continue OUTPUT from its last checkpoint")
+    p.add_argument("--tensorboard", action="store_true", help="also log to OUTPUT/tensorboard (tensorboard --logdir OUTPUT)")
     p.set_defaults(func=_cmd_train)
 
 
@@ -145,7 +146,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
                 "n_envs": args.envs, "n_steps": args.n_steps, "batch_size": args.batch_size,
                 "checkpoint_every": args.checkpoint_every, **({"policy": args.policy} if args.policy else {})}
         ppo = PPOSettings.from_dict({**base, **extra}, "command line (--ppo)")
-    path = train_rotation(env_cfg, ppo, out, resume=args.resume, verbose=0)
+    path = train_rotation(env_cfg, ppo, out, resume=args.resume, verbose=0, tensorboard=args.tensorboard)
     print(f"wrote {path}")
     return 0
 

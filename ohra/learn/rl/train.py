@@ -7,6 +7,8 @@ Run directory::
     RUN/checkpoints/last.zip        model, rewritten atomically every ``checkpoint_every`` steps
     RUN/checkpoints/last_vecnormalize.pkl, last.json (steps, wall seconds so far)
     RUN/model.zip, RUN/vecnormalize.pkl   the final policy and its observation statistics
+    RUN/tensorboard/ppo_0/events.*  with ``tensorboard=True``: SB3's training scalars and the rotation
+                                    per episode, one event file continued by every resume
 
 ``resume=True`` continues from ``checkpoints/last.zip`` up to ``total_steps`` (or until the
 ``max_minutes`` budget, counted over all sessions, is spent); the env config must be the same.
@@ -141,6 +143,8 @@ def _callback(run_dir: Path, ppo: PPOSettings, wall_before: float):
             return ppo.max_minutes is None or self.wall() < 60.0 * ppo.max_minutes
 
         def _on_rollout_end(self) -> None:
+            if self.ep_rot:  # to TensorBoard too (when on) with SB3's own scalars
+                self.logger.record("rollout/rotation_mean", _mean(self.ep_rot))
             log = self.model.logger.name_to_value  # the previous update's values (dumped after this rollout)
             row = {"timesteps": self.num_timesteps, "wall_s": round(self.wall(), 2), "episodes": len(self.ep_r),
                    "ep_reward_mean": _mean(self.ep_r), "ep_length_mean": _mean(self.ep_l),
@@ -227,8 +231,9 @@ def _check_resume(run_dir: Path, env_cfg: RotationConfig, ppo: PPOSettings) -> N
 
 
 def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Path, resume: bool = False,
-                   verbose: int = 0) -> Path:
+                   verbose: int = 0, tensorboard: bool = False) -> Path:
     """Train (or resume) a PPO rotation policy into ``run_dir``; returns the final model path.
+    ``tensorboard``: also log to ``run_dir/tensorboard`` (needs the ``tensorboard`` package; rl extra).
 
     Raises:
         RLConfigError: nothing to resume, or a fresh run into a folder that holds one.
@@ -248,6 +253,9 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
     if not resume and (run_dir / "config.json").is_file():
         raise RLConfigError(f"{run_dir} already holds a run; pass resume=True (--resume) or choose another folder")
     torch.set_num_threads(ppo.threads)
+    tb_dir = str(run_dir / "tensorboard") if tensorboard else None
+    if tensorboard:
+        _require_tensorboard()
     load_or_generate(resolve(env_cfg), progress=verbose > 0)  # once here, not in every worker
     with folder_lock(run_dir, "rotation training run"):  # one writer per run folder
         if resume:
@@ -260,17 +268,17 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
         wall_before = 0.0
         if resume:
             venv = VecNormalize.load(str(run_dir / "checkpoints" / "last_vecnormalize.pkl"), venv)
-            model = cls.load(last, env=venv, device="cpu")
+            model = cls.load(last, env=venv, device="cpu", tensorboard_log=tb_dir)
             wall_before = json.loads((run_dir / "checkpoints" / "last.json").read_text())["wall_s"]
             # rows logged after the checkpoint by an interrupted session are redone from it
             truncate_progress(run_dir / "progress.csv", int(model.num_timesteps))
         else:
             venv = VecNormalize(venv, norm_obs=ppo.normalize_obs, norm_reward=ppo.normalize_reward, gamma=ppo.gamma)
-            model = _new_model(cls, venv, ppo, verbose)
+            model = _new_model(cls, venv, ppo, verbose, tb_dir)
         try:
             cb = _callback(run_dir, ppo, wall_before)
             remaining = max(0, ppo.total_steps - model.num_timesteps)
-            model.learn(total_timesteps=remaining, callback=cb, reset_num_timesteps=False)
+            model.learn(total_timesteps=remaining, callback=cb, reset_num_timesteps=False, tb_log_name="ppo")
             save_checkpoint(model, run_dir, cb.wall())
             model.save(run_dir / "model.zip")
             model.get_vec_normalize_env().save(str(run_dir / "vecnormalize.pkl"))
@@ -279,7 +287,16 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
         return run_dir / "model.zip"
 
 
-def _new_model(cls, venv, ppo: PPOSettings, verbose: int):
+def _require_tensorboard() -> None:
+    try:
+        from torch.utils.tensorboard import SummaryWriter  # noqa: F401
+    except ImportError:  # pragma: no cover - exercised only without the package
+        from ohra.learn import MissingDependencyError
+
+        raise MissingDependencyError("TensorBoard logs need the tensorboard package: pip install -e '.[rl]'") from None
+
+
+def _new_model(cls, venv, ppo: PPOSettings, verbose: int, tensorboard_log: str | None = None):
     import torch.nn as nn
 
     act = {"elu": nn.ELU, "relu": nn.ReLU, "tanh": nn.Tanh}[ppo.activation]
@@ -291,7 +308,7 @@ def _new_model(cls, venv, ppo: PPOSettings, verbose: int):
                n_epochs=ppo.n_epochs, gamma=ppo.gamma, gae_lambda=ppo.gae_lambda, clip_range=ppo.clip_range,
                ent_coef=ppo.ent_coef, vf_coef=ppo.vf_coef, max_grad_norm=ppo.max_grad_norm, target_kl=None,
                kl_target=ppo.kl_target, lr_bounds=ppo.lr_bounds, seed=ppo.seed, device="cpu", verbose=verbose,
-               policy_kwargs=policy_kwargs)
+               policy_kwargs=policy_kwargs, tensorboard_log=tensorboard_log)
 
 
 def _plain(d: dict) -> dict:
