@@ -87,16 +87,17 @@ def trained(name: str, data: list[str], hands: list[str], args, condition: str =
 
 
 def evaluated(model, key: str, hands: list[str], objects: list, original: bool, protocol: Protocol, args,
-              inertials: str = "capsule", refine: bool = False, collisions: str = "own") -> dict:
+              inertials: str = "capsule", refine: bool = False, collisions: str = "own", seed: int = 0) -> dict:
     suffix = (("_original" if original else "") + ("_hybrid" if collisions != "own" else "")
-              + ("_origmass" if inertials != "capsule" else "") + ("_refined" if refine else ""))
+              + ("_origmass" if inertials != "capsule" else "") + ("_refined" if refine else "")
+              + (f"_seed{seed}" if seed else ""))
     path = Path(args.runs) / f"eval_{key}{suffix}.json"
     extra = {"inertials": inertials} if inertials != "capsule" else {}  # the capsule evaluations keep their keys
     if refine:
         extra["refine"] = RefineSettings()
     if collisions != "own":  # the other evaluations keep their keys
         extra["collisions"] = collisions
-    ekey = eval_key(run_key(Path(args.runs) / key), hands=hands, objects=[o.name for o in objects], n=args.n, seed=0,
+    ekey = eval_key(run_key(Path(args.runs) / key), hands=hands, objects=[o.name for o in objects], n=args.n, seed=seed,
                     original=original, protocol=protocol, **extra)
     if (hit := cached(path, ekey)) is not None:
         return hit
@@ -109,7 +110,7 @@ def evaluated(model, key: str, hands: list[str], objects: list, original: bool, 
     t0 = time.perf_counter()
     out = {"per_hand": {}, "pairs": [], "success": {}}
     if todo:
-        rep = evaluate_model(model, todo, objects, n=args.n, seed=0, original=original, protocol=protocol,
+        rep = evaluate_model(model, todo, objects, n=args.n, seed=seed, original=original, protocol=protocol,
                              workers=args.workers, inertials=inertials, refine=refine, collisions=collisions)
         out = {"per_hand": rep.per_hand(), "pairs": [{"hand": p.hand, "object": p.object, "successes": int(p.success.sum()),
                                                       "n": int(len(p.success))} for p in rep.pairs],
