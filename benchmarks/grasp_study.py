@@ -87,8 +87,11 @@ def trained(name: str, data: list[str], hands: list[str], args, condition: str =
 
 
 def evaluated(model, key: str, hands: list[str], objects: list, original: bool, protocol: Protocol, args,
-              inertials: str = "capsule", refine: bool = False, collisions: str = "own", seed: int = 0) -> dict:
-    suffix = (("_original" if original else "") + ("_hybrid" if collisions != "own" else "")
+              inertials: str = "capsule", refine: bool = False, collisions: str = "own", seed: int = 0,
+              tag: str = "") -> dict:
+    """One model's evaluation, cached in ``eval_<key><tag><suffix>.json`` under its settings' key (``tag``:
+    tells apart evaluations of the same model on other hand subsets)."""
+    suffix = tag + (("_original" if original else "") + ("_hybrid" if collisions != "own" else "")
               + ("_origmass" if inertials != "capsule" else "") + ("_refined" if refine else "")
               + (f"_seed{seed}" if seed else ""))
     path = Path(args.runs) / f"eval_{key}{suffix}.json"

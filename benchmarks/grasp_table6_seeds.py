@@ -4,7 +4,8 @@ The study samples 100 grasps per (hand, unseen object) with sampling seed 0; a d
 1,300-grasp rates has a standard error of ~2 points, the size of the differences Table 6 reads. This
 script evaluates the study's committed models (``runs/grasp_study``: ``unified`` and ``specific-<hand>``,
 no training) again with further sampling seeds (other wrist rotations and diffusion noise, same
-objects and protocol), caches each evaluation beside the study's (``eval_<run>_seed<S>.json``), and
+objects and protocol), caches each evaluation beside the study's (``eval_unified_<hand>_seed<S>.json``, ``eval_specific-<hand>_seed<S>.json``:
+one per model and hand, so an interrupted run keeps the hands it finished), and
 writes per hand each seed's unified and specific success and the pooled difference with its standard
 error (two independent samples of grasps per model).
 
@@ -43,8 +44,13 @@ def main(argv: list[str] | None = None) -> int:
     res: dict = {"hands": args.hands, "seeds": args.seeds, "n": args.n, "objects": [o.name for o in objects], "per_seed": {}}
     unified = load_grasp_model(Path(args.runs) / "unified")
     for s in args.seeds:
-        res["per_seed"][s] = {"unified": evaluated(unified, "unified", args.hands, objects, False, protocol, args, seed=s)}
-        for h in args.hands:
+        res["per_seed"][s] = {}
+        for h in args.hands:  # one cached evaluation per model and hand: an interrupted run keeps whole hands
+            if s == 0:  # the study's own evaluation (all hands at once)
+                u = evaluated(unified, "unified", args.hands, objects, False, protocol, args)
+            else:
+                u = evaluated(unified, "unified", [h], objects, False, protocol, args, seed=s, tag=f"_{h}")
+            res["per_seed"][s].setdefault("unified", {"per_hand": {}})["per_hand"][h] = u["per_hand"][h]
             m = load_grasp_model(Path(args.runs) / f"specific-{h}")
             res["per_seed"][s][h] = evaluated(m, f"specific-{h}", [h], objects, False, protocol, args, seed=s)
     lines = [f"Table 6 analogue over sampling seeds {', '.join(map(str, args.seeds))}: the study's unified and hand-specific "
