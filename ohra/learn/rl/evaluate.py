@@ -86,7 +86,7 @@ class Policy:
             from ohra.sim.rotation.grasps import GraspSet
 
             if self.recurrent:
-                from sb3_contrib.common.recurrent.policies import RecurrentActorCriticPolicy as policy_class
+                from ohra.learn.rl.lstm_policy import LstmPolicy as policy_class
             else:
                 from stable_baselines3.common.policies import ActorCriticPolicy as policy_class
 
@@ -162,26 +162,13 @@ def export_policy(run_dir: str | Path, out_dir: str | Path, which: str = "model"
     run, out = Path(run_dir), Path(out_dir)
     pol = Policy(run, which)
     out.mkdir(parents=True, exist_ok=True)
-    _save_policy(pol._policy, out / "policy.pth")
+    pol._policy.save(str(out / "policy.pth"))
     np.savez(out / "obs_stats.npz", mean=pol._mean, var=pol._var, clip=pol._clip, eps=pol._eps)
     load_or_generate(resolve(pol.env_cfg)).save(out / "grasps.npz")
     for name in ("config.json", "progress.csv", "eval.json"):
         if (run / name).is_file():
             shutil.copy(run / name, out / name)
     return out
-
-
-def _save_policy(policy, path: Path) -> None:
-    """SB3's ``policy.save``, plus the LSTM shape a recurrent policy's saved constructor arguments leave out
-    (sb3-contrib's ``RecurrentActorCriticPolicy`` would otherwise reload at its default 256 units)."""
-    import torch
-
-    data = policy._get_constructor_parameters()
-    lstm = getattr(policy, "lstm_actor", None)
-    if lstm is not None:
-        data.update(lstm_hidden_size=lstm.hidden_size, n_lstm_layers=lstm.num_layers,
-                    shared_lstm=policy.shared_lstm, enable_critic_lstm=policy.lstm_critic is not None)
-    torch.save({"state_dict": policy.state_dict(), "data": data}, path)
 
 
 def run_episode(env, policy, seed: int, frames_every: int = 0, render=None) -> dict:

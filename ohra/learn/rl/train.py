@@ -21,7 +21,7 @@ import json
 import os
 import time
 from dataclasses import replace
-from functools import partial
+from functools import lru_cache, partial
 from pathlib import Path
 from typing import Any
 
@@ -65,15 +65,11 @@ class _AdaptiveLR:
         return self.lr
 
 
+@lru_cache(maxsize=None)
 def ppo_class(policy: str = "mlp"):
     """PPO with rl_games' adaptive learning rate (a factory, so that importing this module needs no SB3):
     SB3's ``PPO`` for ``policy="mlp"``, sb3-contrib's ``RecurrentPPO`` for ``"lstm"``."""
-    if policy not in _PPO_CLASSES:
-        _PPO_CLASSES[policy] = _adaptive(_base_class(policy))
-    return _PPO_CLASSES[policy]
-
-
-_PPO_CLASSES: dict = {}
+    return _adaptive(_base_class(policy))
 
 
 def _base_class(policy: str):
@@ -302,9 +298,13 @@ def _new_model(cls, venv, ppo: PPOSettings, verbose: int, tensorboard_log: str |
     act = {"elu": nn.ELU, "relu": nn.ReLU, "tanh": nn.Tanh}[ppo.activation]
     arch = list(ppo.net_arch)
     policy_kwargs = {"net_arch": {"pi": arch, "vf": arch}, "activation_fn": act, "log_std_init": ppo.log_std_init}
+    policy: Any = "MlpPolicy"
     if ppo.policy == "lstm":
+        from ohra.learn.rl.lstm_policy import LstmPolicy
+
+        policy = LstmPolicy
         policy_kwargs.update(lstm_hidden_size=ppo.lstm_hidden, n_lstm_layers=1, shared_lstm=False, enable_critic_lstm=True)
-    return cls("MlpLstmPolicy" if ppo.policy == "lstm" else "MlpPolicy", venv, learning_rate=ppo.learning_rate, n_steps=ppo.n_steps, batch_size=ppo.batch_size,
+    return cls(policy, venv, learning_rate=ppo.learning_rate, n_steps=ppo.n_steps, batch_size=ppo.batch_size,
                n_epochs=ppo.n_epochs, gamma=ppo.gamma, gae_lambda=ppo.gae_lambda, clip_range=ppo.clip_range,
                ent_coef=ppo.ent_coef, vf_coef=ppo.vf_coef, max_grad_norm=ppo.max_grad_norm, target_kl=None,
                kl_target=ppo.kl_target, lr_bounds=ppo.lr_bounds, seed=ppo.seed, device="cpu", verbose=verbose,
