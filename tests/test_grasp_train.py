@@ -13,7 +13,7 @@ torch = pytest.importorskip("torch")
 
 from grasp_fixtures import HANDS, tiny_model_config, tiny_train_config, write_dataset  # noqa: E402
 
-from ohra.errors import CheckpointError, DatasetError, GraspError  # noqa: E402
+from ohra.errors import CheckpointError, DatasetError, GraspError, ParamsError  # noqa: E402
 from ohra.hands import get_hand  # noqa: E402
 from ohra.learn.grasp.config import GraspConfigError  # noqa: E402
 from ohra.learn.grasp.data import TrainingData, check_disjoint, make_batch  # noqa: E402
@@ -318,6 +318,22 @@ def test_original_replay_uses_the_same_grasps(dataset, hands_dir):
     with pytest.raises(GraspError, match="by name"):
         evaluate_model(model, [BaseParams.from_vector(get_hand("barrett_hand").to_vector())], ["builtin:capsule"], n=1,
                        original=True)
+
+
+def test_a_hand_the_model_cannot_condition_on_fails_before_any_simulation(dataset, monkeypatch):
+    model = train_grasp(dataset, tiny_model_config(), tiny_train_config(steps=1), progress=False).model
+    assert model.condition.kind == "vae"  # the VAE reads base-form hands only; LEAP variants have none
+
+    def no_sim(*args, **kwargs):
+        raise AssertionError("a simulation started before every hand was checked")
+
+    import ohra.sim
+
+    monkeypatch.setattr(ohra.sim, "GraspEvaluator", no_sim)
+    with pytest.raises(ParamsError, match="hand 'leap_2211'.*base form"):
+        evaluate_model(model, ["barrett_hand", "leap_2211"], ["builtin:capsule"], n=1)
+    with pytest.raises(ParamsError, match="hand 'leap_3333'"):
+        evaluate_model(model, ["barrett_hand"], ["builtin:capsule"], n=1, condition_hand="leap_3333")
 
 
 # -- CLI ------------------------------------------------------------------------------------------------

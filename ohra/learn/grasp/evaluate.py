@@ -30,11 +30,12 @@ import time
 import warnings
 import zlib
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
 
-from ohra.errors import DatasetError, GraspError
+from ohra.errors import DatasetError, GraspError, ParamsError
 from ohra.learn.grasp.condition import HandLike, hand_key, resolve_hand
 from ohra.learn.grasp.model import GraspModel, ObjectLike, resolve_object
 from ohra.learn.grasp.refine import RefineSettings, as_refine_settings
@@ -167,12 +168,23 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
     objs = [resolve_object(o) for o in objects]
     if not allow_seen:
         check_unseen(model, objs)
-    pairs = []
+    # every hand is checked before the first simulation: a hand the model cannot condition on (a LEAP
+    # variant for a VAE-conditioned model) or without an original URDF fails now, not after minutes of
+    # evaluating the hands before it
+    resolved = []
     for hand in hands:
         if (original or inertials == "original") and not (isinstance(hand, str) and hand in registered_hands()):
             raise GraspError(f"original=True and inertials='original' need a registered hand's original URDF: give the hand "
                              f"by name; {hand if isinstance(hand, str) else type(hand).__name__!r} is not a registered hand")
         params = resolve_hand(hand)
+        try:
+            model.condition.vector(params if condition_hand is None else resolve_hand(condition_hand))
+        except ParamsError as exc:
+            who = hand if condition_hand is None else condition_hand
+            raise ParamsError(f"hand {str(who) if isinstance(who, (str, Path)) else type(who).__name__!r}: {exc}") from None
+        resolved.append((hand, params))
+    pairs = []
+    for hand, params in resolved:
         name = hand if isinstance(hand, str) else getattr(hand, "name", "hand")
         movable = np.asarray(params.movable_joints)
         hybrid = None
