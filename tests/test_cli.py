@@ -180,3 +180,27 @@ def test_synth_help_prints_only_the_help():
     """``python -m ohra.synth --help`` loads neither CasADi nor PyBullet (no build banner on stdout)."""
     proc = subprocess.run([sys.executable, "-m", "ohra.synth", "--help"], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0 and proc.stdout.startswith("usage:") and "pybullet" not in proc.stdout + proc.stderr
+
+
+def test_ohra_warnings_are_one_line_and_others_keep_their_format(capsys):
+    import warnings
+
+    from ohra.errors import ObjectWarning
+
+    def command(args):
+        warnings.warn("object 'x': mass estimated from the hull", ObjectWarning, stacklevel=1)
+        warnings.warn("a third-party notice", DeprecationWarning, stacklevel=1)
+        return 0
+
+    passed_on = []
+
+    def previous(message, category, filename, lineno, file=None, line=None):
+        passed_on.append((str(message), category, Path(filename).name))
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        warnings.showwarning = previous
+        assert cli_main.execute(argparse.Namespace(func=command)) == 0
+        assert warnings.showwarning is previous  # restored after the command
+    assert capsys.readouterr().err.splitlines() == ["ohra: warning: object 'x': mass estimated from the hull"]
+    assert passed_on == [("a third-party notice", DeprecationWarning, "test_cli.py")]

@@ -23,6 +23,8 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+import warnings
+from pathlib import Path
 from typing import Sequence
 
 from ohra.errors import OhraError
@@ -81,8 +83,30 @@ def build_parser(prog: str = "ohra") -> argparse.ArgumentParser:
     return parser
 
 
+def _one_line_warnings(previous):
+    """A ``warnings.showwarning`` that prints ohra's own warnings (estimated mass properties,
+    approximated bodies, parser notes) as one line, ``ohra: warning: MESSAGE``, like its errors; other
+    packages' warnings go to ``previous`` (Python's format, with file and line)."""
+
+    def show(message, category, filename, lineno, file=None, line=None) -> None:
+        ours = category.__module__.startswith("ohra") or Path(filename).resolve().is_relative_to(_PACKAGE)
+        if not ours:
+            return previous(message, category, filename, lineno, file, line)
+        try:
+            print(f"ohra: warning: {message}", file=file if file is not None else sys.stderr)
+        except OSError:  # stderr closed (e.g. a cut pipe): the warning is lost, as with Python's own
+            pass
+
+    return show
+
+
+_PACKAGE = Path(__file__).resolve().parents[1]
+
+
 def execute(args: argparse.Namespace) -> int:
     """Run the command parsed into ``args`` (its ``func``); user errors become one stderr line and exit 2."""
+    shown = warnings.showwarning
+    warnings.showwarning = _one_line_warnings(shown)
     try:
         for folder in getattr(args, "hands_dirs", ()):
             from ohra.hands.registry import add_hands_path
@@ -101,6 +125,8 @@ def execute(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         print("ohra: interrupted", file=sys.stderr)
         return 130
+    finally:
+        warnings.showwarning = shown
 
 
 def main(argv: Sequence[str] | None = None) -> int:
