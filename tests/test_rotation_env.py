@@ -53,6 +53,18 @@ def test_env_passes_gymnasium_env_checker_without_warnings(grasps):
     env.close()
 
 
+def test_make_takes_the_hand_by_name_as_the_readme_spells_it(grasps):
+    """``gymnasium.make(ENV_ID, hand=NAME, urdf=...)``: ``hand`` is the config's hand name (a SimHand
+    to simulate instead goes to ``sim_hand``)."""
+    env = gym.make(R.ENV_ID, hand="leap_hand_right", urdf="canonical", grasp_count=CFG.grasp_count, grasps=grasps)
+    try:
+        assert env.unwrapped.cfg == CFG and env.unwrapped.task.hand.canonical
+        obs, _ = env.reset(seed=0)
+        assert env.observation_space.contains(obs)
+    finally:
+        env.close()
+
+
 def test_same_seed_same_trajectory_and_other_seeds_differ(grasps):
     a, b = InHandRotateEnv(CFG, grasps=grasps), InHandRotateEnv(CFG, grasps=grasps)
     try:
@@ -256,13 +268,13 @@ def test_configs_saved_before_a_setting_existed_read_back_as_they_ran():
 
 
 def test_env_simulates_a_hand_given_to_it_and_refuses_a_mismatched_kind(grasps):
-    """``hand=``: the task simulates that SimHand (here the canonical LEAP with 0.2 kg index finger
+    """``sim_hand=``: the task simulates that SimHand (here the canonical LEAP with 0.2 kg index finger
     links), not the one the config names; a canonical hand under ``urdf='original'`` is refused."""
     base = resolve(CFG).hand
     masses = np.array(base.finger_masses, dtype=float)
     masses[1] = 0.2
     heavy = base.with_finger_masses(masses)
-    e = InHandRotateEnv(CFG, grasps=grasps, hand=heavy)
+    e = InHandRotateEnv(CFG, grasps=grasps, sim_hand=heavy)
     try:
         sc = e.scene
         index = [j for j, name in sc.links if sc.link_finger[j] == 1]
@@ -271,7 +283,7 @@ def test_env_simulates_a_hand_given_to_it_and_refuses_a_mismatched_kind(grasps):
     finally:
         e.close()
     with pytest.raises(RotationConfigError, match="canonical hand but the config says urdf='original'"):
-        resolve(RotationConfig(urdf="original"), hand=base)
+        resolve(RotationConfig(urdf="original"), sim_hand=base)
 
 
 def test_settled_start_targets_hold_the_joints_where_the_starting_state_left_them(grasps):

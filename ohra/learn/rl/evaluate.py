@@ -205,10 +205,11 @@ def run_episode(env, policy, seed: int, frames_every: int = 0, render=None) -> d
 def evaluate_policy(policy, env_cfg: RotationConfig, episodes: int = 20, seed: int = 0, run: str = "",
                     grasps=None, hand=None) -> EvalResult:
     """Steps-to-Fall and Cumulative Rotation of ``policy`` (obs -> action) over seeded episodes
-    (``grasps``, ``hand``: as :class:`ohra.sim.rotation.env.InHandRotateEnv` takes them)."""
+    (``grasps``: as :class:`ohra.sim.rotation.env.InHandRotateEnv` takes them; ``hand``: a SimHand to
+    simulate, the env's ``sim_hand``)."""
     from ohra.sim.rotation.env import InHandRotateEnv
 
-    env = InHandRotateEnv(env_cfg, grasps=grasps, hand=hand)
+    env = InHandRotateEnv(env_cfg, grasps=grasps, sim_hand=hand)
     try:
         eps = [run_episode(env, policy, seed + i) for i in range(episodes)]
     finally:

@@ -38,15 +38,16 @@ class InHandRotateEnv(gym.Env):
         config: a :class:`RotationConfig` or a plain dict of its fields (default: LEAP, canonical, cube).
         render_mode: None or "rgb_array" (PyBullet TinyRenderer; keeps the URDF's visual shapes).
         grasps: starting states to use instead of the cached ones for this config.
-        hand: a :class:`ohra.sim.hands.SimHand` to simulate instead of the one the config names
+        sim_hand: a :class:`ohra.sim.hands.SimHand` to simulate instead of the one the config names
             (:func:`ohra.sim.rotation.task.resolve`); pass ``grasps`` made for it.
-        **overrides: config fields, e.g. ``hand="shadow_hand_right", urdf="original"``.
+        **overrides: config fields, e.g. ``hand="shadow_hand_right", urdf="original"`` (``hand`` is
+            the config's hand name, as in ``gymnasium.make(ENV_ID, hand=..., urdf=...)``).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
 
     def __init__(self, config: RotationConfig | dict | None = None, render_mode: str | None = None,
-                 grasps: GraspSet | None = None, hand: SimHand | None = None, **overrides: Any):
+                 grasps: GraspSet | None = None, sim_hand: SimHand | None = None, **overrides: Any):
         if isinstance(config, dict):
             config = RotationConfig.from_dict(config)
         cfg = (config or RotationConfig()).with_overrides(**overrides) if overrides else (config or RotationConfig())
@@ -54,7 +55,7 @@ class InHandRotateEnv(gym.Env):
             raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
         self.cfg, self.render_mode = cfg, render_mode
         self.metadata = {**self.metadata, "render_fps": cfg.control_hz}
-        self.task = resolve(cfg, hand)
+        self.task = resolve(cfg, sim_hand)
         self.space = self.task.space
         self.grasps = grasps if grasps is not None else load_or_generate(self.task)
         self.scene = RotationScene(self.task.hand, self.task.obj, cfg, self.task.palm_radius,

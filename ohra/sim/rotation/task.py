@@ -91,10 +91,10 @@ def canonical_form(name: str, form: str | None) -> str | None:
     return None
 
 
-def resolve(cfg: RotationConfig, hand: SimHand | None = None) -> Task:
+def resolve(cfg: RotationConfig, sim_hand: SimHand | None = None) -> Task:
     """Build the :class:`Task` of ``cfg`` (loads the hand; the original URDF needs the hand assets).
 
-    ``hand``: simulate this :class:`SimHand` instead of the one ``cfg`` names (e.g. an original URDF with
+    ``sim_hand``: simulate this :class:`SimHand` instead of the one ``cfg`` names (e.g. an original URDF with
     other collision shapes); ``cfg.hand`` still gives the canonical params (object size, palm) and
     ``cfg.urdf`` must say which kind it is (canonical or original).
     """
@@ -104,6 +104,7 @@ def resolve(cfg: RotationConfig, hand: SimHand | None = None) -> Task:
     params = get_hand(cfg.hand, form)
     from ohra.hands import registry
 
+    hand = sim_hand
     if hand is not None:
         if hand.canonical != (cfg.urdf == "canonical"):
             raise RotationConfigError(f"hand {hand.name!r} is {'a canonical' if hand.canonical else 'an original'} "
