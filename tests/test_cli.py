@@ -204,3 +204,10 @@ def test_ohra_warnings_are_one_line_and_others_keep_their_format(capsys):
         assert warnings.showwarning is previous  # restored after the command
     assert capsys.readouterr().err.splitlines() == ["ohra: warning: object 'x': mass estimated from the hull"]
     assert passed_on == [("a third-party notice", DeprecationWarning, "test_cli.py")]
+
+
+def test_output_folders_take_dash_o_like_every_other_command():
+    parser = build_parser()
+    assert parser.parse_args(["data", "build", "r.yaml", "-o", "ds"]).out == "ds"
+    assert parser.parse_args(["synth", "--hand", "leap_3303", "-o", "ds"]).out == "ds"
+    assert parser.parse_args(["rotate", "train", "-o", "run"]).output == "run"

@@ -36,6 +36,21 @@ def test_the_digit_sum_rule_selects_leap_variants_of_that_complexity():
     assert [n for n, _ in r.resolve_hands()] == ["leap_3333", "leap_3033", "leap_3133", "leap_3233"]
 
 
+def test_a_hand_file_is_found_beside_the_recipe_like_an_object_file(tmp_path, monkeypatch):
+    import json
+
+    from ohra.hands import get_hand
+
+    folder = tmp_path / "recipes"
+    folder.mkdir()
+    (folder / "my_hand.json").write_text(json.dumps(get_hand("allegro_hand_left").to_dict()))
+    (folder / "r.yaml").write_text("hands: [my_hand.json, {params: my_hand.json}]\nobjects: [builtin:box]\n")
+    monkeypatch.chdir(tmp_path)  # not the recipe's folder
+    hands = Recipe.load(folder / "r.yaml").resolve_hands()
+    assert [n for n, _ in hands] == ["my_hand"]  # one hand, named by the file's stem either way
+    assert hands[0][1].to_vector().tolist() == get_hand("allegro_hand_left").to_vector().tolist()
+
+
 @pytest.mark.parametrize("recipe, message", [
     ({"hands": ["leap_3333"], "objects": ["builtin"], "grasp_per_pair": 3}, "unknown key.*grasp_per_pair"),
     ({"hands": [], "objects": ["builtin"]}, "'hands' must be a non-empty list"),

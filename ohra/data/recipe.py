@@ -7,8 +7,8 @@ A recipe is a YAML mapping (plain values only; unknown keys are errors naming th
     hands:
       - leap_3333                    # a registered hand or LEAP variant
       - {pattern: "leap_*", digit_sum: [10, 11]}   # glob over hand names; LEAP digit-sum range
-      - {params: my_hand.json}       # a params file
-      - {spec: my_hand.yaml, form: extended}       # a hand spec, parsed (and fitted) on load
+      - {params: my_hand.json}       # a params file (or just my_hand.json), named my_hand
+      - {spec: my_hand.yaml, form: extended}       # a hand spec, parsed (and fitted) on load (my_hand.yaml: extended)
     objects:
       - builtin                      # all built-ins, or builtin:NAME
       - {path: meshes/mug.obj}       # a folder, a mesh or an object URDF
@@ -128,6 +128,10 @@ class Recipe:
     def _hand(self, h: Any, where: str) -> list[tuple[str, Any]]:
         from ohra.hands import get_hand, list_hands
 
+        if isinstance(h, str) and h.endswith(".json"):  # a file, like the objects: relative to the recipe
+            h = {"params": h}
+        elif isinstance(h, str) and h.endswith((".yaml", ".yml")):
+            h = {"spec": h}
         if isinstance(h, str) and not any(c in h for c in "*?["):
             return [(h, get_hand(h))]
         if isinstance(h, str):
