@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import os
+import subprocess
+import sys
 import warnings
 from pathlib import Path
 
@@ -141,8 +143,13 @@ def test_user_hand_folders_join_the_registry(tmp_path, no_hands_root, monkeypatc
     folder.mkdir()
     _toy(folder)
     assert "toy_mimic" not in registry.registered_hands()
+    monkeypatch.setenv("OHRA_HANDS_PATH", "")  # the command appends to it; restored after the test
     assert cli.main(["--hands", str(folder), "hand", "list"]) == 0
     assert "toy_mimic" in capsys.readouterr().out
+    # processes the command starts (worker pools, SubprocVecEnv under forkserver/spawn) see the folder too
+    child = subprocess.run([sys.executable, "-c", "from ohra.hands.registry import registered_hands as r; print('toy_mimic' in r())"],
+                           capture_output=True, text=True, timeout=120)
+    assert child.stdout.strip() == "True", child.stderr
     registry._added.clear()
     monkeypatch.setenv("OHRA_HANDS_PATH", str(folder))
     assert registry.registered_forms("toy_mimic") == ["extended"]

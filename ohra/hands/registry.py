@@ -34,12 +34,17 @@ _added: list[Path] = []
 
 
 def add_hands_path(folder: str | Path) -> None:
-    """Add a user hand folder (its ``*.yaml`` specs join the registry) for this process."""
+    """Add a user hand folder (its ``*.yaml`` specs join the registry) for this process and the
+    processes it starts (worker pools, vectorised environments): the folder is appended to
+    ``$OHRA_HANDS_PATH`` too, which spawned and forkserver children read."""
     p = Path(folder).expanduser().resolve()
     if not p.is_dir():
         raise HandNotFoundError(f"hand folder not found: {p}")
     if p not in _added:
         _added.append(p)
+    env = [x for x in os.environ.get(PATH_ENV, "").split(os.pathsep) if x.strip()]
+    if str(p) not in env:
+        os.environ[PATH_ENV] = os.pathsep.join(env + [str(p)])
 
 
 def hands_paths() -> tuple[Path, ...]:
