@@ -152,7 +152,8 @@ def resolve_hand(ref: Any, form: str | None = None, spec: str | Path | None = No
         return _from_params_file(p, form, spec)
     known = ", ".join(registry.registered_hands()) or "(no registered hands)"
     raise HandNotFoundError(
-        f"unknown hand {key!r}: not a registered hand ({known}), not leap_XXXX, not a spec YAML or params JSON file"
+        f"unknown hand {key!r}: not a registered hand ({known}), not leap_XXXX, not a spec YAML or params JSON file "
+        f"(a hand whose spec is in your own folder: ohra --hands DIR, or ${registry.PATH_ENV})"
     )
 
 
