@@ -56,7 +56,7 @@ def test_list_includes_variants(capsys):
     "argv, message",
     [
         (["hand", "render", "leap_9999"], "unknown hand 'leap_9999'"),
-        (["hand", "info", "no_such_hand"], "unknown hand .no_such_hand.*ohra --hands DIR"),
+        (["hand", "info", "no_such_hand"], "own folder: ohra --hands DIR"),
         (["hand", "render", "{missing}.json"], "params file not found"),
         (["hand", "render", "{bad}"], "malformed JSON"),
         (["hand", "render", "{invalid}"], "lower"),
