@@ -94,3 +94,13 @@ def test_form_picks_the_canonical_hand_and_the_action_map(original, hands_dir):
         assert np.array_equal(h.canon_lower, np.asarray(get_hand("allegro_hand_left", form).joint_lowers))
     assert not np.array_equal(eval_hand("allegro_hand_left", original, "base").canon_lower,
                               eval_hand("allegro_hand_left", original, "extended").canon_lower)
+
+
+def test_a_millimetre_mesh_is_named_and_scale_makes_it_the_same_object(setup, capsys):
+    tmp, hand, mesh, grasps = setup
+    mm = tmp / "box_mm.stl"
+    pinch_box().mesh.apply_scale(1000.0).export(str(mm))
+    rc, out, err = _run(capsys, grasps, "--hand", hand, "--object", mm, "--limit", "1")
+    assert rc == 0 and "ohra: warning: object 'box_mm'" in err and "--scale 0.001" in err
+    rc, out, err = _run(capsys, grasps, "--hand", hand, "--object", mm, "--scale", "0.001")
+    assert rc == 0 and "1/2 succeeded (50.0 %)" in out and "warning" not in err

@@ -364,6 +364,27 @@ def test_cli_train_sample_and_errors(cli, dataset, tmp_path, capsys):
     assert cli(["train", "grasp", "--data", str(tmp_path / "none"), "-o", str(tmp_path / "r2"), "--quiet"]) == 2
 
 
+def test_cli_names_a_millimetre_mesh_takes_scale_and_expands_object_folders(cli, dataset, tmp_path, capsys):
+    run = tmp_path / "run"
+    assert cli(["train", "grasp", "--data", str(dataset), "--steps", "1", "--batch-size", "8", "-o", str(run), "--quiet"]) == 0
+    capsys.readouterr()
+    folder = tmp_path / "meshes"
+    folder.mkdir()
+    ObjectModel.builtin("sphere").mesh.apply_scale(1000.0).export(folder / "ball_mm.stl")
+    ObjectModel.builtin("cylinder").mesh.apply_scale(1000.0).export(folder / "can_mm.stl")
+    out = tmp_path / "g.npz"
+    sample = ["grasp", "sample", "--model", str(run), "--hand", "barrett_hand", "--object", str(folder / "ball_mm.stl"),
+              "-n", "2", "-o", str(out)]
+    assert cli(sample) == 0
+    assert "ohra: warning: object 'ball_mm'" in (err := capsys.readouterr().err) and "--scale 0.001" in err
+    assert cli([*sample, "--scale", "0.001"]) == 0
+    assert "warning" not in capsys.readouterr().err
+    report = tmp_path / "r.json"
+    assert cli(["grasp", "eval", "--model", str(run), "--hands", "barrett_hand", "--objects", str(folder), "--scale", "0.001",
+                "-n", "1", "--quiet", "-o", str(report)]) == 0
+    assert sorted(p["object"] for p in json.loads(report.read_text())["pairs"]) == ["ball_mm", "can_mm"]
+
+
 def test_a_dataset_made_on_another_machine_finds_its_mesh_under_this_object_root(tmp_path, monkeypatch):
     """Manifests store absolute mesh paths; moved to another machine, the same trailing path under
     OHRA_OBJECTS_ROOT is used (the mesh hash still has to match)."""

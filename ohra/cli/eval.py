@@ -32,6 +32,7 @@ def register(subparsers) -> None:
     p.add_argument("grasps", help="grasp file: .npz (key 'grasps' or its only array) or .npy, shape (N, 31)")
     p.add_argument("--hand", required=True, help="registered hand, leap_XXXX, or a params JSON file")
     p.add_argument("--object", required=True, help="mesh (.obj/.stl/.ply), object URDF or folder, or builtin:NAME")
+    p.add_argument("--scale", type=float, default=None, help="multiply the coordinates of object files (0.001 for millimetre meshes)")
     p.add_argument("--key", default=None, help="array name inside the .npz (default: 'grasps' or the only array)")
     p.add_argument("--workers", type=int, default=1, help="processes (default 1)")
     p.add_argument("--backend", choices=("process", "ray"), default="process", help="process pool (default) or Ray")
@@ -104,10 +105,13 @@ def run(args: argparse.Namespace) -> int:
     grasps = load_grasp_file(args.grasps, args.key)
     if args.limit is not None:
         grasps = grasps[: max(0, args.limit)]
-    objs = resolve_objects(args.object)
+    objs = resolve_objects(args.object, scale=args.scale)
     if len(objs) != 1:
         raise ObjectError(f"--object must name one object, {args.object!r} names {len(objs)}")
     obj = objs[0]
+    from ohra.objects.resolve import warn_if_ungraspable
+
+    warn_if_ungraspable(obj)
     protocol = Protocol.strict() if args.strict else Protocol()
     if args.isaac_step:
         protocol = replace(protocol, **ISAAC_STEP)

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from ohra.cli.main import subcommand_group
-from ohra.errors import OhraError
+from ohra.errors import ObjectError, OhraError
 
 
 REFINE_HELP = ("open the fingers just enough to clear the object after sampling "
@@ -36,6 +36,7 @@ def register(sub: Any) -> None:
     p = g.add_parser("sample", help="sample grasps of a hand on an object -> .npz (key 'grasps', (N, 31))")
     p.add_argument("--hand", required=True, help="registered hand, leap_XXXX, or a params JSON file")
     p.add_argument("--object", required=True, help="mesh (.obj/.stl/.ply), object URDF or folder, or builtin:NAME")
+    p.add_argument("--scale", type=float, default=None, help="multiply the coordinates of object files (0.001 for millimetre meshes)")
     p.add_argument("-n", type=int, default=100, help="number of grasps (default 100)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--model", help=model_help)
@@ -46,6 +47,7 @@ def register(sub: Any) -> None:
     p = g.add_parser("eval", help="sample N grasps per (hand, unseen object) and run the six-direction test")
     p.add_argument("--hands", nargs="+", required=True)
     p.add_argument("--objects", nargs="+", required=True, help="builtin:NAME, mesh files or folders")
+    p.add_argument("--scale", type=float, default=None, help="multiply the coordinates of object files (0.001 for millimetre meshes)")
     p.add_argument("-n", type=int, default=100, help="grasps per (hand, object) (default 100)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--model", help=model_help)
@@ -143,9 +145,17 @@ def _load(model: str | None):
 def _cmd_sample(args: argparse.Namespace) -> int:
     from ohra.data.dataset import atomic_write_npz
 
+    from ohra.objects.model import resolve_objects
+    from ohra.objects.resolve import warn_if_ungraspable
+
     model = _load(args.model)
+    objs = resolve_objects(args.object, scale=args.scale)
+    if len(objs) != 1:
+        raise ObjectError(f"--object must name one object, {args.object!r} names {len(objs)}")
+    obj = objs[0]
+    warn_if_ungraspable(obj)
     timing: dict = {}
-    g = model.sample(args.hand, args.object, args.n, seed=args.seed, timing=timing, refine=args.refine)
+    g = model.sample(args.hand, obj, args.n, seed=args.seed, timing=timing, refine=args.refine)
     out = Path(args.output)
     if out.suffix != ".npz":
         raise OhraError(f"-o must end in .npz, got {out}")
@@ -163,7 +173,10 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     model = _load(args.model)
     from ohra.sim import Protocol
 
-    rep = evaluate_model(model, args.hands, args.objects, n=args.n, seed=args.seed, original=args.original,
+    from ohra.objects.model import resolve_objects
+
+    objs = resolve_objects(args.objects, scale=args.scale)
+    rep = evaluate_model(model, args.hands, objs, n=args.n, seed=args.seed, original=args.original,
                          workers=args.workers, progress=not args.quiet, allow_seen=args.allow_seen,
                          protocol=Protocol.preset(args.protocol), inertials=args.inertials,
                          condition_hand=args.condition_hand, refine=args.refine, collisions=args.collisions)

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import math
+import warnings
 from pathlib import Path
 
 import numpy as np
 
-from ohra.errors import ObjectError
+from ohra.errors import ObjectError, ObjectWarning
 from ohra.objects.model import MESH_SUFFIXES, ObjectModel, builtin_object_names
 
 # largest extent [m] of an object a hand can grasp; outside it the units are almost surely wrong
@@ -64,3 +65,13 @@ def size_problem(obj: ObjectModel, extent_range: tuple[float, float] = GRASPABLE
     hint = f"if its units are wrong, --scale {10.0 ** k:g} makes it {100 * ext * 10.0 ** k:.3g} cm" if k else ""
     return (f"object {obj.name!r}: largest extent {ext:.4g} m ({obj.mass:.4g} kg at {obj.density:g} kg/m^3) is outside the "
             f"graspable range {lo:g}-{hi:g} m" + (f"; {hint}" if hint else ""))
+
+
+def warn_if_ungraspable(obj: ObjectModel, extent_range: tuple[float, float] = GRASPABLE_EXTENT_M) -> bool:
+    """Warn (:class:`~ohra.errors.ObjectWarning`) when ``obj`` is outside the graspable size range, e.g. a
+    mesh in millimetres: evaluation and sampling still run on it (the synthesiser refuses it instead).
+    Returns whether it warned."""
+    problem = size_problem(obj, extent_range)
+    if problem:
+        warnings.warn(f"{problem}; grasps on it say little about a hand", ObjectWarning, stacklevel=2)
+    return problem is not None

@@ -166,6 +166,10 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
     if collisions != "own" and not original:
         raise GraspError("collisions='canonical' replays on the original URDF's hybrid: it needs original=True")
     objs = [resolve_object(o) for o in objects]
+    from ohra.objects.resolve import warn_if_ungraspable
+
+    for obj in objs:
+        warn_if_ungraspable(obj)
     if not allow_seen:
         check_unseen(model, objs)
     # every hand is checked before the first simulation: a hand the model cannot condition on (a LEAP
