@@ -89,6 +89,8 @@ def test_a_recipe_builds_resumes_and_summarises(tmp_path):
     assert "leap_2200" in format_summary(s)
     assert len(GraspDataset(tmp_path / "ds", split="test").pairs) == 1
     assert len(GraspDataset(tmp_path / "ds", split="train").pairs) == 2
+    train = GraspDataset(tmp_path / "ds", split="train")
+    assert repr(train).endswith(f": 1 hands, 2 pairs, {len(train.grasps())} grasps, which='pre')")
     proc = _data("info", str(tmp_path / "ds"))
     assert proc.returncode == 0 and "leap_2200" in proc.stdout and "1 test" in proc.stdout, proc.stderr
 

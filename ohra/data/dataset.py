@@ -177,6 +177,12 @@ class GraspDataset:
     def __len__(self) -> int:
         return sum(min(sh["n_grasps"], self.max_per_pair or sh["n_grasps"]) for _, _, _, sh in self.entries)
 
+    def __repr__(self) -> str:
+        roots = ", ".join(repr(str(r)) for r in self.roots)
+        hands = len({h for _, h, _, _ in self.entries})
+        cap = f", max_per_pair={self.max_per_pair}" if self.max_per_pair else ""
+        return f"GraspDataset([{roots}]: {hands} hands, {len(self.entries)} pairs, {len(self)} grasps, which={self.which!r}{cap})"
+
 
 def require_manifest(root: str | Path) -> dict:
     """The manifest of the dataset directory ``root``; :class:`DatasetError` if it has none."""
