@@ -87,6 +87,11 @@ def _joint_axis(jm: pin.JointModel) -> np.ndarray:
 class HandModel:
     """Kinematics (Pinocchio + batched numpy) and capsule collision geometry of a canonical hand."""
 
+    def __repr__(self) -> str:
+        fingers = [f for f in ("thumb", "index", "middle", "ring", "little")
+                   if any(n.startswith(f + "_") and m for n, m in zip(JOINT_NAMES, self.movable_joints))]
+        return f"HandModel(dof={int(self.movable_joints.sum())}, fingers={fingers}, form={type(self.params).__name__ if self.params is not None else None})"
+
     def __init__(self, urdf: str, params: Params | None = None):
         self.urdf = urdf
         self.params = params

@@ -72,6 +72,10 @@ class VAEBundle:
     def latent_dim(self) -> int:
         return self.model.config.latent_dim
 
+    def __repr__(self) -> str:  # the dataclass default prints every layer and the standardiser's arrays
+        return (f"VAEBundle(encoding={self.model.config.encoding!r}, latent_dim={self.latent_dim}, "
+                f"path={str(self.path) if self.path else None!r})")
+
     @property
     def encoding(self) -> Encoding:
         """The encoding this model was trained on (``reference66`` or ``rot6d70``)."""

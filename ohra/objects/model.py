@@ -284,6 +284,11 @@ class ObjectModel:
         """(2,3) bounds of the body [m]."""
         return self.body.bounds
 
+    def __repr__(self) -> str:  # from the mesh only: the simulated body may need a decomposition
+        e = ", ".join(f"{100 * x:.3g}" for x in self.mesh.extents)
+        return (f"ObjectModel({self.name!r}, mesh extents ({e}) cm, {len(self.mesh.faces)} faces, "
+                f"watertight={bool(self.mesh.is_watertight)}, density={self.density:g} kg/m^3)")
+
     @property
     def extents(self) -> np.ndarray:
         """(3,) extents of the body's axis-aligned bounds [m]."""

@@ -152,6 +152,12 @@ class GraspModel:
     def __post_init__(self) -> None:
         self.net.eval()
 
+    def __repr__(self) -> str:  # the dataclass default would print every layer
+        hands = self.meta.get("hands") if isinstance(self.meta, dict) else None
+        shown = f", hands={list(hands)}" if hands else ""
+        return (f"GraspModel(condition={self.condition.kind!r}, encoder={self.config.encoder!r}, "
+                f"parameters={sum(p.numel() for p in self.net.parameters()):,}{shown}, path={str(self.path) if self.path else None!r})")
+
     # -- inputs ---------------------------------------------------------------------------------------
     def object_cloud(self, obj: ObjectModel) -> torch.Tensor:
         """(n_points, 3) float32 surface points of ``obj`` (mesh frame), fixed per object."""
