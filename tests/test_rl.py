@@ -202,6 +202,20 @@ def test_the_recurrent_option_is_a_checked_setting():
         PPOSettings(policy="gru")
     with pytest.raises(RLConfigError, match="lstm_hidden must be >= 1"):
         PPOSettings(policy="lstm", lstm_hidden=0)
+    with pytest.raises(RLConfigError, match="lstm_critic must be true or false, got 'no'"):
+        PPOSettings(policy="lstm", lstm_critic="no")
     old = PPOSettings().to_dict()
-    del old["policy"], old["lstm_hidden"]  # a run saved before the option reads back as an MLP run
-    assert PPOSettings.from_dict(old).policy == "mlp"
+    del old["policy"], old["lstm_hidden"], old["lstm_critic"]  # a run saved before the option reads back as an MLP run
+    assert PPOSettings.from_dict(old).policy == "mlp" and PPOSettings.from_dict(old).lstm_critic
+
+
+def test_a_recurrent_policy_without_a_critic_lstm_trains_and_reloads_as_such(tiny):
+    pytest.importorskip("sb3_contrib", reason="the recurrent policy needs sb3-contrib (rl extra)")
+    from dataclasses import replace
+
+    from ohra.learn.rl.evaluate import Policy, export_policy
+
+    env_cfg, ppo, run = tiny
+    train_rotation(env_cfg, replace(ppo, policy="lstm", lstm_hidden=8, lstm_critic=False, total_steps=24), run)
+    for pol in (Policy(run), Policy(export_policy(run, run.parent / "export"))):
+        assert pol._policy.lstm_critic is None and pol._policy.lstm_actor.hidden_size == 8

@@ -303,7 +303,7 @@ def _new_model(cls, venv, ppo: PPOSettings, verbose: int, tensorboard_log: str |
         from ohra.learn.rl.lstm_policy import LstmPolicy
 
         policy = LstmPolicy
-        policy_kwargs.update(lstm_hidden_size=ppo.lstm_hidden, n_lstm_layers=1, shared_lstm=False, enable_critic_lstm=True)
+        policy_kwargs.update(lstm_hidden_size=ppo.lstm_hidden, n_lstm_layers=1, shared_lstm=False, enable_critic_lstm=ppo.lstm_critic)
     return cls(policy, venv, learning_rate=ppo.learning_rate, n_steps=ppo.n_steps, batch_size=ppo.batch_size,
                n_epochs=ppo.n_epochs, gamma=ppo.gamma, gae_lambda=ppo.gae_lambda, clip_range=ppo.clip_range,
                ent_coef=ppo.ent_coef, vf_coef=ppo.vf_coef, max_grad_norm=ppo.max_grad_norm, target_kl=None,
