@@ -178,8 +178,9 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
     resolved = []
     for hand in hands:
         if (original or inertials == "original") and not (isinstance(hand, str) and hand in registered_hands()):
-            raise GraspError(f"original=True and inertials='original' need a registered hand's original URDF: give the hand "
-                             f"by name; {hand if isinstance(hand, str) else type(hand).__name__!r} is not a registered hand")
+            what = "original=True" if original else "inertials='original'"
+            raise GraspError(f"{what} needs a registered hand's original URDF: give the hand by name; "
+                             f"{hand if isinstance(hand, str) else type(hand).__name__!r} is not a registered hand")
         params = resolve_hand(hand)
         try:
             model.condition.vector(params if condition_hand is None else resolve_hand(condition_hand))
