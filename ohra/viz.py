@@ -24,10 +24,18 @@ _Y_TO_Z = np.array([[1.0, 0, 0, 0], [0, 0, -1.0, 0], [0, 1.0, 0, 0], [0, 0, 0, 1
 
 
 def new_visualizer(open_browser: bool = False):
-    """Start a meshcat server (local, loopback) and return its Visualizer."""
+    """Start a meshcat server (local, loopback) and return its Visualizer (``vis.url()`` is its address).
+
+    meshcat prints "You can open the visualizer by visiting ..." on stdout; that line is kept out of
+    the output here, since most callers only export static HTML and the server stops with them.
+    """
+    import contextlib
+    import io
+
     import meshcat
 
-    vis = meshcat.Visualizer()
+    with contextlib.redirect_stdout(io.StringIO()):
+        vis = meshcat.Visualizer()
     if open_browser:  # pragma: no cover - interactive
         vis.open()
     return vis

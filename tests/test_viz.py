@@ -167,3 +167,13 @@ def test_compare_overlay_opens_framed_on_the_hands(hands_dir, chromium, tmp_path
     rows, cols = np.flatnonzero(hand.any(axis=1)), np.flatnonzero(hand.any(axis=0))
     assert rows[0] > 0 and cols[0] > 0 and rows[-1] < h - 1 and cols[-1] < w - 1  # nothing cut off at the edges
     assert (rows[-1] - rows[0]) > 0.4 * h  # and tall enough to see
+
+
+def test_a_new_visualizer_starts_without_printing_meshcats_url(capsys):
+    """Commands that only export static HTML must not tell the user to visit a server that stops with them."""
+    vis = viz.new_visualizer()
+    try:
+        assert vis.url().startswith("http://127.0.0.1:")
+    finally:
+        del vis
+    assert capsys.readouterr().out == ""
