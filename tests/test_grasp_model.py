@@ -277,6 +277,29 @@ def test_shipped_model_loads_or_says_it_is_missing():
             load_grasp_model()
 
 
+def test_the_shipped_leap_model_conditions_on_raw_parameters_and_takes_any_hand(tmp_path, capsys):
+    """``load_grasp_model("leap")``: the zero-shot study's all-data model, shipped; it samples for a LEAP
+    variant in no dataset (which the default VAE model cannot condition on) and for a base-form hand.
+    ``ohra grasp sample`` without ``--model`` picks it when the hand has no base form, and says so."""
+    from ohra.cli.main import main
+    from ohra.errors import ParamsError
+
+    leap = load_grasp_model("leap")
+    assert leap.condition.kind == "params" and "leap_2211" not in leap.meta["hands"]
+    g = leap.sample("leap_2211", "builtin:box", 3, seed=1)
+    assert g.shape == (3, 31) and np.array_equal(g, leap.sample("leap_2211", "builtin:box", 3, seed=1))
+    assert leap.sample("barrett_hand", "builtin:box", 2).shape == (2, 31)
+    with pytest.raises(ParamsError, match="--model leap"):
+        load_grasp_model().sample("leap_2211", "builtin:box", 1)
+    out = tmp_path / "g.npz"
+    assert main(["grasp", "sample", "--hand", "leap_2211", "--object", "builtin:box", "-n", "3", "--seed", "0", "-o", str(out)]) == 0
+    assert "using the shipped 'leap' model" in capsys.readouterr().err
+    with np.load(out) as z:
+        np.testing.assert_array_equal(z["grasps"], leap.sample("leap_2211", "builtin:box", 3, seed=0))
+    assert main(["grasp", "sample", "--hand", "barrett_hand", "--object", "builtin:box", "-n", "2", "-o", str(out)]) == 0
+    assert "note" not in capsys.readouterr().err  # a base-form hand keeps the default model
+
+
 def test_lazy_exports():
     import ohra.learn
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -32,7 +32,9 @@ def register(sub: Any) -> None:
     """Add ``ohra grasp sample|eval`` and ``ohra train grasp``."""
     register_train(subcommand_group(sub, "train", "train learned models (vae, grasp, ...)", "train_command"))
     g = subcommand_group(sub, "grasp", "the cross-embodiment grasp model: sample and evaluate grasps", "grasp_command")
-    model_help = "run or model directory, or .pt file (default: the shipped model)"
+    model_help = ("run or model directory, .pt file, or a shipped model: 'default' (VAE condition; base-form hands such "
+                  "as Allegro, Barrett, Shadow) or 'leap' (raw-parameter condition, trained on 66 LEAP variants); "
+                  "default: 'default', or 'leap' when no hand has a base form")
     p = g.add_parser("sample", help="sample grasps of a hand on an object -> .npz (key 'grasps', (N, 31))")
     p.add_argument("--hand", required=True, help="registered hand, leap_XXXX, or a params JSON file")
     p.add_argument("--object", required=True, help="mesh (.obj/.stl/.ply), object URDF or folder, or builtin:NAME")
@@ -135,11 +137,30 @@ def _cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
-def _load(model: str | None):
+def _load(model: str | None, hands: Sequence[str] = ()):
+    """The model ``--model`` names; without one, the shipped ``default`` model, or the shipped ``leap``
+    model when none of ``hands`` has a base form (the default model's VAE condition reads base-form hands
+    only: LEAP variants and extended-only hands), with a note on stderr."""
     _torch()
+    from ohra.errors import ParamsError
+    from ohra.learn.grasp.condition import resolve_hand
     from ohra.learn.grasp.model import load_grasp_model
 
-    return load_grasp_model(model)
+    chosen = load_grasp_model(model)
+    if model is not None or not hands:
+        return chosen
+    unusable = []
+    for h in hands:
+        try:
+            chosen.condition.vector(resolve_hand(h))
+        except ParamsError:
+            unusable.append(h)
+    if unusable and len(unusable) == len(hands):
+        print(f"ohra: note: the default grasp model (VAE condition) reads base-form hands only, and "
+              f"{', '.join(unusable)} {'has' if len(unusable) == 1 else 'have'} none: using the shipped 'leap' model "
+              "(raw-parameter condition, trained on 66 LEAP variants; --model leap)", file=sys.stderr)
+        return load_grasp_model("leap")
+    return chosen  # a mix: evaluate_model names the hands the default model cannot condition on
 
 
 def _cmd_sample(args: argparse.Namespace) -> int:
@@ -148,7 +169,7 @@ def _cmd_sample(args: argparse.Namespace) -> int:
     from ohra.objects.model import resolve_objects
     from ohra.objects.resolve import warn_if_ungraspable
 
-    model = _load(args.model)
+    model = _load(args.model, [args.hand])
     objs = resolve_objects(args.object, scale=args.scale)
     if len(objs) != 1:
         raise ObjectError(f"--object must name one object, {args.object!r} names {len(objs)}")
@@ -170,7 +191,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
 
     if args.workers < 1:
         raise OhraError(f"--workers must be >= 1, got {args.workers}")
-    model = _load(args.model)
+    model = _load(args.model, args.hands)
     from ohra.sim import Protocol
 
     from ohra.objects.model import resolve_objects

@@ -130,7 +130,8 @@ class HandCondition:
                 try:
                     base = as_base(params)
                 except ParamsError as exc:
-                    raise ParamsError(f"{exc}; a grasp model with condition='params' can use such hands") from None
+                    raise ParamsError(f"{exc}; a grasp model with condition='params' can use such hands "
+                                      "(the shipped one: load_grasp_model('leap'), --model leap)") from None
                 # the VAE's own encoding (rot6d70 or reference66); fitted hands carry thumb axes a few
                 # degrees off the basis axes: it snaps them without a warning per hand
                 x = self.vae.encoding.encode_vectors(base.to_vector()[None], warn=False)

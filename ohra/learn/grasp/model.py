@@ -154,7 +154,8 @@ class GraspModel:
 
     def __repr__(self) -> str:  # the dataclass default would print every layer
         hands = self.meta.get("hands") if isinstance(self.meta, dict) else None
-        shown = f", hands={list(hands)}" if hands else ""
+        hands = list(hands or [])
+        shown = (f", hands={hands}" if len(hands) <= 4 else f", {len(hands)} hands ({hands[0]} ... {hands[-1]})") if hands else ""
         return (f"GraspModel(condition={self.condition.kind!r}, encoder={self.config.encoder!r}, "
                 f"parameters={sum(p.numel() for p in self.net.parameters()):,}{shown}, path={str(self.path) if self.path else None!r})")
 
@@ -262,18 +263,25 @@ def model_from_payload(obj: dict[str, Any], where: str) -> GraspModel:
     return GraspModel(net, cond, t_scale, cfg, meta, Path(where))
 
 
-def default_model_dir() -> Path:
-    return Path(str(resources.files("ohra.learn").joinpath("models", DEFAULT_MODEL)))
+SHIPPED_MODELS = {"default": DEFAULT_MODEL, "leap": "grasp_leap"}
+"""Grasp models shipped in ``ohra/learn/models``, by the name ``load_grasp_model`` and ``--model`` take:
+``default``: the unified model (frozen-VAE condition; Allegro, Barrett, Shadow; base-form hands only);
+``leap``: the zero-shot study's all-data model (raw-parameter condition; 66 LEAP variants; any hand)."""
+
+
+def default_model_dir(name: str = "default") -> Path:
+    return Path(str(resources.files("ohra.learn").joinpath("models", SHIPPED_MODELS[name])))
 
 
 def load_grasp_model(path: str | Path | None = None) -> GraspModel:
-    """Load a grasp model: the shipped one (``path=None``), a run/model directory (its
-    ``model.pt``, else ``checkpoints/last.pt``), or a ``.pt`` file. :class:`CheckpointError` if
-    missing, corrupt or incompatible."""
+    """Load a grasp model: a shipped one by name (``None`` or ``"default"``, ``"leap"``: see
+    :data:`SHIPPED_MODELS`), a run/model directory (its ``model.pt``, else ``checkpoints/last.pt``), or a
+    ``.pt`` file. :class:`CheckpointError` if missing, corrupt or incompatible."""
     from ohra.learn.train_vae import load_torch_file
 
-    p = default_model_dir() if path is None else Path(path)
-    if path is None and not (p / "model.pt").is_file():
+    shipped = path is None or (isinstance(path, str) and path in SHIPPED_MODELS and not Path(path).exists())
+    p = default_model_dir(path or "default") if shipped else Path(path)
+    if shipped and not (p / "model.pt").is_file():
         raise CheckpointError(f"no grasp model is shipped with this ohra ({p / 'model.pt'} is missing); "
                               "train one with `ohra train grasp` and load its run directory")
     f = p
