@@ -180,7 +180,8 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
         if (original or inertials == "original") and not (isinstance(hand, str) and hand in registered_hands()):
             what = "original=True" if original else "inertials='original'"
             raise GraspError(f"{what} needs a registered hand's original URDF: give the hand by name; "
-                             f"{hand if isinstance(hand, str) else type(hand).__name__!r} is not a registered hand")
+                             f"{hand if isinstance(hand, str) else type(hand).__name__!r} is not a registered hand "
+                             "(a spec of your own registers with ohra --hands DIR or $OHRA_HANDS_PATH)")
         params = resolve_hand(hand)
         try:
             model.condition.vector(params if condition_hand is None else resolve_hand(condition_hand))
