@@ -156,3 +156,16 @@ def test_ycb_decompositions_cover_the_mesh_where_the_simulator_needs_them(object
         hi = np.max([p.bounds[1] for p in pieces], axis=0)
         assert np.abs(lo - o.mesh.bounds[0]).max() < 0.005 and np.abs(hi - o.mesh.bounds[1]).max() < 0.005, name
         assert 0.9 < sum(p.volume for p in pieces) / o.volume < 1.6, name
+
+
+def test_the_size_check_reads_the_mesh_and_never_builds_the_simulated_body():
+    """Sampling and evaluation check an object's size first; a plausible object must not pay for (or warn
+    about) a convex decomposition there."""
+    from ohra.objects.model import ObjectModel
+    from ohra.objects.resolve import size_problem, warn_if_ungraspable
+
+    ball = ObjectModel(trimesh.creation.icosphere(radius=0.04), "ball")
+    assert size_problem(ball) is None and not warn_if_ungraspable(ball)
+    assert "body" not in vars(ball)  # the cached simulated body was never built
+    big = ObjectModel(trimesh.creation.icosphere(radius=40.0), "ball_mm")
+    assert "--scale 0.001" in size_problem(big)

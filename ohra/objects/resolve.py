@@ -55,9 +55,10 @@ def _from_path(p: Path, scale: float | None) -> list[ObjectModel]:
 
 
 def size_problem(obj: ObjectModel, extent_range: tuple[float, float] = GRASPABLE_EXTENT_M) -> str | None:
-    """Why ``obj`` cannot be a graspable object (largest extent outside ``extent_range``), with the
-    power-of-ten ``--scale`` that would bring it to ~10 cm; None when its size is plausible."""
-    ext = float(np.max(obj.extents))
+    """Why ``obj`` cannot be a graspable object (largest extent of its mesh outside ``extent_range``), with
+    the power-of-ten ``--scale`` that would bring it to ~10 cm; None when its size is plausible. Reads the
+    mesh, not the simulated body, so a plausible object never pays for a convex decomposition here."""
+    ext = float(np.max(obj.mesh.extents))
     lo, hi = extent_range
     if lo <= ext <= hi:
         return None
