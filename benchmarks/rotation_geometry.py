@@ -79,8 +79,11 @@ def main(argv: list[str] | None = None) -> int:
                 runs[label] = (pol.env_cfg, generate(resolve(dataclasses.replace(pol.env_cfg, grasp_count=args.grasps), h)), h)
         res = {}
         for label, (cfg, gs, h) in runs.items():
-            r = evaluate_policy(pol, cfg, args.episodes, args.seed, name, grasps=gs, hand=h).summary()
-            res[label] = r
+            ev = evaluate_policy(pol, cfg, args.episodes, args.seed, name, grasps=gs, hand=h)
+            r = ev.summary()
+            # per episode too: a spread like +-10 rad is one stray episode, and the JSON should show which
+            res[label] = {**r, "per_episode": {"steps_to_fall": [int(x) for x in ev.steps_to_fall],
+                                               "cumulative_rotation": [float(x) for x in ev.cumulative_rotation]}}
             rows.append(f"| {name} | {label} | {summary_cell(r, ' | ')} |")
             print(rows[-1], file=sys.stderr)
         drifts = np.array([d for _, d in fit.values()])
