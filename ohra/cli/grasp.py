@@ -21,7 +21,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ohra.cli.main import subcommand_group
-from ohra.errors import ObjectError, OhraError
+from ohra.errors import OhraError
 
 
 REFINE_HELP = ("open the fingers just enough to clear the object after sampling "
@@ -166,14 +166,11 @@ def _load(model: str | None, hands: Sequence[str] = ()):
 def _cmd_sample(args: argparse.Namespace) -> int:
     from ohra.data.dataset import atomic_write_npz
 
-    from ohra.objects.model import resolve_objects
+    from ohra.learn.grasp.model import resolve_object
     from ohra.objects.resolve import warn_if_ungraspable
 
     model = _load(args.model, [args.hand])
-    objs = resolve_objects(args.object, scale=args.scale)
-    if len(objs) != 1:
-        raise ObjectError(f"--object must name one object, {args.object!r} names {len(objs)}")
-    obj = objs[0]
+    obj = resolve_object(args.object, scale=args.scale)
     warn_if_ungraspable(obj)
     timing: dict = {}
     g = model.sample(args.hand, obj, args.n, seed=args.seed, timing=timing, refine=args.refine)

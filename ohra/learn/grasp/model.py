@@ -120,14 +120,15 @@ def random_rotations(n: int, rng: np.random.Generator) -> np.ndarray:
     return quat_to_matrix(qs / np.linalg.norm(qs, axis=1, keepdims=True))
 
 
-def resolve_object(obj: ObjectLike) -> ObjectModel:
+def resolve_object(obj: ObjectLike, scale: float | None = None) -> ObjectModel:
+    """One object from an ObjectModel or a spec (``scale`` multiplies a mesh file's coordinates)."""
     if isinstance(obj, ObjectModel):
         return obj
     if not isinstance(obj, (str, Path)):
         raise ObjectError(f"object: expected an ObjectModel, builtin:NAME or a mesh path, got {type(obj).__name__}")
     from ohra.objects.model import resolve_objects
 
-    objs = resolve_objects(str(obj))
+    objs = resolve_objects(str(obj), scale=scale)
     if len(objs) != 1:
         raise ObjectError(f"object {str(obj)!r} names {len(objs)} objects, expected one")
     return objs[0]
