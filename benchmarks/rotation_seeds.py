@@ -1,0 +1,112 @@
+"""Table 3 over several PPO seeds: canonical vs original URDF, each seed's episodes pooled.
+
+Reads the results of ``rotation_table3.py`` runs (their JSON under ``benchmarks/results/``; no training, no
+simulation), groups their policies by hand and URDF, and per group pools the per-episode Steps-to-Fall and
+Cumulative Rotation of every seed (mean, standard error over the pooled episodes, each seed's own mean). Per
+hand it then writes the canonical / original ratio of the pooled means and the difference with its standard
+error, against issue 15's target (canonical within 10 % of original on both metrics).
+
+The standard error treats the pooled episodes as independent draws; the spread between seeds is shown beside it
+(two seeds cannot estimate a seed-level variance).
+
+    python benchmarks/rotation_seeds.py rotation_table3_shadow_210 rotation_table3_shadow_s1 --name rotation_shadow_seeds
+    -> benchmarks/results/rotation_shadow_seeds.{json,md}
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import RESULTS, write_results  # noqa: E402
+
+TARGET = 0.10  # issue 15: canonical within 10 % of original on each metric
+METRICS = {"steps_to_fall": "Steps-to-Fall", "cumulative_rotation": "Cumulative Rotation [rad]"}
+
+
+def pooled(values: list[list[float]]) -> dict:
+    """Mean, sample standard deviation and standard error of all seeds' episodes together, and each seed's mean."""
+    allv = np.concatenate([np.asarray(v, dtype=float) for v in values])
+    sd = float(allv.std(ddof=1)) if len(allv) > 1 else float("nan")
+    return {"n": int(len(allv)), "mean": float(allv.mean()), "std": sd, "se": sd / np.sqrt(len(allv)),
+            "seed_means": [float(np.mean(v)) for v in values]}
+
+
+def compare(canonical: dict, original: dict) -> dict:
+    """Canonical / original ratio of pooled means, the difference and its standard error, and the verdict."""
+    ratio = canonical["mean"] / original["mean"] if original["mean"] else float("nan")
+    return {"ratio": ratio, "difference": canonical["mean"] - original["mean"],
+            "difference_se": float(np.hypot(canonical["se"], original["se"])),
+            "within_target": bool(abs(ratio - 1.0) <= TARGET + 1e-9)}  # 1.1 / 1.0 is 1.1000000000000001
+
+
+def group_runs(results: dict[str, dict]) -> dict[tuple[str, str], list[tuple[str, dict]]]:
+    """``(hand, urdf) -> [(results name/label, run entry), ...]`` over every results file, in the given order."""
+    groups: dict[tuple[str, str], list[tuple[str, dict]]] = {}
+    for name, res in results.items():
+        for label, run in res["runs"].items():
+            groups.setdefault((run["hand"], run["urdf"]), []).append((f"{name}/{label}", run))
+    return groups
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("results", nargs="+", help="results names of rotation_table3.py runs (benchmarks/results/NAME.json)")
+    ap.add_argument("--name", default="rotation_seeds")
+    args = ap.parse_args(argv)
+    results = {}
+    for name in args.results:
+        path = RESULTS / f"{name}.json"
+        if not path.is_file():
+            raise SystemExit(f"rotation_seeds: no results {path}")
+        results[name] = json.loads(path.read_text())
+    episodes = {(r["episodes"], r["seed"]) for r in results.values()}
+    if len(episodes) != 1:
+        raise SystemExit(f"rotation_seeds: the results were evaluated on different episodes (episodes, first seed): {sorted(episodes)}")
+    groups = group_runs(results)
+    data: dict = {"results": list(results), "groups": {}, "comparisons": {}}
+    rows, cmp_rows = [], []
+    for (hand, urdf), runs in groups.items():
+        seeds = [r["budget"]["seed"] for _, r in runs]
+        if len(set(seeds)) != len(seeds):
+            raise SystemExit(f"rotation_seeds: {hand} / {urdf} has two runs with PPO seed {seeds}: {[n for n, _ in runs]}")
+        entry = {"runs": [n for n, _ in runs], "seeds": seeds,
+                 "budget": [{"steps": r["budget"]["steps"], "minutes": r["budget"]["minutes"]} for _, r in runs]}
+        for key in METRICS:
+            entry[key] = pooled([r["per_episode"][key] for _, r in runs])
+        data["groups"][f"{hand}/{urdf}"] = entry
+        budget = ", ".join(f"seed {s}: {b['steps'] / 1e3:.0f}k steps / {b['minutes']:.0f} min"
+                           for s, b in zip(seeds, entry["budget"]))
+        rows.append(f"| {hand} | {urdf} | {entry['steps_to_fall']['n']} | "
+                    + " | ".join(f"{entry[k]['mean']:.2f} +- {entry[k]['se']:.2f} ({', '.join(f'{m:.2f}' for m in entry[k]['seed_means'])})"
+                                 for k in METRICS) + f" | {budget} |")
+    for hand in dict.fromkeys(h for h, _ in groups):
+        can, orig = data["groups"].get(f"{hand}/canonical"), data["groups"].get(f"{hand}/original")
+        if can is None or orig is None:
+            continue
+        c = {key: compare(can[key], orig[key]) for key in METRICS}
+        data["comparisons"][hand] = c
+        cmp_rows.append(f"| {hand} | " + " | ".join(
+            f"{c[k]['ratio']:.2f} ({c[k]['difference']:+.2f} +- {c[k]['difference_se']:.2f}) {'yes' if c[k]['within_target'] else 'no'}"
+            for k in METRICS) + " |")
+    n_ep, first = episodes.pop()
+    table = "\n".join([
+        f"Rotation policies over PPO seeds ({', '.join(results)}): {n_ep} deterministic episodes per policy "
+        f"(seeds {first}..{first + n_ep - 1}), every seed's episodes pooled per hand and URDF. Cells: pooled mean "
+        "+- standard error over the pooled episodes (each seed's own mean).", "",
+        "| hand | urdf | episodes | " + " | ".join(METRICS.values()) + " | budget |",
+        "|---|---|---|---|---|---|", *rows, "",
+        f"Canonical / original ratio of the pooled means (difference canonical - original +- its standard error), "
+        f"and whether it lies within {100 * TARGET:.0f} % (issue 15's target):", "",
+        "| hand | " + " | ".join(METRICS.values()) + " |", "|---|---|---|", *cmp_rows])
+    write_results(args.name, data, table)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
