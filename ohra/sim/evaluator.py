@@ -82,6 +82,10 @@ class EvalReport:
     protocol: Protocol
     meta: dict = field(default_factory=dict)
 
+    def __repr__(self) -> str:  # the dataclass default prints every grasp's arrays
+        return (f"EvalReport(mode={self.mode!r}, {len(self.results)} grasps, success {100 * self.success_rate:.1f} %, "
+                f"{self.clamped_count} clamped)")
+
     @property
     def success(self) -> np.ndarray:
         return np.array([r.success for r in self.results], dtype=bool)

@@ -88,6 +88,10 @@ class PairResult:
     def success_rate(self) -> float:
         return float(self.success.mean()) if len(self.success) else 0.0
 
+    def __repr__(self) -> str:  # the dataclass default prints the (n, 31) grasps
+        return (f"PairResult({self.hand!r}, {self.object!r}, {int(self.success.sum())}/{len(self.success)} succeed"
+                f"{', original URDF' if self.original else ''})")
+
     def to_dict(self) -> dict[str, Any]:
         n = len(self.success)
         return {"hand": self.hand, "object": self.object, "object_hash": self.object_hash, "original": self.original,
@@ -101,6 +105,10 @@ class PairResult:
 class GraspEvalReport:
     pairs: list[PairResult]
     meta: dict = field(default_factory=dict)
+
+    def __repr__(self) -> str:  # per hand, not every pair's grasps and the model's metadata
+        hands = "; ".join(f"{h} {100 * r['success_rate']:.1f} % of {r['n']}" for h, r in self.per_hand().items())
+        return f"GraspEvalReport({len(self.pairs)} pairs: {hands or 'none'})"
 
     def per_hand(self) -> dict[str, dict[str, float]]:
         """Pooled success rate and mean sampling time per hand."""

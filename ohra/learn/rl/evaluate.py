@@ -51,6 +51,12 @@ class EvalResult:
     def to_dict(self) -> dict:
         return {**asdict(self), "summary": self.summary(), "return_summary": self.return_summary()}
 
+    def __repr__(self) -> str:  # the dataclass default prints every episode and reward term
+        s = self.summary()
+        return (f"EvalResult({self.run!r}, {self.episodes} episodes: Steps-to-Fall {s['steps_to_fall_mean']:.1f} +- "
+                f"{s['steps_to_fall_std']:.1f}, rotation {s['rotation_mean']:.2f} +- {s['rotation_std']:.2f} rad, "
+                f"{100 * s['survived']:.0f} % survive)")
+
 
 def shipped(name: str) -> Path:
     """Folder of a policy shipped with the package (``ohra/learn/models/<name>``, an :func:`export_policy`)."""
