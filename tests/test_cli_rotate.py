@@ -103,3 +103,35 @@ def test_ohra_train_rotate_is_ohra_rotate_train(tmp_path, monkeypatch):
     assert ohra_main(["train", "rotate", *flags]) == 0
     assert ohra_main(["rotate", "train", *flags]) == 0
     assert calls[0] == calls[1] and calls[0][0].hand == "shadow_hand_right" and calls[0][1].policy == "lstm"
+
+
+def test_eval_of_a_shipped_policy_by_name_writes_beside_the_user_not_into_the_package(tmp_path, monkeypatch, capsys):
+    pytest.importorskip("stable_baselines3", reason="ohra rotate eval needs stable-baselines3")
+    from ohra.learn.rl.evaluate import shipped
+
+    package = shipped("rotate_leap_canonical")
+    before = {p.name: p.stat().st_mtime_ns for p in package.iterdir()}
+    monkeypatch.chdir(tmp_path)
+    assert main(["eval", "leap_canonical", "--episodes", "1"]) == 0
+    out = capsys.readouterr().out
+    assert (tmp_path / "rotate_leap_canonical" / "eval.json").is_file() and "rotate_leap_canonical/eval.json" in out
+    assert {p.name: p.stat().st_mtime_ns for p in package.iterdir()} == before
+    assert main(["eval", "rotate_leap_canonical", "--episodes", "1", "-o", "mine"]) == 0
+    assert (tmp_path / "mine" / "eval.json").is_file()
+
+
+def test_eval_of_an_unknown_name_lists_the_shipped_policies(tmp_path, monkeypatch, capsys):
+    pytest.importorskip("stable_baselines3", reason="ohra rotate eval needs stable-baselines3")
+    monkeypatch.chdir(tmp_path)
+    assert main(["eval", "leap_canonicl"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "rotate_leap_canonical" in err and "run directory" in err
+
+
+def test_evaluate_run_refuses_to_write_into_a_shipped_policy():
+    pytest.importorskip("stable_baselines3", reason="the rotation policies need the rl extra")
+    from ohra.errors import CheckpointError
+    from ohra.learn.rl.evaluate import evaluate_run, shipped
+
+    with pytest.raises(CheckpointError, match="shipped policy"):
+        evaluate_run(shipped("rotate_shadow_canonical"), episodes=1)

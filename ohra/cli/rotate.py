@@ -96,15 +96,17 @@ def register(sub: Any) -> None:
                 .add_parser("rotate", help=TRAIN_HELP))
 
     p = rs.add_parser("eval", help="Steps-to-Fall and Cumulative Rotation of a trained run; renders an episode")
-    p.add_argument("run", help="run directory")
+    p.add_argument("run", help="run directory, or a shipped policy by name (rotate_leap_canonical, or leap_canonical; "
+                                "its results go to ./NAME unless -o says where)")
+    p.add_argument("-o", "--out", help="folder for eval*.json and episode*/ (default: the run directory)")
     p.add_argument("--episodes", type=int, default=20)
     p.add_argument("--seed", type=int, default=1000, help="first episode seed (default 1000)")
     p.add_argument("--checkpoint", choices=("model", "last"), default="model", help="final model or last checkpoint")
-    p.add_argument("--render", action="store_true", help="also write RUN/episode/{rollout.gif,strip.png}")
-    p.add_argument("--replay", action="store_true", help="also write RUN/episode/replay.html (meshcat)")
+    p.add_argument("--render", action="store_true", help="also write OUT/episode/{rollout.gif,strip.png}")
+    p.add_argument("--replay", action="store_true", help="also write OUT/episode/replay.html (meshcat)")
     p.add_argument("--on-urdf", choices=("canonical", "original"),
                    help="run the policy on the hand's other URDF through the canonical joint space (a policy "
-                        "trained with space canonical); writes RUN/eval_on_URDF.json and RUN/episode_on_URDF/")
+                        "trained with space canonical); writes OUT/eval_on_URDF.json and OUT/episode_on_URDF/")
     p.set_defaults(func=_cmd_eval)
 
     p = rs.add_parser("plot", help="reward curves, mean +- std over seeds: LABEL=RUN[,RUN...] per group")
@@ -155,22 +157,25 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     from ohra.learn.rl import require_rl
 
     require_rl()
-    from ohra.learn.rl.evaluate import evaluate_run, on_urdf, output_suffix, record_episode, replay_html
+    from ohra.learn.rl.evaluate import (evaluate_run, is_shipped, on_urdf, output_suffix, policy_dir, record_episode,
+                                        replay_html)
     from ohra.learn.rl.train import load_run
 
-    run = Path(args.run)
-    res = evaluate_run(run, args.episodes, args.seed, args.checkpoint, urdf=args.on_urdf)
+    run = policy_dir(args.run)
+    # a shipped policy lives in the package: its results go beside the user, not into site-packages
+    dest = Path(args.out) if args.out else (Path(run.name) if is_shipped(run) else run)
+    res = evaluate_run(run, args.episodes, args.seed, args.checkpoint, urdf=args.on_urdf, out_dir=dest)
     own = load_run(run)[0]
     cfg, suffix = on_urdf(own, args.on_urdf), output_suffix(own, args.on_urdf)
     where = f" on the {cfg.urdf} URDF" if suffix else ""
     s = res.summary()
     print(f"Steps-to-Fall {s['steps_to_fall_mean']:.1f} +- {s['steps_to_fall_std']:.1f} (of {res.episode_steps}), "
           f"Cumulative Rotation {s['rotation_mean']:.2f} +- {s['rotation_std']:.2f} rad, "
-          f"survived {100 * s['survived']:.0f} % over {res.episodes} episodes{where}; wrote {run / f'eval{suffix}.json'}")
+          f"survived {100 * s['survived']:.0f} % over {res.episodes} episodes{where}; wrote {dest / f'eval{suffix}.json'}")
     ret = res.return_summary()
     print("mean episode return " + f"{ret['total']:.1f} = " + " ".join(f"{k} {v:+.1f}" for k, v in ret.items() if k != "total"))
     if args.render or args.replay:
-        out = run / f"episode{suffix}"
+        out = dest / f"episode{suffix}"
         ep = record_episode(run, out, seed=args.seed, which=args.checkpoint, urdf=args.on_urdf)
         print(f"episode (seed {args.seed}): {ep['steps']} steps, {ep['rotation']:.2f} rad; wrote {ep['gif']}, {ep['strip']}")
         if args.replay:

@@ -14,7 +14,7 @@ _LAZY = {
     "train_rotation": "train", "load_run": "train", "with_budget": "train", "ppo_class": "train",
     "evaluate_run": "evaluate", "evaluate_policy": "evaluate", "record_episode": "evaluate",
     "replay_html": "evaluate", "Policy": "evaluate", "EvalResult": "evaluate", "export_policy": "evaluate",
-    "shipped": "evaluate", "on_urdf": "evaluate", "output_suffix": "evaluate",
+    "shipped": "evaluate", "policy_dir": "evaluate", "on_urdf": "evaluate", "output_suffix": "evaluate",
     "reward_curves": "plots", "mean_std_curve": "plots", "read_progress": "plots", "table3": "plots",
 }
 

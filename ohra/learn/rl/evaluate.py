@@ -69,6 +69,32 @@ def shipped(name: str) -> Path:
     return path
 
 
+def models_dir() -> Path:
+    """The package's folder of shipped models (read-only where the package is installed)."""
+    from importlib import resources
+
+    return Path(str(resources.files("ohra.learn").joinpath("models")))
+
+
+def policy_dir(run: str | Path) -> Path:
+    """A run directory or exported policy as given, or a shipped policy by name (``rotate_leap_canonical`` or
+    just ``leap_canonical``) when no such folder exists."""
+    path = Path(run)
+    # a bare name's folder may be where an earlier evaluation of that shipped policy wrote its results
+    if path.name != str(run) or (path / "config.json").is_file():
+        return path
+    for name in (str(run), f"rotate_{run}"):
+        if (models_dir() / name / "policy.pth").is_file():
+            return models_dir() / name
+    known = sorted(p.parent.name for p in models_dir().glob("rotate_*/policy.pth"))
+    raise CheckpointError(f"{run!r} is neither a run directory nor a shipped rotation policy (shipped: {', '.join(known)})")
+
+
+def is_shipped(path: str | Path) -> bool:
+    """Whether ``path`` is one of the package's shipped models (which evaluation must not write into)."""
+    return Path(path).resolve().parent == models_dir().resolve()
+
+
 class Policy:
     """A trained policy as a function of raw observations (observation statistics applied).
 
@@ -254,17 +280,24 @@ def output_suffix(env_cfg: RotationConfig, urdf: str | None) -> str:
 
 
 def evaluate_run(run_dir: str | Path, episodes: int = 20, seed: int = 1000, which: str = "model",
-                 write: bool = True, urdf: str | None = None) -> EvalResult:
-    """Evaluate a trained run (seeds from 1000 by default: training used 0..n_envs); writes ``RUN/eval.json``.
+                 write: bool = True, urdf: str | None = None, out_dir: str | Path | None = None) -> EvalResult:
+    """Evaluate a trained run (seeds from 1000 by default: training used 0..n_envs); writes ``eval.json`` into
+    ``out_dir`` (default the run itself; a shipped policy, :func:`policy_dir`, needs an ``out_dir`` to write).
 
     ``urdf``: run the policy on the hand's other URDF (:func:`on_urdf`; starting states from that URDF's
-    own cache) and write ``RUN/eval_on_<urdf>.json`` instead.
+    own cache) and write ``eval_on_<urdf>.json`` instead.
     """
+    run_dir = policy_dir(run_dir)
+    if write and out_dir is None and is_shipped(run_dir):
+        raise CheckpointError(f"{run_dir.name} is a shipped policy: give out_dir (ohra rotate eval -o DIR) to write its "
+                              "evaluation elsewhere than the package, or write=False")
     pol = Policy(run_dir, which)
     cfg = on_urdf(pol.env_cfg, urdf)
     res = evaluate_policy(pol, cfg, episodes, seed, str(run_dir), grasps=pol.grasps if cfg is pol.env_cfg else None)
     if write:
-        path = Path(run_dir) / f"eval{output_suffix(pol.env_cfg, urdf)}.json"
+        out = Path(out_dir) if out_dir is not None else run_dir
+        out.mkdir(parents=True, exist_ok=True)
+        path = out / f"eval{output_suffix(pol.env_cfg, urdf)}.json"
         tmp = path.with_suffix(".tmp")
         tmp.write_text(json.dumps(res.to_dict(), indent=2) + "\n")
         os.replace(tmp, path)
@@ -279,7 +312,7 @@ def record_episode(run_dir: str | Path, out_dir: str | Path, seed: int = 1000, e
     from ohra.sim.render import write_png
     from ohra.sim.rotation.render import render, strip, write_gif
 
-    pol = Policy(run_dir, which)
+    pol = Policy(policy_dir(run_dir), which)
     env = pol.make_env(render_mode="rgb_array", urdf=urdf)
     try:
         ep = run_episode(env, pol, seed, frames_every=every, render=lambda: render(env.scene, size))
