@@ -55,7 +55,7 @@ def test_list_includes_variants(capsys):
 @pytest.mark.parametrize(
     "argv, message",
     [
-        (["hand", "render", "leap_9999"], "unknown hand 'leap_9999'"),
+        (["hand", "render", "leap_9999"], "not a LEAP variant leap_ABCD (digits 0-3"),
         (["hand", "info", "no_such_hand"], "own folder: ohra --hands DIR"),
         (["hand", "render", "{missing}.json"], "params file not found"),
         (["hand", "render", "{bad}"], "malformed JSON"),

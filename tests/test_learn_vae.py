@@ -313,6 +313,7 @@ def test_cli_bad_input_is_one_line_and_exit_2(vae, tmp_path, capsys):
         (["vae", "decode", "1,2,3"], f"expected shape ({vae.latent_dim},)"),
         (["vae", "decode", "a,b"], "comma-separated"),
         (["vae", "encode", "no_such_hand"], "unknown hand"),
+        (["vae", "encode", "leap_3303"], "leap_3303 is a LEAP variant"),
     ]
     bad = tmp_path / "bad.pt"
     bad.write_bytes(b"\x00garbage")

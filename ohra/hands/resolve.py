@@ -135,7 +135,8 @@ def resolve_hand(ref: Any, form: str | None = None, spec: str | Path | None = No
     key = str(ref)
     if is_variant(key):
         if form == "base":
-            raise HandNotFoundError(f"{key} exists only in the extended form (LEAP flavour)")
+            raise HandNotFoundError(f"{key} is a LEAP variant: it exists only in the extended form (LEAP flavour), and "
+                                    "this needs a hand's base form (a registered hand, its spec or base params JSON)")
         return HandRef(key, "extended", leap_variant(key), kind="variant")
     if key in registry.registered_hands():
         f = registry._resolve_form(key, form)
@@ -152,7 +153,8 @@ def resolve_hand(ref: Any, form: str | None = None, spec: str | Path | None = No
         return _from_params_file(p, form, spec)
     known = ", ".join(registry.registered_hands()) or "(no registered hands)"
     raise HandNotFoundError(
-        f"unknown hand {key!r}: not a registered hand ({known}), not leap_XXXX, not a spec YAML or params JSON file "
+        f"unknown hand {key!r}: not a registered hand ({known}), not a LEAP variant "
+        f"leap_ABCD (digits 0-3: links kept on the thumb, index, middle and little finger), not a spec YAML or params JSON file "
         f"(a hand whose spec is in your own folder: ohra --hands DIR, or ${registry.PATH_ENV})"
     )
 
