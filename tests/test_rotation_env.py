@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 import warnings
 import xml.etree.ElementTree as ET
 
@@ -318,3 +319,23 @@ def test_original_urdf_with_canonical_collisions_is_the_hybrid_hand(hands_dir):
     assert "capsule" in shapes and not shapes & {"mesh", "box"} and own_shapes & {"mesh", "box"}
     with pytest.raises(RotationConfigError, match="collisions"):
         RotationConfig(collisions="canonical")
+
+
+def test_generating_starting_states_shows_progress_on_a_terminal_only(monkeypatch):
+    """gym.make on a hand without cached states generates them (minutes): a terminal sees a bar, a log does not."""
+    import io
+
+    from ohra.sim.rotation import grasps
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    monkeypatch.setattr(sys, "stderr", Terminal())
+    bar = grasps._bar(3, "grasps x", None)
+    bar.update(1)
+    bar.close()
+    assert "grasps x (first use; cached)" in sys.stderr.getvalue()
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    grasps._bar(3, "grasps x", None).update(1)
+    assert sys.stderr.getvalue() == ""

@@ -252,7 +252,7 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
     tb_dir = str(run_dir / "tensorboard") if tensorboard else None
     if tensorboard:
         _require_tensorboard()
-    load_or_generate(resolve(env_cfg), progress=verbose > 0)  # once here, not in every worker
+    load_or_generate(resolve(env_cfg), progress=True if verbose > 0 else None)  # once here, not in every worker
     with folder_lock(run_dir, "rotation training run"):  # one writer per run folder
         if resume:
             _check_resume(run_dir, env_cfg, ppo)

@@ -28,6 +28,7 @@ import hashlib
 import json
 import math
 import os
+import sys
 import tempfile
 import warnings
 from dataclasses import dataclass
@@ -235,7 +236,7 @@ def _keep(scene: RotationScene, start: np.ndarray, before) -> bool:
     return scene.hand_contacts() >= cfg.min_contacts
 
 
-def generate(task: Task, progress: bool = False) -> GraspSet:
+def generate(task: Task, progress: bool | None = False) -> GraspSet:
     """Generate ``task.cfg.grasp_count`` starting states (see module doc); seeded by ``grasp_seed``."""
     cfg, hand = task.cfg, task.hand
     scene = RotationScene(hand, task.obj, cfg, task.palm_radius)
@@ -279,8 +280,10 @@ def generate(task: Task, progress: bool = False) -> GraspSet:
     return GraspSet(np.array(Q), np.array(T), np.array(P), np.array(O), hold, attempts, cache_key(task))
 
 
-def load_or_generate(task: Task, progress: bool = False) -> GraspSet:
-    """The cached starting states of ``task`` (generated and cached on first use)."""
+def load_or_generate(task: Task, progress: bool | None = None) -> GraspSet:
+    """The cached starting states of ``task``, generated and cached on first use (tens of minutes for a hand
+    whose perturbed grasps seldom hold: the original Allegro with the cube keeps ~1 in 7). ``progress``: a
+    bar while generating; ``None`` shows one when stderr is a terminal."""
     path = cache_path(task)
     if path.is_file():
         try:
@@ -302,9 +305,11 @@ class _NoBar:
         pass
 
 
-def _bar(total: int, desc: str, show: bool):
+def _bar(total: int, desc: str, show: bool | None):
+    if show is None:
+        show = sys.stderr.isatty()
     if not show:
         return _NoBar()
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=desc, leave=False)
+    return tqdm(total=total, desc=f"{desc} (first use; cached)", leave=False)
