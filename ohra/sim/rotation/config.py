@@ -75,8 +75,11 @@ class RotationConfig:
     form: str | None = None  # canonical form; None: extended when registered (closest to the original), else base
     space: str | None = None  # joint space of actions/observations: "canonical" (22) or "native" (the URDF's
     #                           driven joints); None: canonical for the canonical URDF, native for the original
-    object: str = "cube"  # "cube", "sphere", "cylinder" (lying along the fingers) or "builtin:NAME"
-    object_size: float | None = None  # m: cube side / sphere and cylinder diameter; None: the palm radius
+    # "cube", "sphere", "cylinder" (lying along the fingers), or any object ohra resolves: "builtin:NAME",
+    # "procedural:FAMILY:SEED", a mesh/URDF file or one-object folder (its primitives or convex pieces)
+    object: str = "cube"
+    # m: cube side / sphere and cylinder diameter (None: the palm radius); a mesh file's largest extent (None: its own)
+    object_size: float | None = None
     object_density: float = 500.0  # kg/m^3
     friction: float = 1.0  # effective hand-object friction (each body gets its square root)
 

@@ -28,6 +28,7 @@ import hashlib
 import json
 import math
 import os
+import re
 import sys
 import tempfile
 import warnings
@@ -208,6 +209,7 @@ def cache_key(task: Task) -> str:
         fields["grasp_hold"] = cfg.grasp_hold
     fields.update(noise=cfg.resolved_grasp_noise, object=task.obj.name, mass=task.obj.mass,
                   prims=[dict(p) for p in task.obj.prims], version=VERSION, palm_radius=task.palm_radius,
+                  **({"body": task.obj.digest} if task.obj.digest else {}),  # a mesh object (keys of primitives unchanged)
                   pybullet=pb.getAPIVersion())
     h = hashlib.sha256(task.hand.urdf.encode())
     h.update(json.dumps(fields, sort_keys=True, default=float).encode())
@@ -215,8 +217,16 @@ def cache_key(task: Task) -> str:
 
 
 def cache_path(task: Task) -> Path:
-    safe = task.cfg.object.replace(":", "-")
-    return cache_dir() / "rotation" / f"{task.cfg.hand}_{task.cfg.urdf}_{safe}_{cache_key(task)}.npz"
+    """The cache file of ``task``'s starting states: named for the hand, URDF and object (a file's stem when
+    either is given as a path), keyed by :func:`cache_key`."""
+    hand, obj = (_label(str(s)) for s in (task.cfg.hand, task.cfg.object))
+    return cache_dir() / "rotation" / f"{hand}_{task.cfg.urdf}_{obj}_{cache_key(task)}.npz"
+
+
+def _label(spec: str) -> str:
+    if "/" in spec or "\\" in spec or spec.endswith((".json", ".yaml", ".yml", ".obj", ".stl", ".ply", ".urdf")):
+        spec = Path(spec).stem
+    return re.sub(r"[^A-Za-z0-9_.-]+", "-", spec)
 
 
 def _keep(scene: RotationScene, start: np.ndarray, before) -> bool:

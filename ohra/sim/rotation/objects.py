@@ -1,16 +1,20 @@
-"""Objects of the rotation task as PyBullet primitives with exact mass properties.
+"""Objects of the rotation task with exact mass properties: PyBullet primitives or convex pieces.
 
 ``cube``, ``sphere`` and ``cylinder`` are sized by one length (cube side, sphere and cylinder
 diameter; the cylinder is as long as its diameter and lies along the fingers, so that turning it
-about world +z is not a spin about its own symmetry axis). ``builtin:NAME`` takes an ohra built-in
-object (``ohra.objects.builtin``) at its own size. Frames: the object frame is the primitive's
-centre; ``rest_quat`` (xyzw) is its orientation in the world at yaw 0.
+about world +z is not a spin about its own symmetry axis). Any other object ohra resolves
+(``builtin:NAME``, ``procedural:FAMILY:SEED``, a mesh or URDF file or a one-object folder) is taken as
+the body :class:`ohra.objects.ObjectModel` simulates (its primitives, else its convex pieces) at its own
+size, or scaled so that its largest extent is ``size`` when one is given (file objects only). Frames: the
+object frame is the primitive's centre for the sized objects, the mesh frame otherwise; ``rest_quat``
+(xyzw) is its orientation in the world at yaw 0.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 import trimesh
@@ -33,6 +37,9 @@ class ObjectShape:
         rest_quat: (4,) xyzw orientation of the object frame in the world at yaw 0.
         half_height: m, extent below the centre along world -z at rest (the resting height above a plane).
         mesh: surface mesh in the object frame (renders and meshcat replays).
+        inertia_quat: (4,) xyzw orientation of the principal axes (``inertia``'s frame) in the object frame.
+        pieces: convex collision pieces in the object frame, for an object without primitives.
+        digest: what identifies the geometry beyond ``prims`` (a mesh object's body hash), for caches.
     """
 
     name: str
@@ -43,10 +50,16 @@ class ObjectShape:
     rest_quat: np.ndarray
     half_height: float
     mesh: trimesh.Trimesh
+    inertia_quat: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 0.0, 1.0]))
+    pieces: tuple[trimesh.Trimesh, ...] = ()
+    digest: str = ""
 
 
-def make_object(name: str, size: float, density: float) -> ObjectShape:
-    """The object ``name`` (see module doc) of characteristic length ``size`` [m] and density [kg/m^3]."""
+def make_object(name: str, size: float | None, density: float) -> ObjectShape:
+    """The object ``name`` (see module doc) of characteristic length ``size`` [m] (``None``: its own size, for
+    objects other than the sized shapes) and density [kg/m^3]."""
+    if name in SIZED and not (size is not None and size > 0):
+        raise ObjectError(f"object {name!r} needs a size > 0 [m], got {size!r}")
     if name == "cube":
         h = size / 2
         m = density * size**3
@@ -67,25 +80,43 @@ def make_object(name: str, size: float, density: float) -> ObjectShape:
         return ObjectShape(name, ({"type": "cylinder", "size": (r, length), "pos": (0.0, 0.0, 0.0)},), m,
                            np.array([ixx, ixx, 0.5 * m * r**2]), np.zeros(3), np.array([0.0, s, 0.0, s]), r,
                            trimesh.creation.cylinder(radius=r, height=length, sections=48))
-    if name.startswith("builtin:"):
-        return _builtin(name.split(":", 1)[1], density)
-    raise ObjectError(f"unknown rotation object {name!r}; expected one of {SIZED} or 'builtin:NAME'")
+    return from_model(name, size, density)
 
 
-def _builtin(name: str, density: float) -> ObjectShape:
-    from ohra.objects.model import ObjectModel
+def resolve_model(spec: str, density: float, size: float | None = None):
+    """The one :class:`ohra.objects.ObjectModel` ``spec`` names, at ``density``; a file object is scaled so its
+    largest extent is ``size`` [m] when given."""
+    from ohra.objects.model import resolve_objects
 
-    obj = ObjectModel.builtin(name, density)
-    if not obj.primitives:
-        raise ObjectError(f"built-in object {name!r} has no primitive solids; the rotation scene needs primitives")
+    if not (spec.startswith(("builtin:", "procedural:")) or Path(spec).expanduser().exists()):
+        raise ObjectError(f"unknown rotation object {spec!r}; expected one of {SIZED}, builtin:NAME, "
+                          "procedural:FAMILY:SEED, or a mesh/URDF file or folder that exists")
+    if size is not None and spec.startswith(("builtin:", "procedural:")):
+        raise ObjectError(f"object {spec!r} keeps its own size: object_size scales cube, sphere, cylinder and "
+                          "mesh files only")
+    objs = resolve_objects(spec)
+    if len(objs) != 1:
+        raise ObjectError(f"object {spec!r} names {len(objs)} objects, expected one")
+    obj = objs[0]
+    if size is not None:
+        obj = resolve_objects(spec, scale=float(size) / float(np.max(obj.mesh.extents)))[0]
+    obj.density = float(density)
+    return obj
+
+
+def from_model(spec: str, size: float | None, density: float) -> ObjectShape:
+    """The rotation object of any object spec ohra resolves (module doc): primitives when the object has them,
+    else the convex pieces of its simulated body; mass properties of that body."""
+    from ohra.rotations import matrix_to_quat
+
+    obj = resolve_model(spec, density, size)
     I = np.asarray(obj.inertia, dtype=float)
     w, V = np.linalg.eigh(0.5 * (I + I.T))
-    if not np.allclose(V, np.diag(np.diag(V)) * np.sign(np.diag(V)), atol=1e-6):
-        raise ObjectError(f"built-in object {name!r}: principal axes are not the mesh axes")
-    order = np.argmax(np.abs(V), axis=0)  # eigenvector k lies along axis order[k]
-    inertia = np.zeros(3)
-    inertia[order] = w
+    if np.linalg.det(V) < 0:
+        V[:, 0] *= -1
     com = np.asarray(obj.center_mass, dtype=float)
     half = float(com[2] - obj.bounds[0][2])
-    return ObjectShape(f"builtin:{name}", tuple(obj.primitives), float(obj.mass), np.maximum(inertia, 1e-12), com,
-                       np.array([0.0, 0.0, 0.0, 1.0]), half, obj.mesh)
+    prims = tuple(dict(p) for p in obj.primitives) if obj.primitives else ()
+    pieces = () if prims else tuple(obj.convex_pieces())
+    return ObjectShape(spec, prims, float(obj.mass), np.maximum(w, 1e-12), com, np.array([0.0, 0.0, 0.0, 1.0]), half,
+                       obj.mesh, np.asarray(matrix_to_quat(V), dtype=float), pieces, "" if prims else obj.body_hash)

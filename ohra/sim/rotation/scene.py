@@ -72,6 +72,9 @@ class RotationScene:
     def __init__(self, hand: SimHand, obj: ObjectShape, cfg: RotationConfig, palm_radius: float,
                  visual: bool = False):
         self.hand, self.obj, self.cfg, self.visual = hand, obj, cfg, visual
+        qi = np.asarray(obj.inertia_quat, dtype=float)
+        self._turned_inertia = not np.allclose(np.abs(qi), [0.0, 0.0, 0.0, 1.0], atol=1e-12)
+        self._inertia_conj = np.array([-qi[0], -qi[1], -qi[2], qi[3]])
         self.palm_radius = float(palm_radius)  # m, of the hand's canonical params (places the object)
         self.client = c = pb.connect(pb.DIRECT)
         pb.setGravity(0.0, 0.0, -cfg.gravity, physicsClientId=c)
@@ -164,6 +167,9 @@ class RotationScene:
     # -- object ---------------------------------------------------------------------------------
     def _make_object_shape(self) -> None:
         c, prims = self.client, self.obj.prims
+        if not prims:
+            self._make_mesh_shape()
+            return
         kw = dict(radii=[p["size"][0] if p["type"] != "box" else 0.0 for p in prims],
                   halfExtents=[list(p["size"]) if p["type"] == "box" else [0.0, 0.0, 0.0] for p in prims],
                   lengths=[p["size"][1] if p["type"] in ("cylinder", "capsule") else 0.0 for p in prims],
@@ -176,6 +182,37 @@ class RotationScene:
             self.obj_visual = pb.createVisualShapeArray(kinds, visualFramePositions=pos,
                                                         rgbaColors=[[0.85, 0.63, 0.4, 1.0]] * len(prims), **kw)
 
+    def _make_mesh_shape(self) -> None:
+        """Collision shape of an object without primitives: its convex pieces, link frame at the centre of mass."""
+        import tempfile
+        from pathlib import Path
+
+        c, o = self.client, self.obj
+        pieces = [p.copy() for p in o.pieces]
+        for p in pieces:
+            p.apply_translation(-o.com)
+        if len(pieces) == 1:
+            self.obj_shape = pb.createCollisionShape(pb.GEOM_MESH, vertices=np.asarray(pieces[0].vertices).tolist(),
+                                                     physicsClientId=c)
+        else:
+            # createCollisionShapeArray takes meshes only as files: one temporary OBJ per convex piece
+            with tempfile.TemporaryDirectory() as tmp:
+                files = []
+                for k, p in enumerate(pieces):
+                    files.append(str(Path(tmp) / f"piece{k}.obj"))
+                    p.export(files[-1])
+                n = len(files)
+                self.obj_shape = pb.createCollisionShapeArray(
+                    [pb.GEOM_MESH] * n, fileNames=files, meshScales=[[1, 1, 1]] * n,
+                    collisionFramePositions=[[0, 0, 0]] * n, collisionFrameOrientations=[[0, 0, 0, 1]] * n,
+                    physicsClientId=c)
+        self.obj_visual = -1
+        if self.visual:
+            m = o.mesh
+            self.obj_visual = pb.createVisualShape(pb.GEOM_MESH, vertices=(np.asarray(m.vertices) - o.com).tolist(),
+                                                   indices=np.asarray(m.faces).reshape(-1).tolist(),
+                                                   rgbaColor=[0.85, 0.63, 0.4, 1.0], physicsClientId=c)
+
     def new_object(self, pos: np.ndarray, quat: np.ndarray, fixed: bool = False) -> None:
         """A fresh object body with its frame at ``pos`` (world, m) and ``quat`` (xyzw), at rest."""
         c, o = self.client, self.obj
@@ -183,12 +220,15 @@ class RotationScene:
             pb.removeBody(self.obj_body, physicsClientId=c)
         R = np.reshape(pb.getMatrixFromQuaternion([float(x) for x in quat]), (3, 3))
         com = np.asarray(pos, dtype=float) + R @ o.com
+        # the inertial frame turned onto the principal axes; PyBullet then reports that frame's pose (read())
         b = pb.createMultiBody(0.0 if fixed else o.mass, self.obj_shape, self.obj_visual, com.tolist(),
                                [float(x) for x in quat], baseInertialFramePosition=[0.0, 0.0, 0.0],
-                               physicsClientId=c)
+                               baseInertialFrameOrientation=[float(x) for x in o.inertia_quat], physicsClientId=c)
         mu = math.sqrt(self.cfg.friction)
+        # collisionMargin 0 for convex meshes: PyBullet would inflate them by 1 mm (primitives include theirs)
         pb.changeDynamics(b, -1, lateralFriction=mu, spinningFriction=0.0, rollingFriction=0.0, restitution=0.0,
-                          linearDamping=0.0, angularDamping=0.0, physicsClientId=c)
+                          linearDamping=0.0, angularDamping=0.0, physicsClientId=c,
+                          **({} if o.prims else {"collisionMargin": 0.0}))
         if not fixed:
             pb.changeDynamics(b, -1, localInertiaDiagonal=o.inertia.tolist(), physicsClientId=c)
         pb.setCollisionFilterGroupMask(b, -1, OBJECT_BIT, PALM_BIT | FINGER_BITS, physicsClientId=c)
@@ -207,6 +247,8 @@ class RotationScene:
         p, quat = pb.getBasePositionAndOrientation(self.obj_body, physicsClientId=c)
         v, w = pb.getBaseVelocity(self.obj_body, physicsClientId=c)
         quat = np.asarray(quat)
+        if self._turned_inertia:  # PyBullet reports the inertial frame: back to the object frame
+            quat = _quat_mul(quat, self._inertia_conj)
         pos = np.asarray(p)
         if self.obj.com.any():
             R = np.reshape(pb.getMatrixFromQuaternion(quat.tolist()), (3, 3))

@@ -15,7 +15,7 @@ import numpy as np
 from ohra.errors import HandNotFoundError
 from ohra.sim.hands import SimHand
 from ohra.sim.rotation.config import RotationConfig, RotationConfigError
-from ohra.sim.rotation.objects import ObjectShape, make_object
+from ohra.sim.rotation.objects import SIZED, ObjectShape, make_object
 
 
 class JointSpace:
@@ -127,7 +127,8 @@ def resolve(cfg: RotationConfig, sim_hand: SimHand | None = None) -> Task:
         space = JointSpace(tuple(_canonical_names()), hand.canon_lower.copy(), hand.canon_upper.copy(), True, hand)
     else:
         space = JointSpace(tuple(hand.joints), hand.lower.copy(), hand.upper.copy(), False, hand)
-    size = cfg.object_size if cfg.object_size is not None else float(params.palm_radius)
+    # the sized shapes default to the palm radius; other objects keep their own size unless one is given
+    size = cfg.object_size if cfg.object_size is not None or cfg.object not in SIZED else float(params.palm_radius)
     return Task(cfg, hand, params, space, make_object(cfg.object, size, cfg.object_density))
 
 
