@@ -135,3 +135,16 @@ def test_evaluate_run_refuses_to_write_into_a_shipped_policy():
 
     with pytest.raises(CheckpointError, match="shipped policy"):
         evaluate_run(shipped("rotate_shadow_canonical"), episodes=1)
+
+
+def test_grasps_for_a_mesh_file_object_at_a_given_size(tmp_path, monkeypatch, capsys):
+    import trimesh
+
+    monkeypatch.setenv("OHRA_CACHE_DIR", str(tmp_path / "cache"))
+    mesh = tmp_path / "my mug.obj"
+    trimesh.creation.cylinder(radius=0.04, height=0.1).export(mesh)
+    assert main(["grasps", "--object", str(mesh), "--object-size", "0.05", "--grasps", "2", "--set", "settle_time=1.0"]) == 0
+    out = capsys.readouterr().out
+    assert "+ " + str(mesh) in out and "my-mug" in out
+    assert main(["grasps", "--object", "builtin:box", "--object-size", "0.05"]) == 2
+    assert "keeps its own size" in capsys.readouterr().err

@@ -23,7 +23,10 @@ def _env_args(p: argparse.ArgumentParser) -> None:
                    help="canonical URDF: finger masses of the template's capsules (default) or of the original URDF")
     p.add_argument("--form", choices=("base", "extended"), help="canonical form (default: extended when registered)")
     p.add_argument("--space", choices=("canonical", "native"), help="joint space of actions (default: by --urdf)")
-    p.add_argument("--object", default="cube", help="cube, sphere, cylinder or builtin:NAME (default cube)")
+    p.add_argument("--object", default="cube", help="cube, sphere, cylinder (default cube), builtin:NAME, "
+                   "procedural:FAMILY:SEED, or a mesh/URDF file or one-object folder")
+    p.add_argument("--object-size", type=float, metavar="M",
+                   help="cube side / sphere, cylinder diameter (default: the palm radius); a mesh file's largest extent")
     p.add_argument("--grasps", type=int, default=1000, help="cached starting states (default 1000)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=JSON",
                    help="any other RotationConfig field, e.g. --set sim_dt=0.0166 (repeatable)")
@@ -33,7 +36,7 @@ def _env_config(args: argparse.Namespace):
     from ohra.sim.rotation.config import RotationConfig, RotationConfigError
 
     kw: dict[str, Any] = {"hand": args.hand, "urdf": args.urdf, "inertials": args.inertials, "form": args.form, "space": args.space,
-                          "object": args.object, "grasp_count": args.grasps}
+                          "object": args.object, "object_size": args.object_size, "grasp_count": args.grasps}
     kw.update(_key_values(args.set, "--set", RotationConfigError))
     return RotationConfig.from_dict(kw, "command line")
 
