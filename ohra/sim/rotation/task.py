@@ -117,7 +117,8 @@ def resolve(cfg: RotationConfig, sim_hand: SimHand | None = None) -> Task:
             hand = hand.with_finger_masses(original_finger_masses(cfg.hand, params.form))
     else:
         if cfg.hand not in registry.registered_hands():
-            raise HandNotFoundError(f"urdf='original' needs a registered hand with an original URDF, not {cfg.hand!r}")
+            raise HandNotFoundError(f"urdf='original' needs a registered hand with an original URDF, not {cfg.hand!r} "
+                                    "(a spec YAML of your own registers with ohra --hands DIR or $OHRA_HANDS_PATH)")
         hand = SimHand.registered_original(cfg.hand, params.form)
         if cfg.collisions == "canonical":
             from ohra.sim.hybrid import with_canonical_collisions
