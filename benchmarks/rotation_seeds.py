@@ -7,7 +7,9 @@ hand it then writes the canonical / original ratio of the pooled means and the d
 error, against issue 15's target (canonical within 10 % of original on both metrics).
 
 The standard error treats the pooled episodes as independent draws; the spread between seeds is shown beside it
-(two seeds cannot estimate a seed-level variance).
+(two seeds cannot estimate a seed-level variance). Where the runs' folders are present, the training curves
+(episode return and rotation per training episode against PPO steps) are drawn per hand and URDF as the mean
++- standard deviation over the seeds: ``NAME_curves.png``, ``NAME_curves_rotation.png``.
 
     python benchmarks/rotation_seeds.py rotation_table3_shadow_210 rotation_table3_shadow_s1 --name rotation_shadow_seeds
     -> benchmarks/results/rotation_shadow_seeds.{json,md}
@@ -54,6 +56,20 @@ def group_runs(results: dict[str, dict]) -> dict[tuple[str, str], list[tuple[str
     return groups
 
 
+def seed_curves(groups: dict[tuple[str, str], list[tuple[str, dict]]], name: str) -> list[str]:
+    """Return and rotation curves per hand and URDF over its seeds' runs (``per_episode.run``); none when a run's
+    ``progress.csv`` is missing (results read on a machine without the runs)."""
+    from ohra.learn.rl.plots import reward_curves
+
+    runs = {f"{hand} {urdf}": [Path(r["per_episode"]["run"]) for _, r in rs] for (hand, urdf), rs in groups.items()}
+    if not all((d / "progress.csv").is_file() for ds in runs.values() for d in ds):
+        return []
+    out = [reward_curves(runs, RESULTS / f"{name}_curves.png", title="Episode return, mean +- std over PPO seeds"),
+           reward_curves(runs, RESULTS / f"{name}_curves_rotation.png", key="rotation_mean",
+                         title="Rotation per training episode, mean +- std over PPO seeds")]
+    return [p.name for p in out]
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("results", nargs="+", help="results names of rotation_table3.py runs (benchmarks/results/NAME.json)")
@@ -94,6 +110,7 @@ def main(argv: list[str] | None = None) -> int:
         cmp_rows.append(f"| {hand} | " + " | ".join(
             f"{c[k]['ratio']:.2f} ({c[k]['difference']:+.2f} +- {c[k]['difference_se']:.2f}) {'yes' if c[k]['within_target'] else 'no'}"
             for k in METRICS) + " |")
+    curves = seed_curves(groups, args.name)
     n_ep, first = episodes.pop()
     table = "\n".join([
         f"Rotation policies over PPO seeds ({', '.join(results)}): {n_ep} deterministic episodes per policy "
@@ -103,7 +120,9 @@ def main(argv: list[str] | None = None) -> int:
         "|---|---|---|---|---|---|", *rows, "",
         f"Canonical / original ratio of the pooled means (difference canonical - original +- its standard error), "
         f"and whether it lies within {100 * TARGET:.0f} % (issue 15's target):", "",
-        "| hand | " + " | ".join(METRICS.values()) + " |", "|---|---|---|", *cmp_rows])
+        "| hand | " + " | ".join(METRICS.values()) + " |", "|---|---|---|", *cmp_rows,
+        *(["", "Training curves, mean +- std over the seeds: " + ", ".join(f"`{c}`" for c in curves)] if curves else [])])
+    data["curves"] = curves
     write_results(args.name, data, table)
     return 0
 

@@ -17,9 +17,9 @@ finally:
     sys.path.pop(0)
 
 
-def _run(urdf: str, seed: int, steps: list[int], rotation: list[float]) -> dict:
+def _run(urdf: str, seed: int, steps: list[int], rotation: list[float], run: str = "no/such/run") -> dict:
     return {"hand": "h", "urdf": urdf, "budget": {"steps": 1000, "minutes": 1.0, "seed": seed},
-            "per_episode": {"steps_to_fall": steps, "cumulative_rotation": rotation}}
+            "per_episode": {"steps_to_fall": steps, "cumulative_rotation": rotation, "run": run}}
 
 
 def _write(results: Path, name: str, runs: dict, episodes: int = 3) -> None:
@@ -74,3 +74,22 @@ def test_results_evaluated_on_different_episodes_are_refused(results):
     _write(results, "b", {"c": _run("canonical", 1, [400] * 2, [1.0] * 2)}, episodes=2)
     with pytest.raises(SystemExit, match="different episodes"):
         rotation_seeds.main(["a", "b", "--name", "out"])
+
+
+def test_curves_are_drawn_over_the_seeds_when_the_runs_are_present(results):
+    runs = []
+    for k in range(2):
+        d = results / f"run{k}"
+        d.mkdir()
+        rows = "\n".join(f"{t},{t / 100},{-10 + t / 1000 + k},{t / 10000 + k}" for t in range(0, 4000, 500))
+        (d / "progress.csv").write_text("timesteps,wall_s,ep_reward_mean,rotation_mean\n" + rows + "\n")
+        runs.append(str(d))
+    _write(results, "a", {"c": _run("canonical", 0, [400] * 3, [1.0] * 3, runs[0])})
+    _write(results, "b", {"c": _run("canonical", 1, [400] * 3, [1.0] * 3, runs[1])})
+    assert rotation_seeds.main(["a", "b", "--name", "out"]) == 0
+    out = json.loads((results / "out.json").read_text())
+    assert out["curves"] == ["out_curves.png", "out_curves_rotation.png"]
+    assert (results / "out_curves_rotation.png").read_bytes()[:4] == b"\x89PNG"
+    _write(results, "b", {"c": _run("canonical", 1, [400] * 3, [1.0] * 3)})  # a run folder missing: no curves
+    assert rotation_seeds.main(["a", "b", "--name", "out2"]) == 0
+    assert json.loads((results / "out2.json").read_text())["curves"] == []
