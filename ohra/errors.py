@@ -72,3 +72,18 @@ def reject_unknown(keys: Iterable[str], known: Iterable[str], error: type[OhraEr
     unknown = sorted(set(keys) - names)
     if unknown:
         raise error(f"{source}: unknown {what} {unknown}; known: {sorted(names)}")
+
+
+def user_stacklevel() -> int:
+    """The ``stacklevel`` that attributes a warning to the first frame outside ohra (and ``functools``, whose
+    ``cached_property`` runs some of ohra's checks): a notebook user sees their own line, not ohra's internals.
+    Call it in the argument list of ``warnings.warn``."""
+    import functools
+    import os
+    import sys
+
+    pkg = os.path.dirname(os.path.abspath(__file__)) + os.sep
+    frame, level = sys._getframe(1), 1  # the frame that calls warnings.warn is stacklevel 1
+    while frame is not None and (frame.f_code.co_filename.startswith(pkg) or frame.f_code.co_filename == functools.__file__):
+        frame, level = frame.f_back, level + 1
+    return level

@@ -35,7 +35,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ohra.errors import OhraError, ParamsError
+from ohra.errors import OhraError, ParamsError, user_stacklevel
 from ohra.canonical.params import MAX_ANGLE, BaseParams, ExtendedParams, segment_mask
 from ohra.learn.sampler import BASIS_AXES, EXTRA, FINGER_RADIUS, LENGTHS, LOWERS, PALM, THUMB_AXES, THUMB_RPY, UPPERS, XYZ
 
@@ -103,14 +103,12 @@ def _as_batch(v: Any, width: int, what: str) -> tuple[np.ndarray, bool]:
     return arr, single
 
 
-def axis_categories(axes: np.ndarray, warn: bool = True, names: Sequence[str] | None = None,
-                    stacklevel: int = 3) -> np.ndarray:
+def axis_categories(axes: np.ndarray, warn: bool = True, names: Sequence[str] | None = None) -> np.ndarray:
     """Category index (0..5 for +x, -x, +y, -y, +z, -z) of each axis in ``axes`` (..., 3).
 
     A zero axis (absent joint) is category 0 (+x, as in the reference). Any other axis goes to the
     signed basis axis closest in angle; if it was not already one, an :class:`AxisSnapWarning`
-    names it (``names[i]`` labels the i-th axis in the message), attributed ``stacklevel`` frames up
-    (as in :func:`warnings.warn`; the default names the caller of this function's caller).
+    names it (``names[i]`` labels the i-th axis in the message), attributed to the first caller outside ohra.
     """
     a = np.asarray(axes, dtype=float)
     flat = a.reshape(-1, 3)
@@ -129,7 +127,7 @@ def axis_categories(axes: np.ndarray, warn: bool = True, names: Sequence[str] | 
                               for i, g in zip(idx[:4], ang[:4]))
             more = f" (and {idx.size - 4} more)" if idx.size > 4 else ""
             warnings.warn(f"thumb axes that are not signed basis axes snapped to the nearest one: {shown}{more}",
-                          AxisSnapWarning, stacklevel=stacklevel)
+                          AxisSnapWarning, stacklevel=user_stacklevel())
     return cat.reshape(a.shape[:-1])
 
 
@@ -140,7 +138,7 @@ def _encode_discrete(out: np.ndarray, v: np.ndarray, axis1: slice, axis2: slice,
     n = len(v)
     axes = v[:, THUMB_AXES].reshape(n, 2, 3)
     names = [f"thumb_axes[{k}] of hand {i}" if n > 1 else f"thumb_axes[{k}]" for i in range(n) for k in range(2)]
-    cat = axis_categories(axes, warn=warn, names=names, stacklevel=4)  # the warning names encode_vectors' caller
+    cat = axis_categories(axes, warn=warn, names=names)
     rows = np.arange(n)
     out[rows, axis1.start + cat[:, 0]] = 1.0
     out[rows, axis2.start + cat[:, 1]] = 1.0

@@ -23,7 +23,7 @@ import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
 
-from ohra.errors import ObjectError, ObjectWarning
+from ohra.errors import ObjectError, ObjectWarning, user_stacklevel
 from ohra.objects.body import BODY_TOLERANCE_M, SDF, Body, Fidelity, MassProperties, fidelity
 from ohra.objects.decompose import DECOMPOSITION_NAMES, check_solid, load_convex_pieces, vhacd_pieces
 from ohra.objects.repair import RepairReport, repair_mesh
@@ -200,17 +200,17 @@ class ObjectModel:
                 b = Body(vhacd_pieces(self.mesh, self.mesh_hash), "vhacd")
                 scored.append((self._fidelity_of(b), b))
             except ObjectError as exc:
-                warnings.warn(f"object {self.name!r}: {exc}; using the convex hull", ObjectWarning, stacklevel=2)
+                warnings.warn(f"object {self.name!r}: {exc}; using the convex hull", ObjectWarning, stacklevel=user_stacklevel())
         fid, best = min(scored, key=lambda fb: fb[0].mean)
         self.__dict__["fidelity"] = fid
         if not self.watertight:
             warnings.warn(f"object {self.name!r}: the mesh is open (not watertight after repair); it is taken as the closed "
                           f"body {best.kind} ({len(best.pieces)} piece(s)): volume {1e6 * best.mass_properties.volume:.4g} cm^3, "
-                          f"mass properties {best.mass_properties.method}", ObjectWarning, stacklevel=2)
+                          f"mass properties {best.mass_properties.method}", ObjectWarning, stacklevel=user_stacklevel())
         if not fid.within_tolerance:
             warnings.warn(f"object {self.name!r}: no convex body within {1e3 * BODY_TOLERANCE_M:.0f} mm of the mesh "
                           f"(best: {best.kind}, 95th percentile {1e3 * fid.p95:.1f} mm, volume x{fid.volume_ratio:.2f}); "
-                          "grasps are synthesised and simulated on that body", ObjectWarning, stacklevel=2)
+                          "grasps are synthesised and simulated on that body", ObjectWarning, stacklevel=user_stacklevel())
         return best
 
     def _fidelity_of(self, body: Body) -> Fidelity:

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ohra.errors import ObjectError, ObjectWarning
+from ohra.errors import ObjectError, ObjectWarning, user_stacklevel
 from ohra.objects.model import MESH_SUFFIXES, ObjectModel, builtin_object_names
 
 # largest extent [m] of an object a hand can grasp; outside it the units are almost surely wrong
@@ -74,5 +74,5 @@ def warn_if_ungraspable(obj: ObjectModel, extent_range: tuple[float, float] = GR
     Returns whether it warned."""
     problem = size_problem(obj, extent_range)
     if problem:
-        warnings.warn(f"{problem}; grasps on it say little about a hand", ObjectWarning, stacklevel=2)
+        warnings.warn(f"{problem}; grasps on it say little about a hand", ObjectWarning, stacklevel=user_stacklevel())
     return problem is not None

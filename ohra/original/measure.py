@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ohra.canonical.params import FINGER_SLICES, FINGERS, JOINT_INDEX, JOINT_NAMES
-from ohra.errors import ParseError
+from ohra.errors import ParseError, user_stacklevel
 from ohra.original.action import ActionMap
 from ohra.original.spec import FormSpec, HandSpec
 from ohra.original.urdf import OriginalHand
@@ -147,7 +147,7 @@ def farthest(points: np.ndarray, origin: np.ndarray, z: np.ndarray) -> np.ndarra
 def warn_estimated(notes: list[str], msg: str) -> None:
     """Record ``msg`` as an estimate in ``notes`` and warn with :class:`ParseWarning`."""
     notes.append("estimated: " + msg)
-    warnings.warn(msg, ParseWarning, stacklevel=3)
+    warnings.warn(msg, ParseWarning, stacklevel=user_stacklevel())
 
 
 def geometry_points(hand: OriginalHand, links: list[str], T_links: dict[str, np.ndarray]) -> np.ndarray | None:
@@ -311,7 +311,7 @@ def _note_unfollowed(hand: OriginalHand, f: str, fs: FormSpec, moved: list[str],
         msg = (f"{f}: joint(s) {', '.join(loose)} move links beyond the finger's last mapped joint but drive no slot: the "
                f"canonical finger holds them at canonical zero (map them to slots to follow them)")
         notes.append("approximation: " + msg)
-        warnings.warn(msg, ParseWarning, stacklevel=3)
+        warnings.warn(msg, ParseWarning, stacklevel=user_stacklevel())
 
 
 BEND_NOTE = np.radians(15.0)  # noted above this (joint origins sit off the finger axis by a few degrees)

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ohra.errors import ParseError
+from ohra.errors import ParseError, user_stacklevel
 from ohra.transforms import xyzrpy_to_matrix
 from ohra.original.hand import KNOWN_TYPES, MOVABLE_TYPES, Geometry, Joint, MissingMeshWarning, OriginalHand
 
@@ -286,7 +286,7 @@ def _collect_geometry(root_elem: ET.Element, urdf_dir: Path, where: str) -> tupl
                         warnings.warn(
                             f"{where}: mesh file {p} not found (link {lname!r} {tag}); geometry skipped",
                             MissingMeshWarning,
-                            stacklevel=3,
+                            stacklevel=user_stacklevel(),
                         )
                         missing.append(str(p))
                         le.remove(ge)

@@ -31,7 +31,7 @@ from typing import Iterable, Sequence, Union
 import numpy as np
 import pybullet as pb
 
-from ohra.errors import GraspError
+from ohra.errors import GraspError, user_stacklevel
 from ohra.objects.model import ObjectModel
 from ohra.canonical.params import BaseParams, ExtendedParams
 from ohra.rotations import check_grasps, grasp_to_pose, pose_to_grasp
@@ -295,7 +295,7 @@ class GraspEvaluator:
             raise GraspError(f"workers must be >= 1, got {workers}")
         g, out = self.check(grasps)
         if out.any():
-            warnings.warn(f"{int(out.sum())} grasp(s) have joints outside the limits; they are clamped", stacklevel=2)
+            warnings.warn(f"{int(out.sum())} grasp(s) have joints outside the limits; they are clamped", stacklevel=user_stacklevel())
         results: list[GraspResult | None] = [None] * len(g)
         bar = _progress(len(g), progress)
         try:

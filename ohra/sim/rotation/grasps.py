@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 import pybullet as pb
 
-from ohra.errors import OhraError
+from ohra.errors import OhraError, user_stacklevel
 from ohra.paths import cache_dir
 from ohra.sim.rotation.rewards import delta_yaw
 from ohra.sim.rotation.scene import R_WORLD_PALM, RotationScene, _quat_mul, yaw_quat
@@ -286,7 +286,7 @@ def generate(task: Task, progress: bool | None = False) -> GraspSet:
                                    f"{cfg.settle_time} s (noise +-{r} rad)")
     if len(Q) < cfg.grasp_count:
         warnings.warn(f"{hand.name}: only {len(Q)} of {cfg.grasp_count} starting states after {attempts} attempts",
-                      stacklevel=2)
+                      stacklevel=user_stacklevel())
     return GraspSet(np.array(Q), np.array(T), np.array(P), np.array(O), hold, attempts, cache_key(task))
 
 
