@@ -9,7 +9,9 @@ error, against issue 15's target (canonical within 10 % of original on both metr
 The standard error treats the pooled episodes as independent draws; the spread between seeds is shown beside it
 (two seeds cannot estimate a seed-level variance). Where the runs' folders are present, the training curves
 (episode return and rotation per training episode against PPO steps) are drawn per hand and URDF as the mean
-+- standard deviation over the seeds: ``NAME_curves.png``, ``NAME_curves_rotation.png``.
++- standard deviation over the seeds: ``NAME_curves.png``, ``NAME_curves_rotation.png``; and per hand, the rotation
+per training episode of each run over the same PPO steps (the ``WINDOW`` steps before the fewest any of the hand's
+runs reached), which compares the URDFs per step rather than per wall minute.
 
     python benchmarks/rotation_seeds.py rotation_table3_shadow_210 rotation_table3_shadow_s1 --name rotation_shadow_seeds
     -> benchmarks/results/rotation_shadow_seeds.{json,md}
@@ -28,6 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import RESULTS, write_results  # noqa: E402
 
 TARGET = 0.10  # issue 15: canonical within 10 % of original on each metric
+WINDOW = 200_000  # PPO steps of training episodes averaged for the per-step comparison
 METRICS = {"steps_to_fall": "Steps-to-Fall", "cumulative_rotation": "Cumulative Rotation [rad]"}
 
 
@@ -68,6 +71,31 @@ def seed_curves(groups: dict[tuple[str, str], list[tuple[str, dict]]], name: str
            reward_curves(runs, RESULTS / f"{name}_curves_rotation.png", key="rotation_mean",
                          title="Rotation per training episode, mean +- std over PPO seeds")]
     return [p.name for p in out]
+
+
+def matched_steps(groups: dict[tuple[str, str], list[tuple[str, dict]]]) -> dict[str, dict]:
+    """Per hand: mean rotation per training episode of each run over the ``WINDOW`` PPO steps before the fewest
+    steps any of that hand's runs reached (``progress.csv``); hands whose runs are not all present are left out."""
+    from ohra.learn.rl.plots import read_progress
+
+    out: dict[str, dict] = {}
+    for hand in dict.fromkeys(h for h, _ in groups):
+        mine = {urdf: rs for (h, urdf), rs in groups.items() if h == hand}
+        dirs = [Path(r["per_episode"]["run"]) for rs in mine.values() for _, r in rs]
+        if not all((d / "progress.csv").is_file() for d in dirs):
+            continue
+        prog = {d: read_progress(d) for d in dirs}
+        end = min(float(p["timesteps"][-1]) for p in prog.values())
+        entry: dict = {"steps": [max(0.0, end - WINDOW), end]}
+        for urdf, rs in mine.items():
+            vals = []
+            for _, r in rs:
+                p = prog[Path(r["per_episode"]["run"])]
+                sel = (p["timesteps"] > end - WINDOW) & (p["timesteps"] <= end) & np.isfinite(p["rotation_mean"])
+                vals.append(float(p["rotation_mean"][sel].mean()) if sel.any() else float("nan"))
+            entry[urdf] = {"per_seed": vals, "mean": float(np.mean(vals))}
+        out[hand] = entry
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -111,6 +139,10 @@ def main(argv: list[str] | None = None) -> int:
             f"{c[k]['ratio']:.2f} ({c[k]['difference']:+.2f} +- {c[k]['difference_se']:.2f}) {'yes' if c[k]['within_target'] else 'no'}"
             for k in METRICS) + " |")
     curves = seed_curves(groups, args.name)
+    data["matched_steps"] = steps = matched_steps(groups)
+    step_rows = [f"| {hand} | {e['steps'][0] / 1e3:.0f}k-{e['steps'][1] / 1e3:.0f}k | " + " | ".join(
+        f"{u}: {e[u]['mean']:.2f} ({', '.join(f'{v:.2f}' for v in e[u]['per_seed'])})" for u in e if u != "steps") + " |"
+        for hand, e in steps.items()]
     n_ep, first = episodes.pop()
     table = "\n".join([
         f"Rotation policies over PPO seeds ({', '.join(results)}): {n_ep} deterministic episodes per policy "
@@ -121,7 +153,10 @@ def main(argv: list[str] | None = None) -> int:
         f"Canonical / original ratio of the pooled means (difference canonical - original +- its standard error), "
         f"and whether it lies within {100 * TARGET:.0f} % (issue 15's target):", "",
         "| hand | " + " | ".join(METRICS.values()) + " |", "|---|---|---|", *cmp_rows,
-        *(["", "Training curves, mean +- std over the seeds: " + ", ".join(f"`{c}`" for c in curves)] if curves else [])])
+        *(["", "Training curves, mean +- std over the seeds: " + ", ".join(f"`{c}`" for c in curves)] if curves else []),
+        *(["", f"Per PPO step: rotation per training episode [rad] over the same {WINDOW / 1e3:.0f}k steps of every run of "
+           "a hand (before the fewest steps any of them reached), mean over seeds (each seed):", "",
+           "| hand | PPO steps | per URDF |", "|---|---|---|", *step_rows] if step_rows else [])])
     data["curves"] = curves
     write_results(args.name, data, table)
     return 0

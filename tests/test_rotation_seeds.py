@@ -93,3 +93,26 @@ def test_curves_are_drawn_over_the_seeds_when_the_runs_are_present(results):
     _write(results, "b", {"c": _run("canonical", 1, [400] * 3, [1.0] * 3)})  # a run folder missing: no curves
     assert rotation_seeds.main(["a", "b", "--name", "out2"]) == 0
     assert json.loads((results / "out2.json").read_text())["curves"] == []
+
+
+def test_per_step_rotation_is_read_over_the_same_steps_for_every_run(results):
+    """Run 0 reached 3,500 steps, run 1 only 2,000: both are read over the window before 2,000."""
+    dirs = []
+    for k, (end, level) in enumerate(((3500, 1.0), (2000, 3.0))):
+        d = results / f"r{k}"
+        d.mkdir()
+        # rotation rises with the steps: a window at each run's own end would read run 0 higher
+        rows = "\n".join(f"{t},{t / 100},-1,{level + t / 1000}" for t in range(500, end + 1, 500))
+        (d / "progress.csv").write_text("timesteps,wall_s,ep_reward_mean,rotation_mean\n" + rows + "\n")
+        dirs.append(str(d))
+    _write(results, "a", {"c": _run("canonical", 0, [400] * 3, [1.0] * 3, dirs[0]),
+                          "o": _run("original", 0, [400] * 3, [1.0] * 3, dirs[1])})
+    monkey_window = rotation_seeds.WINDOW
+    rotation_seeds.WINDOW = 1000
+    try:
+        assert rotation_seeds.main(["a", "--name", "out"]) == 0
+    finally:
+        rotation_seeds.WINDOW = monkey_window
+    e = json.loads((results / "out.json").read_text())["matched_steps"]["h"]
+    assert e["steps"] == [1000, 2000]
+    assert e["canonical"]["per_seed"] == [2.75] and e["original"]["per_seed"] == [4.75]
