@@ -126,14 +126,30 @@ class HandModel:
     # -- construction --------------------------------------------------------------------------
     @classmethod
     def from_params(cls, params: Params) -> "HandModel":
-        """Model of the canonical hand rendered from ``params``."""
+        """Model of the canonical hand rendered from ``params`` (:func:`~ohra.canonical.urdfgen.render`).
+
+        Args:
+            params: base or extended params; kept for the capsule and palm geometry.
+
+        Raises:
+            ParamsError: ``params`` is not :class:`BaseParams` or :class:`ExtendedParams`.
+        """
         if not isinstance(params, (BaseParams, ExtendedParams)):
             raise ParamsError(f"expected BaseParams or ExtendedParams, got {type(params).__name__}")
         return cls(render(params), params)
 
     @classmethod
     def from_urdf(cls, path: str | Path, params: Params | None = None) -> "HandModel":
-        """Model from a canonical URDF file (capsule geometry then needs ``params``)."""
+        """Model from a canonical URDF file.
+
+        Args:
+            path: a URDF written by :func:`~ohra.canonical.urdfgen.write` (22 canonical joints).
+            params: the params it was rendered from; without them the kinematics work but capsule,
+                palm and collision queries raise :class:`OhraError`.
+
+        Raises:
+            OhraError: the file is missing, Pinocchio cannot load it, or it lacks canonical joints.
+        """
         p = Path(path)
         if not p.is_file():
             raise OhraError(f"canonical URDF not found: {p}")
@@ -188,7 +204,15 @@ class HandModel:
         return np.clip(np.zeros(22), self.lower, self.upper)
 
     def random_configurations(self, n: int, seed: int = 0) -> np.ndarray:
-        """(n, 22) configurations uniform within the limits (absent joints 0), seeded."""
+        """Configurations drawn uniformly within the joint limits (absent joints 0).
+
+        Args:
+            n: number of configurations.
+            seed: seed of ``numpy.random.default_rng``; same seed, same configurations.
+
+        Returns:
+            (n, 22) joint angles [rad], canonical joint order.
+        """
         rng = np.random.default_rng(seed)
         return self.lower + rng.random((int(n), 22)) * (self.upper - self.lower)
 
@@ -199,7 +223,18 @@ class HandModel:
 
     # -- forward kinematics --------------------------------------------------------------------
     def frame_pose(self, q: np.ndarray, frame: str) -> np.ndarray:
-        """4x4 pose of a link or tip frame at one configuration (Pinocchio)."""
+        """Pose of a link or tip frame at one configuration (Pinocchio).
+
+        Args:
+            q: (22,) joint angles [rad].
+            frame: a name in :attr:`frame_names` (e.g. ``"index_tip"``).
+
+        Returns:
+            (4, 4) ``T_palm_frame``: the frame's pose in the palm frame, translation [m].
+
+        Raises:
+            OhraError: ``q`` is not (22,) or not finite; unknown ``frame``.
+        """
         q = self.check_q(q)
         if q.ndim != 1:
             raise OhraError("frame_pose takes one configuration; use frame_poses for batches")
@@ -208,10 +243,18 @@ class HandModel:
         return pin.updateFramePlacement(self.model, self.data, fid).homogeneous.copy()
 
     def frame_poses(self, q: np.ndarray, frames: Sequence[str] | None = None) -> np.ndarray:
-        """Poses of ``frames`` (default: every link and tip frame, order ``frame_names``).
+        """Poses of ``frames`` in the palm frame; vectorised over the batch, evaluating only the
+        joints the requested frames hang from.
 
-        ``q`` (22,) -> (F,4,4); (N,22) -> (N,F,4,4). Vectorised over the batch; only the joints the
-        requested frames hang from are evaluated.
+        Args:
+            q: (22,) or (N, 22) joint angles [rad].
+            frames: F names from :attr:`frame_names`; None: all of them, in that order.
+
+        Returns:
+            (F, 4, 4) or (N, F, 4, 4) ``T_palm_frame``, translation [m].
+
+        Raises:
+            OhraError: ``q`` has the wrong shape or is not finite; an unknown frame.
         """
         q = self.check_q(q)
         single = q.ndim == 1
@@ -278,7 +321,17 @@ class HandModel:
         return Rs, ts
 
     def fingertips(self, q: np.ndarray) -> np.ndarray:
-        """Tip positions (…,5,3) in finger order; NaN rows for absent fingers."""
+        """Fingertip positions (tip frame origins) in the palm frame.
+
+        Args:
+            q: (22,) or (N, 22) joint angles [rad].
+
+        Returns:
+            (5, 3) or (N, 5, 3) positions [m], thumb .. little; NaN rows for absent fingers.
+
+        Raises:
+            OhraError: ``q`` has the wrong shape or is not finite.
+        """
         q = self.check_q(q)
         lead = q.shape[:-1]
         out = np.full(lead + (5, 3), np.nan)
@@ -288,7 +341,20 @@ class HandModel:
         return out
 
     def jacobian(self, q: np.ndarray, frame: str) -> np.ndarray:
-        """(6,22) frame Jacobian [linear; angular] in the palm-aligned frame at the frame origin."""
+        """Frame Jacobian at one configuration (Pinocchio ``LOCAL_WORLD_ALIGNED``).
+
+        Args:
+            q: (22,) joint angles [rad].
+            frame: a name in :attr:`frame_names`.
+
+        Returns:
+            (6, 22) ``[linear; angular]`` velocity of ``frame`` per joint velocity, columns in canonical
+            joint order: the linear rows [m/rad] are the velocity of the frame origin, and both are
+            expressed in palm-frame axes.
+
+        Raises:
+            OhraError: ``q`` is not finite or its last axis is not 22; unknown ``frame``.
+        """
         q = self.check_q(q)
         fid = self._fid(frame)
         qp = self._to_pin(q)
@@ -332,7 +398,18 @@ class HandModel:
         return {"radius": R, "depth": depth}
 
     def capsules(self, q: np.ndarray) -> Capsules:
-        """Capsule core segments at ``q`` ((22,) or (N,22)) in the palm frame."""
+        """Finger capsules at ``q`` (one per segment that carries geometry, K in all).
+
+        Args:
+            q: (22,) or (N, 22) joint angles [rad].
+
+        Returns:
+            :class:`Capsules`: ``p0``/``p1`` (K, 3) or (N, K, 3) end-sphere centres in the palm frame
+            [m], ``radius`` (K,) [m], ``link`` and ``finger`` per capsule.
+
+        Raises:
+            OhraError: the model has no params; ``q`` has the wrong shape or is not finite.
+        """
         specs = self.capsule_specs
         links = [s[0] for s in specs]
         T = self.frame_poses(q, links) if links else np.zeros(np.shape(q)[:-1] + (0, 4, 4))
@@ -366,8 +443,19 @@ class HandModel:
         return out
 
     def self_collision_pairs(self, q: np.ndarray, margin: float = 0.0) -> list[tuple[str, str]]:
-        """Colliding pairs of segments on different fingers (palm-finger and same-finger pairs are
-        excluded, as in the evaluation protocol)."""
+        """Pairs of finger segments on different fingers closer than ``margin`` (palm-finger and
+        same-finger pairs are excluded, as in the evaluation protocol).
+
+        Args:
+            q: (22,) joint angles [rad].
+            margin: distance [m] below which a pair counts; 0: only penetrating pairs.
+
+        Returns:
+            ``(link, link)`` name pairs, e.g. ``("index_distal", "middle_distal")``.
+
+        Raises:
+            OhraError: the model has no params; ``q`` is not finite or its last axis is not 22.
+        """
         objs = [o for o in self.collision_objects(q) if o[1] >= 0]
         hits = []
         for i in range(len(objs)):
@@ -380,7 +468,15 @@ class HandModel:
         return hits
 
     def self_collision(self, q: np.ndarray, margin: float = 0.0) -> bool:
-        """True when segments of two different fingers intersect (closer than ``margin`` metres)."""
+        """Whether segments of two different fingers intersect (:meth:`self_collision_pairs`).
+
+        Args:
+            q: (22,) joint angles [rad].
+            margin: distance [m] below which a pair counts; 0: only penetration.
+
+        Raises:
+            OhraError: the model has no params; ``q`` is not finite or its last axis is not 22.
+        """
         return bool(self.self_collision_pairs(q, margin))
 
     def object_distances(
@@ -388,12 +484,23 @@ class HandModel:
     ) -> dict[str, float]:
         """Distance [m] from every hand shape (palm and capsules) to an object.
 
-        ``T_palm_object`` is the object's pose in the palm frame. For a convex object (``coal.Convex``
-        or a primitive) the value is signed: negative means penetration and its magnitude is the
-        penetration depth (GJK/EPA). For a triangle mesh (``coal.BVHModel``) Coal's distance is
-        unsigned: a colliding shape reports ``-depth`` taken from the deepest contact of a collision
-        query, which is exact for shallow contacts but underestimates deep ones (the mesh has no
-        inside); use an SDF (``ohra.objects.model``) when deep signed values matter.
+        For a convex object (``coal.Convex`` or a primitive) the value is signed: negative means
+        penetration and its magnitude is the penetration depth (GJK/EPA). For a triangle mesh
+        (``coal.BVHModel``) Coal's distance is unsigned: a colliding shape reports ``-depth`` taken
+        from the deepest contact of a collision query, which is exact for shallow contacts but
+        underestimates deep ones (the mesh has no inside); use an SDF (``ohra.objects.model``) when
+        deep signed values matter.
+
+        Args:
+            q: (22,) joint angles [rad].
+            geometry: the object's Coal geometry in its own frame [m].
+            T_palm_object: (4, 4) pose of the object frame in the palm frame [m]; None: identity.
+
+        Returns:
+            ``{"palm": d, "<link>": d, ...}``: one signed distance [m] per hand shape.
+
+        Raises:
+            OhraError: the model has no params; ``q`` is not finite or its last axis is not 22.
         """
         To = np.eye(4) if T_palm_object is None else np.asarray(T_palm_object, dtype=float)
         obj = coal.CollisionObject(geometry, _se3(To))
@@ -407,11 +514,26 @@ class HandModel:
         return out
 
     def min_distance(self, q: np.ndarray, geometry: coal.CollisionGeometry, T_palm_object: np.ndarray | None = None) -> float:
-        """Smallest value of :meth:`object_distances` (negative: penetration depth)."""
+        """Smallest value of :meth:`object_distances` (same arguments).
+
+        Returns:
+            Distance [m] of the closest hand shape; negative: minus the deepest penetration.
+
+        Raises:
+            OhraError: the model has no params; ``q`` is not finite or its last axis is not 22.
+        """
         return min(self.object_distances(q, geometry, T_palm_object).values())
 
     def penetration_depth(self, q: np.ndarray, geometry: coal.CollisionGeometry, T_palm_object: np.ndarray | None = None) -> float:
-        """Largest penetration depth [m] of any hand shape into the object (0 when free)."""
+        """Largest penetration depth of any hand shape into the object (arguments as
+        :meth:`object_distances`).
+
+        Returns:
+            Depth [m], >= 0; 0 when no shape penetrates.
+
+        Raises:
+            OhraError: the model has no params; ``q`` is not finite or its last axis is not 22.
+        """
         return max(0.0, -self.min_distance(q, geometry, T_palm_object))
 
 

@@ -175,7 +175,16 @@ def _context(params: Params, robot_name: str) -> dict[str, Any]:
 
 
 def render(params: Params, robot_name: str = "canonical_hand") -> str:
-    """Canonical URDF text of ``params`` (deterministic: same params, same bytes)."""
+    """Canonical URDF text of ``params`` (deterministic: same params, same bytes).
+
+    Args:
+        params: base or extended params (lengths [m], angles [rad], palm frame).
+        robot_name: the ``<robot name>``.
+
+    Returns:
+        URDF text: root link ``world``, fixed to ``palm`` (the palm frame); lengths [m], masses [kg],
+        limits [rad]; ends with one newline.
+    """
     if not isinstance(params, (BaseParams, ExtendedParams)):
         raise TypeError(f"expected BaseParams or ExtendedParams, got {type(params).__name__}")
     tpl = _environment().get_template(template_name(params))
@@ -185,5 +194,14 @@ def render(params: Params, robot_name: str = "canonical_hand") -> str:
 
 
 def write(params: Params, path: str | Path, robot_name: str = "canonical_hand") -> Path:
-    """Render and write atomically to ``path``; returns the path."""
+    """Render (:func:`render`) and write atomically to ``path``, creating parent folders.
+
+    Args:
+        params: base or extended params.
+        path: the ``.urdf`` file to write (replaced if present).
+        robot_name: the ``<robot name>``.
+
+    Returns:
+        ``path`` as a :class:`~pathlib.Path`.
+    """
     return write_text(path, render(params, robot_name))

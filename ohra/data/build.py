@@ -19,15 +19,35 @@ from ohra.data.recipe import Recipe, RecipeError
 def build(recipe: Recipe | str | Path, out: str | Path | None = None, workers: int = 1, resume: bool = False,
           overwrite: bool = False, backend: str = "process", address: str | None = None, progress: bool = True,
           hands: list[str] | None = None) -> dict:
-    """Synthesise the dataset ``recipe`` describes into ``out`` (default ``out/<recipe name>``);
-    returns the manifest. See :func:`ohra.synth.pipeline.synthesize` for the run options.
+    """Synthesise the dataset ``recipe`` describes into ``out``; see
+    :func:`ohra.synth.pipeline.synthesize` for the run options.
 
-    ``hands``: build only these of the recipe's hands (names as resolved; None: all). Hands differ
-    in yield per CPU-second several-fold, so topping up one hand's count with extra seeds should not
-    pay for the others; the same directory can later be completed with the rest (``resume``).
+    Args:
+        recipe: a :class:`Recipe` or the path of its YAML file.
+        out: the dataset directory; None: ``out/<recipe name>`` under the working directory.
+        workers: processes (``backend="process"``) or CPUs of a local Ray cluster; >= 1.
+        resume: keep pairs whose shards are already complete.
+        overwrite: replace a dataset or hand made with other settings or params (its shards are deleted).
+        backend: ``"process"`` or ``"ray"`` (``address``: an existing cluster).
+        progress: show a progress bar.
+        hands: build only these of the recipe's hands (names as resolved; None: all). Hands differ
+            in yield per CPU-second several-fold, so topping up one hand's count with extra seeds
+            should not pay for the others; the same directory can later be completed with the rest
+            (``resume``).
+
+    Returns:
+        The manifest written to ``out/manifest.json`` (recipe, object split, per-pair counts, core-hours).
 
     Raises:
-        RecipeError: a name in ``hands`` is not one of the recipe's hands.
+        RecipeError: the recipe is missing or invalid; a name in ``hands`` is not one of its hands.
+        HandNotFoundError: the recipe names an unknown hand.
+        ParamsError, SpecError, ParseError: a hand's params or spec file is invalid (as in
+            :func:`ohra.hands.get_hand`).
+        ObjectError: an object cannot be loaded or is outside the graspable size range.
+        DatasetError: ``out`` holds a manifest written with other settings or other params of a hand
+            (without ``overwrite``), or a corrupt one.
+        FolderInUseError: another process is building into ``out``.
+        OhraError: ``out`` is a file; ``workers`` < 1; a hand with fewer than two fingers.
     """
     from ohra.synth.pipeline import synthesize
 

@@ -128,11 +128,19 @@ def _npz_files(root: Path, hand: str) -> list[Path]:
 
 
 def pack(root: str | Path) -> PackReport:
-    """Pack every hand's shards of the dataset ``root`` (see the module doc); returns what it did.
+    """Pack every hand's shards of the dataset ``root`` (see the module doc), fold loose shards into
+    the packs, and delete every other ``.npz`` in the hands' folders.
+
+    Args:
+        root: a finished dataset directory (holding ``manifest.json``).
+
+    Returns:
+        A :class:`PackReport`: hands and pairs packed, loose shards folded in, shard bytes before/after.
 
     Raises:
-        DatasetError: no manifest; a shard missing, damaged or not re-serialising to its recorded
-            bytes (nothing is changed then).
+        DatasetError: no or unreadable manifest; a shard or pack missing, damaged or not
+            re-serialising to its recorded bytes; shards of one hand with differing arrays, dtypes or
+            trailing shapes (in all these cases nothing is changed).
     """
     root = Path(root)
     manifest = require_manifest(root)

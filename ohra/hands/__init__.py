@@ -27,7 +27,15 @@ def _registry():
 
 
 def list_hands(include_variants: bool = False) -> list[str]:
-    """Registered hand names (plus the 256 ``leap_XXXX`` variants if asked)."""
+    """Registered hand names (package specs and ``$OHRA_HANDS_PATH`` folders), sorted.
+
+    Args:
+        include_variants: also list the 256 LEAP variants ``leap_0000`` .. ``leap_3333``, after the
+            registered names.
+
+    Returns:
+        Names :func:`get_hand` accepts.
+    """
     reg = _registry()
     names = sorted(reg.registered_hands()) if reg is not None else []
     if include_variants:
@@ -38,9 +46,25 @@ def list_hands(include_variants: bool = False) -> list[str]:
 def get_hand(name: str | Path, form: str | None = None) -> Params:
     """Params of a registered hand, a LEAP variant, a hand spec YAML (parsed, cached) or a params JSON file.
 
-    ``form`` is ``"base"`` or ``"extended"``; None picks the hand's natural form (base for registered
-    hands that have one, extended for LEAP variants and extended-only hands, the file's own form).
     Couplings travel beside the params: :func:`get_couplings`, or :func:`resolve_hand` for both.
+
+    Args:
+        name: a registered name (:func:`list_hands`), ``leap_XXXX``, or a ``.yaml``/``.yml`` spec or
+            ``.json`` params path.
+        form: ``"base"`` or ``"extended"``; None picks the hand's natural form (base for registered
+            hands that have one, extended for LEAP variants and extended-only hands, the file's own form).
+
+    Returns:
+        :class:`BaseParams` or :class:`ExtendedParams` (lengths [m], angles [rad], palm frame).
+
+    Raises:
+        HandNotFoundError: unknown name or missing file; ``form`` not ``"base"``/``"extended"``; the hand
+            is not registered in ``form``; a LEAP variant, or extended params that have no base form,
+            asked for as ``"base"``.
+        ParamsError: a params JSON file is malformed or invalid.
+        SpecError: a spec YAML is malformed, has no ``form``, or names joints its URDF lacks.
+        AssetsNotFoundError: a spec's original URDF is not found.
+        ParseError: a spec's original URDF does not give valid params.
     """
     return resolve_hand(name, form).params
 
