@@ -96,7 +96,21 @@ class VAEBundle:
         return mu.double().numpy(), logvar.double().numpy()
 
     def encode(self, hands: HandLike | Sequence[HandLike]) -> tuple[np.ndarray, np.ndarray]:
-        """(mu, logvar) of one hand ((latent_dim,) each) or a sequence of hands ((N, latent_dim) each)."""
+        """Mean and log-variance of the encoder's posterior (eval mode: deterministic).
+
+        Args:
+            hands: one hand or a sequence of N hands, each a registered hand name, a spec YAML or params
+                JSON path (base form), or :class:`BaseParams` / :class:`ExtendedParams` with a base form.
+                Thumb axes off the basis axes are snapped to the nearest one (with a warning).
+
+        Returns:
+            (mu, logvar): float64, each (latent_dim,) for one hand or (N, latent_dim) for a sequence.
+
+        Raises:
+            HandNotFoundError: an unknown name or a missing file; a name with no base form (a LEAP
+                variant, an extended-only hand).
+            ParamsError: extended params with no base form.
+        """
         single = isinstance(hands, (str, Path, BaseParams, ExtendedParams))
         items = [hands] if single else list(hands)
         x = np.stack([self.encoding.encode_vectors(resolve_hand(h).to_vector()) for h in items])
@@ -140,8 +154,22 @@ class VAEBundle:
         return v[0] if single else v
 
     def decode(self, z: Any, limits: Any = None) -> BaseParams | list[BaseParams]:
-        """One latent -> :class:`BaseParams`; (N, latent_dim) -> list. ``limits`` as in
-        :func:`ohra.learn.encoding.decode_vectors` (default: ``[0, pi/2]`` for present joints)."""
+        """Valid base-form hands for latents (any finite or infinite values; see the module docstring).
+
+        Args:
+            z: one latent (latent_dim,) or N latents (N, latent_dim).
+            limits: joint limits [rad] of the decoded hands, as in
+                :func:`ohra.learn.encoding.decode_vectors`: None gives ``[0, pi/2]`` to the joints the
+                decoder marks present (0 to absent ones); else params (or a list of N), a
+                ``(lowers, uppers)`` pair of (22,) or (N, 22), or a (44,) / (N, 44) array.
+
+        Returns:
+            One :class:`BaseParams` for a (latent_dim,) latent, a list of N for (N, latent_dim).
+
+        Raises:
+            LatentError: ``z`` is not numeric, not of shape (latent_dim,) or (N, latent_dim), or holds NaN.
+            ParamsError: malformed ``limits`` (shape, non-finite, a lower above its upper).
+        """
         v = self.decode_vectors(z, limits)
         if v.ndim == 1:
             return BaseParams.from_vector(v)
@@ -158,11 +186,23 @@ class VAEBundle:
         """``n`` hands from the mean latent of ``a`` to that of ``b`` (endpoints included), decoded with
         default limits [0, pi/2] for present joints (see :mod:`ohra.learn.latent_path`).
 
-        ``spacing="geodesic"`` (default): a bent latent path of short fingertip travel, at equal
-        fingertip arc length (:func:`geodesic_latents`; never a larger step than ``"arc"``, ~0.5-2 s);
-        ``"arc"``: the straight latent line at equal fingertip arc length (:func:`arc_length_alphas`);
-        ``"even"``: the straight line at even steps (``alphas = linspace(0, 1, n)``). ``alphas`` are
-        the hands' parameters along the path (for the geodesic, the fraction of the bent path)."""
+        Args:
+            a, b: the end hands, as :meth:`encode` takes them.
+            n: number of hands, >= 2.
+            spacing: ``"geodesic"``: a bent latent path of short fingertip travel, at equal fingertip
+                arc length (:func:`geodesic_latents`; never a larger step than ``"arc"``, ~0.5-2 s);
+                ``"arc"``: the straight latent line at equal fingertip arc length
+                (:func:`arc_length_alphas`); ``"even"``: the straight line at ``alphas = linspace(0, 1, n)``.
+
+        Returns:
+            :class:`Interpolation` with ``alphas`` (n,) (the hands' places along the path, 0 to 1; for
+            the geodesic the fraction of the bent path), latents ``z`` (n, latent_dim), the decoded
+            ``params`` and their URDF texts, and the two end hands in base form.
+
+        Raises:
+            LatentError: ``n < 2`` or an unknown ``spacing``.
+            HandNotFoundError, ParamsError: an end hand cannot be encoded (see :meth:`encode`).
+        """
         if int(n) < 2:
             raise LatentError(f"interpolation needs at least 2 steps, got {n}")
         if spacing not in SPACINGS:
@@ -250,8 +290,21 @@ def bundle_from_payload(obj: dict[str, Any], where: str) -> tuple[MorphologyVAE,
 
 
 def load_vae(path: str | Path | None = None) -> VAEBundle:
-    """Load a VAE: the shipped model (``path=None``), a run/model directory, or a ``.pt`` file
-    (``model.pt`` or a training checkpoint). Raises :class:`CheckpointError` if missing or corrupt."""
+    """Load a VAE in eval mode.
+
+    Args:
+        path: None for the shipped model (loaded once, then the same bundle is returned); a run or
+            model directory (its ``model.pt``, else ``checkpoints/last.pt``); or a ``.pt`` file
+            (``model.pt`` or a training checkpoint).
+
+    Returns:
+        :class:`VAEBundle`: the model, its standardiser, the training config (``config.json`` beside
+        the file, else the checkpoint's) and ``metrics.json`` if present.
+
+    Raises:
+        CheckpointError: no model file there; a corrupt, foreign or other-version file; weights that
+            do not fit the stored config; malformed ``config.json`` / ``metrics.json``.
+    """
     if path is None:
         return _load_default()
     return _load(Path(path))

@@ -319,7 +319,22 @@ def sample_vectors(n: int, seed: int, config: SamplerConfig = DEFAULT_CONFIG, re
 
 
 def sample_params(n: int, seed: int, config: SamplerConfig = DEFAULT_CONFIG) -> list[BaseParams]:
-    """``n`` random hands as validated :class:`BaseParams` (see :func:`sample_vectors`)."""
+    """``n`` random hands as validated :class:`BaseParams` (see :func:`sample_vectors`).
+
+    Args:
+        n: number of hands, >= 0.
+        seed: seed of the generator (``numpy.random.default_rng``); the same seed and config give the
+            same hands.
+        config: the sampler's ranges [m, rad] (:class:`SamplerConfig`).
+
+    Returns:
+        ``n`` base-form hands, left or right with probability 1/2 each; lengths and positions in
+        metres, angles in radians, in the canonical palm frame.
+
+    Raises:
+        ParamsError: ``n < 0``, or a thumb still touches a finger at q = 0 after ``config.max_redraws``
+            redraws.
+    """
     return [BaseParams.from_vector(v) for v in sample_vectors(n, seed, config)]
 
 

@@ -152,12 +152,46 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
                    collisions: str = "own") -> GraspEvalReport:
     """Sample ``n`` grasps per (hand, object) and run the six-direction test (module docstring).
 
-    ``collisions="canonical"`` (with ``original=True``): replay on the *hybrid* hand, the original URDF
-    (kinematics, limits, masses, inertias, action map) carrying the canonical collision shapes
-    (:mod:`ohra.sim.hybrid`), to tell what the original's link shapes do from what the rest of it does.
+    Every hand and object is checked before the first simulation.
 
-    ``condition_hand``: tell the model this hand instead of the true one (paper Table 9: does the
-    condition matter?); the grasps keep the true hand's joint limits and run on the true hand.
+    Args:
+        model: the grasp model.
+        hands: hands as :meth:`GraspModel.sample` takes them; registered names only with
+            ``original=True`` or ``inertials="original"``.
+        objects: objects as :func:`~ohra.learn.grasp.model.resolve_object` takes them; unseen in training.
+        n: grasps per pair, >= 1, each with its own uniformly random wrist rotation.
+        seed: base seed; each pair's seed is :func:`pair_seed` of it, the hand name and the mesh hash.
+        original: replay the grasps on the hand's original URDF through its action map.
+        workers: simulation processes per pair (:meth:`ohra.sim.GraspEvaluator.evaluate`).
+        protocol: a :class:`ohra.sim.Protocol`; None for the default.
+        progress: show the simulation's progress bar.
+        allow_seen: also evaluate objects the model was trained on.
+        inertials: ``"capsule"`` (template finger masses) or ``"original"`` (the original URDF's finger
+            masses on the canonical hand; ignored with ``original=True``).
+        condition_hand: tell the model this hand instead of the true one (paper Table 9: does the
+            condition matter?); the grasps keep the true hand's joint limits and run on the true hand.
+        refine: test-time finger refinement, as in :meth:`GraspModel.sample`.
+        collisions: ``"own"``, or ``"canonical"`` (needs ``original=True``): replay on the *hybrid*
+            hand, the original URDF (kinematics, limits, masses, inertias, action map) carrying the
+            canonical collision shapes (:mod:`ohra.sim.hybrid`), to tell what the original's link
+            shapes do from what the rest of it does.
+
+    Returns:
+        :class:`GraspEvalReport`: one :class:`PairResult` per (hand, object), hand-major, each with the
+        sampled grasps (n, 31) (palm frame in the object mesh frame [m]; joints [rad]), their success
+        (n,), timings [s] and diversity; ``meta`` holds the settings and the model's metadata.
+
+    Raises:
+        GraspError: ``n`` not a positive integer; no hands or no objects; an unknown ``inertials`` or
+            ``collisions``; ``collisions="canonical"`` without ``original``; ``original`` or
+            ``inertials="original"`` with a hand that is not a registered name; ``workers < 1`` (only
+            when the first pair is simulated).
+        ObjectError: an object cannot be resolved to one object.
+        DatasetError: an object is in the model's training set (by name or mesh hash) and not
+            ``allow_seen``.
+        HandNotFoundError: an unknown hand name or a missing params file.
+        ParamsError: the model cannot be conditioned on a hand (e.g. no base form for a
+            ``vae``-conditioned model).
     """
     from ohra.hands.registry import registered_hands
     from ohra.sim import GraspEvaluator, SimHand

@@ -121,7 +121,19 @@ def random_rotations(n: int, rng: np.random.Generator) -> np.ndarray:
 
 
 def resolve_object(obj: ObjectLike, scale: float | None = None) -> ObjectModel:
-    """One object from an ObjectModel or a spec (``scale`` multiplies a mesh file's coordinates)."""
+    """One object from an ObjectModel or a spec.
+
+    Args:
+        obj: an :class:`ObjectModel` (returned as is), ``builtin:NAME``, ``procedural:FAMILY:SEED``, or
+            a mesh / URDF file or folder that holds exactly one object.
+        scale: multiplies the coordinates of an object read from a file (e.g. 0.001 for a millimetre mesh).
+
+    Returns:
+        The object; its mesh in its mesh frame [m].
+
+    Raises:
+        ObjectError: ``obj`` is of another type, is not found or unusable, or names more than one object.
+    """
     if isinstance(obj, ObjectModel):
         return obj
     if not isinstance(obj, (str, Path)):
@@ -173,16 +185,36 @@ class GraspModel:
     def sample(self, hand: HandLike, obj: ObjectLike, n: int, rotations: Any = None, seed: int = 0,
                timing: dict | None = None, condition_hand: HandLike | None = None,
                refine: bool | RefineSettings = False) -> np.ndarray:
-        """``n`` grasps (n, 31) of ``hand`` on ``obj`` (see the module docstring).
+        """``n`` grasps of ``hand`` on ``obj`` (see the module docstring).
 
-        ``rotations``: wrist rotations (n, 3, 3), rot6d (n, 6) or a scipy ``Rotation``; None draws
-        uniformly random ones from ``seed``. The same seed gives the same grasps. ``timing``, if a
-        dict, receives ``seconds`` (wall time of the sampling itself, rotations to joints).
-        ``condition_hand``: condition the model on another hand's parameters while the joints stay
-        clamped to ``hand``'s limits (the paper's wrong-condition study, Table 9).
-        ``refine``: True (default settings) or :class:`~ohra.learn.grasp.refine.RefineSettings` opens
-        the fingers just enough to clear the object (:func:`~ohra.learn.grasp.refine.refine_grasps`);
-        its wall time goes to ``timing["refine_seconds"]``, not ``seconds``.
+        Args:
+            hand: a registered hand or LEAP variant name, a params JSON path, or params. A model with the
+                ``vae`` condition needs a hand with a base form.
+            obj: the object (:func:`resolve_object`); its mesh frame is the frame of the grasps.
+            n: number of grasps, >= 1.
+            rotations: wrist rotations ``R_obj_palm`` (palm frame in the object mesh frame): (n, 3, 3)
+                matrices, (n, 6) rot6d (orthonormalised), or a scipy ``Rotation``; None draws uniformly
+                random ones from ``seed``.
+            seed: the same seed (and inputs) gives the same grasps.
+            timing: if a dict, receives ``seconds`` (wall time of the sampling itself, rotations to
+                joints) and, with ``refine``, ``refine_seconds``.
+            condition_hand: condition the model on another hand's parameters while the joints stay
+                clamped to ``hand``'s limits (the paper's wrong-condition study, Table 9).
+            refine: True (default settings) or :class:`~ohra.learn.grasp.refine.RefineSettings`: open the
+                fingers just enough to clear the object (:func:`~ohra.learn.grasp.refine.refine_grasps`).
+
+        Returns:
+            (n, 31) float64 grasps ``[t (3), rot6d (6), q (22)]``: ``t`` the palm-frame origin in the
+            object mesh frame [m], ``rot6d`` the first two columns of ``R_obj_palm``, ``q`` the canonical
+            joint angles [rad] within ``hand``'s limits (absent joints 0).
+
+        Raises:
+            GraspError: ``n`` is not a positive integer; ``rotations`` of the wrong shape, non-finite,
+                or not rotations.
+            ObjectError: ``obj`` cannot be resolved to one object.
+            HandNotFoundError: an unknown hand name or a missing params file.
+            ParamsError: ``hand`` (or ``condition_hand``) of another type, or without a base form for a
+                ``vae``-conditioned model.
         """
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
             raise GraspError(f"n must be a positive integer, got {n!r}")
@@ -275,9 +307,21 @@ def default_model_dir(name: str = "default") -> Path:
 
 
 def load_grasp_model(path: str | Path | None = None) -> GraspModel:
-    """Load a grasp model: a shipped one by name (``None`` or ``"default"``, ``"leap"``: see
-    :data:`SHIPPED_MODELS`), a run/model directory (its ``model.pt``, else ``checkpoints/last.pt``), or a
-    ``.pt`` file. :class:`CheckpointError` if missing, corrupt or incompatible."""
+    """Load a grasp model, ready to sample (eval mode).
+
+    Args:
+        path: a shipped model by name (``None`` or ``"default"``, ``"leap"``: see :data:`SHIPPED_MODELS`;
+            an existing folder of that name wins), a run or model directory (its ``model.pt``, else
+            ``checkpoints/last.pt``), or a ``.pt`` file (``model.pt`` or a training checkpoint).
+
+    Returns:
+        :class:`GraspModel` with its network, hand condition, translation scale ``t_scale`` [m] and
+        training metadata ``meta``.
+
+    Raises:
+        CheckpointError: the shipped model is missing; no model file there; a corrupt, foreign or
+            other-version file; weights or hand condition that do not fit the stored config.
+    """
     from ohra.learn.train_vae import load_torch_file
 
     shipped = path is None or (isinstance(path, str) and path in SHIPPED_MODELS and not Path(path).exists())

@@ -77,8 +77,19 @@ def models_dir() -> Path:
 
 
 def policy_dir(run: str | Path) -> Path:
-    """A run directory or exported policy as given, or a shipped policy by name (``rotate_leap_canonical`` or
-    just ``leap_canonical``) when no such folder exists."""
+    """The folder of a run, an exported policy, or a shipped policy.
+
+    Args:
+        run: a path with a folder part, or a bare name whose folder has ``config.json``: returned as
+            given (not checked further); else a shipped policy's name (``rotate_leap_canonical`` or just
+            ``leap_canonical``).
+
+    Returns:
+        The folder.
+
+    Raises:
+        CheckpointError: a bare name that is neither a run folder nor a shipped policy.
+    """
     path = Path(run)
     # a bare name's folder may be where an earlier evaluation of that shipped policy wrote its results
     if path.name != str(run) or (path / "config.json").is_file():
@@ -185,7 +196,21 @@ class Policy:
 def export_policy(run_dir: str | Path, out_dir: str | Path, which: str = "model") -> Path:
     """A small, pickle-free copy of a run for committing: ``config.json``, ``policy.pth`` (actor and
     critic weights, no optimizer), ``obs_stats.npz``, the starting states ``grasps.npz``, and the run's
-    ``progress.csv`` / ``eval.json`` when present."""
+    ``progress.csv`` / ``eval.json`` when present.
+
+    Args:
+        run_dir: a training run (or an exported policy).
+        out_dir: the export folder (created if missing; files in it are overwritten).
+        which: ``"model"`` (the final policy) or ``"last"`` (the last checkpoint).
+
+    Returns:
+        ``out_dir``.
+
+    Raises:
+        CheckpointError: no ``config.json``; ``which`` not ``"model"`` or ``"last"``; no trained policy
+            file for it.
+        RotationConfigError, RLConfigError: an unknown or invalid setting in the run's ``config.json``.
+    """
     import shutil
 
     from ohra.sim.rotation.grasps import load_or_generate
@@ -236,9 +261,24 @@ def run_episode(env, policy, seed: int, frames_every: int = 0, render=None) -> d
 
 def evaluate_policy(policy, env_cfg: RotationConfig, episodes: int = 20, seed: int = 0, run: str = "",
                     grasps=None, hand=None) -> EvalResult:
-    """Steps-to-Fall and Cumulative Rotation of ``policy`` (obs -> action) over seeded episodes
-    (``grasps``: as :class:`ohra.sim.rotation.env.InHandRotateEnv` takes them; ``hand``: a SimHand to
-    simulate, the env's ``sim_hand``)."""
+    """Steps-to-Fall and Cumulative Rotation of ``policy`` over seeded episodes (module docstring).
+
+    Args:
+        policy: raw observation (obs_dim,) -> action (action_dim,) in [-1, 1] (e.g. a :class:`Policy`,
+            which applies the observation statistics); its ``reset()``, if any, is called per episode.
+        env_cfg: the environment.
+        episodes: number of episodes; episode ``i`` is reset with seed ``seed + i``.
+        seed: first episode seed.
+        run: label stored in the result.
+        grasps: starting states, as :class:`ohra.sim.rotation.env.InHandRotateEnv` takes them (None:
+            the cached ones of ``env_cfg``).
+        hand: a :class:`~ohra.sim.hands.SimHand` to simulate (the env's ``sim_hand``).
+
+    Returns:
+        :class:`EvalResult`: per episode the control steps until termination (``episode_steps`` if it
+        survived), the rotation [rad] about world +z (positive: the commanded direction), the
+        termination reason (None if it survived), and the weighted return of each reward term.
+    """
     from ohra.sim.rotation.env import InHandRotateEnv
 
     env = InHandRotateEnv(env_cfg, grasps=grasps, sim_hand=hand)
@@ -252,13 +292,21 @@ def evaluate_policy(policy, env_cfg: RotationConfig, episodes: int = 20, seed: i
 
 
 def on_urdf(env_cfg: RotationConfig, urdf: str | None) -> RotationConfig:
-    """The environment of ``env_cfg`` with the same hand's ``urdf`` ("canonical" or "original") instead,
-    driven and observed in the canonical 22-D joint space (an original URDF through its action map,
-    starting from the canonical holding pose), so a policy trained in the canonical joint space on one
-    URDF can be run on the other. ``None`` or the run's own URDF returns ``env_cfg`` unchanged.
+    """The environment of ``env_cfg`` with the same hand's other URDF, driven and observed in the
+    canonical 22-D joint space (an original URDF through its action map, starting from the canonical
+    holding pose), so a policy trained in the canonical joint space on one URDF can be run on the other.
 
-    Raises :class:`CheckpointError` when the policy acts in an original URDF's own joints (``space``
-    "native": its actions mean nothing to another URDF).
+    Args:
+        env_cfg: the run's environment.
+        urdf: ``"canonical"``, ``"original"`` or None.
+
+    Returns:
+        ``env_cfg`` itself for None or the run's own URDF, else a changed copy.
+
+    Raises:
+        CheckpointError: the policy acts in an original URDF's own joints (``space`` "native": its
+            actions mean nothing to another URDF).
+        RotationConfigError: ``urdf`` is not ``"canonical"``, ``"original"`` or None.
     """
     import dataclasses
 
@@ -281,11 +329,28 @@ def output_suffix(env_cfg: RotationConfig, urdf: str | None) -> str:
 
 def evaluate_run(run_dir: str | Path, episodes: int = 20, seed: int = 1000, which: str = "model",
                  write: bool = True, urdf: str | None = None, out_dir: str | Path | None = None) -> EvalResult:
-    """Evaluate a trained run (seeds from 1000 by default: training used 0..n_envs); writes ``eval.json`` into
-    ``out_dir`` (default the run itself; a shipped policy, :func:`policy_dir`, needs an ``out_dir`` to write).
+    """Evaluate a trained run with :func:`evaluate_policy` and write ``eval.json``.
 
-    ``urdf``: run the policy on the hand's other URDF (:func:`on_urdf`; starting states from that URDF's
-    own cache) and write ``eval_on_<urdf>.json`` instead.
+    Args:
+        run_dir: a run, an exported policy or a shipped policy's name (:func:`policy_dir`).
+        episodes: number of episodes.
+        seed: first episode seed (1000 by default: training used 0..n_envs).
+        which: ``"model"`` (the final policy) or ``"last"`` (the last checkpoint) of a training run.
+        write: write the result as JSON (atomically).
+        urdf: run the policy on the hand's other URDF (:func:`on_urdf`; starting states from that URDF's
+            own cache) and write ``eval_on_<urdf>.json`` instead.
+        out_dir: where to write (created if missing); default the run itself. A shipped policy needs one.
+
+    Returns:
+        :class:`EvalResult` (steps in control steps, rotations [rad] about world +z).
+
+    Raises:
+        CheckpointError: no such run or shipped policy; a shipped policy with ``write`` and no
+            ``out_dir``; no ``config.json``; ``which`` not ``"model"`` or ``"last"``; no trained policy
+            file; ``urdf`` names the other URDF for a policy in a native joint space.
+        RotationConfigError: an unknown or invalid environment setting in the run's ``config.json``;
+            ``urdf`` not ``"canonical"``, ``"original"`` or None.
+        RLConfigError: an unknown or invalid PPO setting in the run's ``config.json``.
     """
     run_dir = policy_dir(run_dir)
     if write and out_dir is None and is_shipped(run_dir):
@@ -306,9 +371,29 @@ def evaluate_run(run_dir: str | Path, episodes: int = 20, seed: int = 1000, whic
 
 def record_episode(run_dir: str | Path, out_dir: str | Path, seed: int = 1000, every: int = 2, strip_frames: int = 8,
                    which: str = "model", size: int = 240, urdf: str | None = None) -> dict:
-    """Render one episode of a run: ``rollout.gif`` (every ``every``-th step), ``strip.png`` (evenly spaced
-    frames), ``trajectory.npz`` (joints and object poses per step, for :func:`replay_html`). ``urdf``: on
-    the hand's other URDF (:func:`on_urdf`)."""
+    """Render one episode of a run into ``out_dir`` (created if missing): ``rollout.gif`` (every
+    ``every``-th control step), ``strip.png`` (evenly spaced frames), ``trajectory.npz`` (for
+    :func:`replay_html`): ``q`` (T+1, n_joints) simulated joint positions [rad] in ``SimHand.joints``
+    order, ``obj_pos`` (T+1, 3) [m] and ``obj_quat`` (T+1, 4) xyzw, the object frame in the world frame.
+
+    Args:
+        run_dir: a run, an exported policy or a shipped policy's name (:func:`policy_dir`).
+        out_dir: the output folder.
+        seed: the episode's seed.
+        every: render every ``every``-th control step (>= 1).
+        strip_frames: frames in the strip (at most).
+        which: ``"model"`` or ``"last"`` (see :func:`evaluate_run`).
+        size: frame width and height [px].
+        urdf: on the hand's other URDF (:func:`on_urdf`).
+
+    Returns:
+        dict with ``steps``, ``rotation`` [rad] about world +z, ``termination`` (None if it survived),
+        and the paths ``gif``, ``strip``, ``trajectory``.
+
+    Raises:
+        CheckpointError, RotationConfigError, RLConfigError: as in :func:`evaluate_run`, less the
+            shipped-policy write check.
+    """
     from ohra.sim.render import write_png
     from ohra.sim.rotation.render import render, strip, write_gif
 

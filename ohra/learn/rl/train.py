@@ -228,12 +228,30 @@ def _check_resume(run_dir: Path, env_cfg: RotationConfig, ppo: PPOSettings) -> N
 
 def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Path, resume: bool = False,
                    verbose: int = 0, tensorboard: bool = False) -> Path:
-    """Train (or resume) a PPO rotation policy into ``run_dir``; returns the final model path.
-    ``tensorboard``: also log to ``run_dir/tensorboard`` (needs the ``tensorboard`` package; rl extra).
+    """Train (or resume) a PPO rotation policy into ``run_dir`` (layout in the module docstring).
+
+    Generates (or loads) the cached starting states first; sets torch's thread count to ``ppo.threads``.
+
+    Args:
+        env_cfg: the environment (:class:`RotationConfig`); on resume it must equal the run's.
+        ppo: PPO settings; on resume only ``total_steps``, ``max_minutes`` and ``checkpoint_every`` may
+            differ from the run's.
+        run_dir: the run folder (created if missing).
+        resume: continue from ``checkpoints/last.zip`` up to ``ppo.total_steps`` (or the
+            ``max_minutes`` budget, counted over all sessions).
+        verbose: SB3 verbosity; > 0 also forces a progress bar while starting states are generated
+            (else one only when stderr is a terminal).
+        tensorboard: also log to ``run_dir/tensorboard`` (needs the ``tensorboard`` package; rl extra).
+
+    Returns:
+        Path of the final policy, ``run_dir/model.zip`` (``vecnormalize.pkl`` beside it).
 
     Raises:
-        RLConfigError: nothing to resume, or a fresh run into a folder that holds one.
+        RLConfigError: nothing to resume; a fresh run into a folder that holds one; on resume, an
+            environment config or non-budget PPO setting that differs from the run's.
         FolderInUseError: another process is training into ``run_dir``.
+        MissingDependencyError: ``tensorboard`` without the tensorboard package; ``ppo.policy="lstm"``
+            without sb3-contrib.
     """
     import torch
     from stable_baselines3.common.utils import set_random_seed
@@ -331,7 +349,20 @@ def _write_config(run_dir: Path, env_cfg: RotationConfig, ppo: PPOSettings) -> N
 
 
 def load_run(run_dir: str | Path) -> tuple[RotationConfig, PPOSettings]:
-    """The env config and PPO settings a run was trained with."""
+    """The env config and PPO settings a run was trained with.
+
+    Args:
+        run_dir: a training run or an exported policy (a folder with ``config.json``).
+
+    Returns:
+        (env config, PPO settings); settings added to ohra after the run was made take the value the
+        run had (:data:`ohra.sim.rotation.config.SAVED_BEFORE`) or their default.
+
+    Raises:
+        CheckpointError: ``run_dir/config.json`` does not exist.
+        RotationConfigError: an unknown or invalid environment setting in it.
+        RLConfigError: an unknown or invalid PPO setting in it.
+    """
     from ohra.errors import CheckpointError
 
     path = Path(run_dir) / "config.json"
