@@ -13,7 +13,7 @@ import pytest
 
 from ohra.data.dataset import GraspDataset
 from ohra.data.pack import pack, unpack
-from ohra.errors import DatasetError
+from ohra.errors import DatasetError, FolderInUseError
 from ohra.hands import get_hand
 from ohra.objects.model import ObjectModel
 from ohra.synth.pipeline import SynthSettings, synthesize
@@ -101,6 +101,39 @@ def test_packing_refuses_a_damaged_shard_and_changes_nothing(ds):
     with pytest.raises(DatasetError, match=r"leap_3030/box.*--resume"):
         pack(ds)
     assert _shard_bytes(ds) == files and _manifest(ds) == m
+
+
+def test_packing_a_folder_a_build_is_writing_is_refused_and_changes_nothing(ds):
+    """A build holds the dataset folder's lock (here another process holds it): pack and unpack fail at once."""
+    hold = "import sys\nfrom ohra.io import folder_lock\nwith folder_lock(sys.argv[1], 'dataset'):\n    print('held', flush=True); sys.stdin.read()"
+    p = subprocess.Popen([sys.executable, "-c", hold, str(ds)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert p.stdout.readline().strip() == "held"
+        files, m = _shard_bytes(ds), _manifest(ds)
+        for f in (pack, unpack):
+            with pytest.raises(FolderInUseError, match=rf"another process \(pid {p.pid}\) is writing this dataset"):
+                f(ds)
+        assert _shard_bytes(ds) == files and _manifest(ds) == m
+    finally:
+        p.stdin.close()
+        p.wait()
+    assert pack(ds).packed == 4  # once the build is done
+
+
+def test_packing_deletes_only_the_shards_it_folds_in_and_stale_packs_never_other_files(ds):
+    """A user's own ``.npz`` in a hand's folder, or in the folder of a hand with no shards, survives packing;
+    a pack no entry names any more (a build recomputed every pair of a packed hand) does not."""
+    m = _manifest(ds)
+    m["hands"]["leap_3030"]["shards"] = {}
+    (ds / "manifest.json").write_text(json.dumps(m))
+    unlisted = sorted(str(f.relative_to(ds)) for f in (ds / "leap_3030").glob("*.npz"))
+    for hand in ("leap_2200", "leap_3030"):
+        np.savez(ds / hand / "my_analysis.npz", a=np.arange(3))
+    np.savez(ds / "leap_2200" / "pack-0123abcd.npz", a=np.arange(3))
+    assert pack(ds).folded == 2
+    left = sorted(str(f.relative_to(ds)) for f in ds.rglob("*.npz"))
+    [packed] = [f for f in left if f.startswith("leap_2200/pack-")]
+    assert left == sorted([packed, "leap_2200/my_analysis.npz", "leap_3030/my_analysis.npz"] + unlisted)
 
 
 def test_cli_packs_and_reports_sizes_and_a_missing_manifest_is_one_line(ds, tmp_path):

@@ -126,3 +126,15 @@ def test_bad_configuration_raises(shadow_base):
         hm.fingertips(np.full(22, np.nan))
     with pytest.raises(OhraError, match="unknown frame"):
         hm.frame_pose(np.zeros(22), "wrist")
+
+
+@pytest.mark.parametrize("method, args", [
+    ("frame_pose", ("index_tip",)), ("jacobian", ("index_tip",)), ("self_collision_pairs", ()), ("self_collision", ()),
+    ("object_distances", (coal.Sphere(0.02),)), ("min_distance", (coal.Sphere(0.02),)),
+    ("penetration_depth", (coal.Sphere(0.02),)),
+])
+def test_one_configuration_methods_given_a_batch_raise_naming_both_shapes(shadow_base, method, args):
+    hm = HandModel.from_params(shadow_base)
+    getattr(hm, method)(np.zeros(22), *args)  # one configuration works
+    with pytest.raises(OhraError, match=rf"{method} takes one configuration of shape \(22,\), got \(3, 22\)"):
+        getattr(hm, method)(np.zeros((3, 22)), *args)

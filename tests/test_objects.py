@@ -53,6 +53,15 @@ def test_surface_samples_are_seeded_and_on_the_surface():
     assert np.allclose(np.linalg.norm(na, axis=1), 1.0)
 
 
+@pytest.mark.parametrize("n", [0, -3])
+def test_sampling_fewer_than_one_surface_point_is_an_error_naming_the_object(n):
+    o = ObjectModel.builtin("sphere")
+    with pytest.raises(ObjectError, match=rf"'sphere': sample_surface needs n >= 1 points, got {n}"):
+        o.sample_surface(n)
+    with pytest.raises(ObjectError, match=rf"got {n}"):
+        o.sample_surface(n, oversample=4)
+
+
 def test_farthest_point_sampling_spreads_points():
     pts = np.random.default_rng(0).random((500, 3))
     idx = farthest_point_sampling(pts, 20, seed=0)
@@ -91,6 +100,26 @@ def test_urdf_object_applies_its_mesh_scale_to_the_mesh_and_the_convex_pieces(tm
     assert ObjectModel.load(tmp_path / "visual.obj").mesh.extents == pytest.approx(ref.mesh.extents, rel=1e-6)
 
 
+def test_urdf_collision_mesh_takes_its_own_scale_not_the_visual_ones(tmp_path):
+    """The ``<collision>`` mesh stored in millimetres (scale 0.001) beside a visual mesh in metres gives
+    pieces in metres; a URDF with only a ``<collision>`` mesh scales the object by that mesh's scale."""
+    ref = ObjectModel.builtin("l_block")
+    _write_obj(tmp_path / "visual.obj", [ref.mesh])
+    _write_obj(tmp_path / "collision_mm.obj", [p.copy().apply_scale(1000.0) for p in ref.convex_pieces()])
+    (tmp_path / "model.urdf").write_text(
+        '<robot name="thing"><link name="base"><visual><geometry><mesh filename="visual.obj"/></geometry></visual>'
+        '<collision><geometry><mesh filename="collision_mm.obj" scale="0.001 0.001 0.001"/></geometry></collision></link></robot>')
+    o = ObjectModel.load(tmp_path / "model.urdf")
+    assert o.mesh.extents == pytest.approx(ref.mesh.extents, rel=1e-6)
+    pieces = o.convex_pieces()
+    assert len(pieces) == 2
+    assert sum(p.volume for p in pieces) == pytest.approx(sum(p.volume for p in ref.convex_pieces()), rel=1e-6)
+    (tmp_path / "collision_only.urdf").write_text(
+        '<robot name="thing"><link name="base"><collision><geometry><mesh filename="visual.obj" scale="2 2 2"/>'
+        '</geometry></collision></link></robot>')
+    assert ObjectModel.load(tmp_path / "collision_only.urdf").mesh.extents == pytest.approx(2.0 * ref.mesh.extents, rel=1e-6)
+
+
 def test_ycb_urdf_scale_is_applied(objects_dir):
     """MasterChefCan's URDF scales its mesh by 0.7."""
     a = ObjectModel.load(objects_dir / "ycb" / "MasterChefCan" / "model.urdf")
@@ -107,6 +136,36 @@ def test_missing_or_empty_mesh_is_a_clear_error(tmp_path):
         ObjectModel.load(empty)
     with pytest.raises(ObjectError, match="unknown built-in object"):
         ObjectModel.builtin("teapot")
+
+
+@pytest.mark.parametrize("suffix", [".ply", ".off", ".glb"])
+def test_a_folder_holding_any_supported_mesh_type_loads_it_after_the_preferred_files(tmp_path, suffix):
+    box = trimesh.creation.box((0.04, 0.05, 0.06))
+    folder = tmp_path / "thing"
+    folder.mkdir()
+    box.export(folder / f"a{suffix}")
+    o = ObjectModel.load(folder)
+    assert o.name == "thing" and o.source == folder / f"a{suffix}"
+    assert o.mesh.extents == pytest.approx([0.04, 0.05, 0.06], rel=1e-6)
+    box.export(folder / "z.stl")  # .obj and .stl keep their precedence over the other types
+    assert ObjectModel.load(folder).source == folder / "z.stl"
+
+
+def test_loading_an_unsupported_path_names_every_supported_mesh_type(tmp_path):
+    listed = r"\.obj, \.stl, \.ply, \.off, \.glb"
+    (tmp_path / "notes.txt").write_text("no mesh here\n")
+    with pytest.raises(ObjectError, match=rf"folder holds no mesh \({listed}\) or model\.urdf"):
+        ObjectModel.load(tmp_path)
+    with pytest.raises(ObjectError, match=rf"unsupported object file type '\.txt' \(use {listed} or \.urdf\)"):
+        ObjectModel.load(tmp_path / "notes.txt")
+
+
+@pytest.mark.parametrize("density", [0.0, -500.0, float("nan"), float("inf")])
+def test_a_density_that_is_not_a_positive_number_is_an_error_naming_the_object(density):
+    with pytest.raises(ObjectError, match=rf"object 'cube': density must be a finite number > 0 kg/m\^3, got {density}"):
+        ObjectModel(trimesh.creation.box((0.05, 0.05, 0.05)), "cube", density=density)
+    with pytest.raises(ObjectError, match=rf"object 'sphere': density .* got {density}"):
+        ObjectModel.builtin("sphere", density=density)
 
 
 def test_object_urdf_places_the_mesh_by_its_visual_origin(objects_dir):

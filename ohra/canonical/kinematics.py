@@ -195,6 +195,14 @@ class HandModel:
             raise OhraError("configuration contains NaN or inf")
         return q
 
+    def _check_one_q(self, q: np.ndarray, method: str) -> np.ndarray:
+        """:meth:`check_q` for methods that take one configuration: a batch is an error naming both shapes."""
+        q = self.check_q(q)
+        if q.ndim != 1:
+            hint = "use frame_poses for batches" if method == "frame_pose" else "call it once per configuration"
+            raise OhraError(f"{method} takes one configuration of shape (22,), got {q.shape}; {hint}")
+        return q
+
     def clamp(self, q: np.ndarray) -> np.ndarray:
         """Clip to the joint limits (absent joints to 0)."""
         return np.clip(self.check_q(q), self.lower, self.upper)
@@ -235,9 +243,7 @@ class HandModel:
         Raises:
             OhraError: ``q`` is not (22,) or not finite; unknown ``frame``.
         """
-        q = self.check_q(q)
-        if q.ndim != 1:
-            raise OhraError("frame_pose takes one configuration; use frame_poses for batches")
+        q = self._check_one_q(q, "frame_pose")
         fid = self._fid(frame)
         pin.forwardKinematics(self.model, self.data, self._to_pin(q))
         return pin.updateFramePlacement(self.model, self.data, fid).homogeneous.copy()
@@ -353,9 +359,9 @@ class HandModel:
             expressed in palm-frame axes.
 
         Raises:
-            OhraError: ``q`` is not finite or its last axis is not 22; unknown ``frame``.
+            OhraError: ``q`` is not (22,) or not finite; unknown ``frame``.
         """
-        q = self.check_q(q)
+        q = self._check_one_q(q, "jacobian")
         fid = self._fid(frame)
         qp = self._to_pin(q)
         J = pin.computeFrameJacobian(self.model, self.data, qp, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
@@ -423,8 +429,8 @@ class HandModel:
 
     # -- Coal collision ------------------------------------------------------------------------
     def collision_objects(self, q: np.ndarray, T_world_palm: np.ndarray | None = None) -> list[tuple[str, int, coal.CollisionObject]]:
-        """Coal objects (name, finger index or -1 for the palm, object) of the hand at one configuration."""
-        q = self.check_q(q)
+        """Coal objects (name, finger index or -1 for the palm, object) of the hand at one (22,) configuration."""
+        q = self._check_one_q(q, "collision_objects")
         T0 = np.eye(4) if T_world_palm is None else np.asarray(T_world_palm, dtype=float)
         out: list[tuple[str, int, coal.CollisionObject]] = []
         R, depth = palm_geometry(self.params) if self.params is not None else (0.0, 0.0)
@@ -454,8 +460,9 @@ class HandModel:
             ``(link, link)`` name pairs, e.g. ``("index_distal", "middle_distal")``.
 
         Raises:
-            OhraError: the model has no params; ``q`` is not finite or its last axis is not 22.
+            OhraError: the model has no params; ``q`` is not (22,) or not finite.
         """
+        q = self._check_one_q(q, "self_collision_pairs")
         objs = [o for o in self.collision_objects(q) if o[1] >= 0]
         hits = []
         for i in range(len(objs)):
@@ -475,9 +482,9 @@ class HandModel:
             margin: distance [m] below which a pair counts; 0: only penetration.
 
         Raises:
-            OhraError: the model has no params; ``q`` is not finite or its last axis is not 22.
+            OhraError: the model has no params; ``q`` is not (22,) or not finite.
         """
-        return bool(self.self_collision_pairs(q, margin))
+        return bool(self.self_collision_pairs(self._check_one_q(q, "self_collision"), margin))
 
     def object_distances(
         self, q: np.ndarray, geometry: coal.CollisionGeometry, T_palm_object: np.ndarray | None = None
@@ -500,8 +507,9 @@ class HandModel:
             ``{"palm": d, "<link>": d, ...}``: one signed distance [m] per hand shape.
 
         Raises:
-            OhraError: the model has no params; ``q`` is not finite or its last axis is not 22.
+            OhraError: the model has no params; ``q`` is not (22,) or not finite.
         """
+        q = self._check_one_q(q, "object_distances")
         To = np.eye(4) if T_palm_object is None else np.asarray(T_palm_object, dtype=float)
         obj = coal.CollisionObject(geometry, _se3(To))
         is_mesh = isinstance(geometry, coal.BVHModelBase)
@@ -520,9 +528,9 @@ class HandModel:
             Distance [m] of the closest hand shape; negative: minus the deepest penetration.
 
         Raises:
-            OhraError: the model has no params; ``q`` is not finite or its last axis is not 22.
+            OhraError: the model has no params; ``q`` is not (22,) or not finite.
         """
-        return min(self.object_distances(q, geometry, T_palm_object).values())
+        return min(self.object_distances(self._check_one_q(q, "min_distance"), geometry, T_palm_object).values())
 
     def penetration_depth(self, q: np.ndarray, geometry: coal.CollisionGeometry, T_palm_object: np.ndarray | None = None) -> float:
         """Largest penetration depth of any hand shape into the object (arguments as
@@ -532,9 +540,9 @@ class HandModel:
             Depth [m], >= 0; 0 when no shape penetrates.
 
         Raises:
-            OhraError: the model has no params; ``q`` is not finite or its last axis is not 22.
+            OhraError: the model has no params; ``q`` is not (22,) or not finite.
         """
-        return max(0.0, -self.min_distance(q, geometry, T_palm_object))
+        return max(0.0, -self.min_distance(self._check_one_q(q, "penetration_depth"), geometry, T_palm_object))
 
 
 def _se3(T: np.ndarray) -> coal.Transform3s:

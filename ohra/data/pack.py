@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,10 +26,11 @@ import numpy as np
 from ohra.data.dataset import file_digest, npz_bytes, require_manifest
 from ohra.data.manifest import ManifestWriter
 from ohra.errors import DatasetError
-from ohra.io import write_bytes
+from ohra.io import folder_lock, write_bytes
 
 ROWS = ".rows"  # suffix of a member holding the row offsets (P+1,) of the array of the same name
 KEYS = "_keys"  # member holding the object key of each row
+PACK_NAME = re.compile(r"pack-[0-9a-f]{8}\.npz")  # the name pack() gives a hand's pack
 
 
 @dataclass(frozen=True)
@@ -122,14 +124,23 @@ def _concat(hand: str, rows: list[tuple[str, dict[str, np.ndarray]]]) -> dict[st
     return out
 
 
-def _npz_files(root: Path, hand: str) -> list[Path]:
-    d = root / hand
-    return sorted(d.glob("*.npz")) if d.is_dir() else []
+def _dataset_files(root: Path, hands: dict) -> set[Path]:
+    """The shard and pack files ``hands`` (a manifest's) names that exist, and any pack file left
+    unlisted in a hand's folder (a build that recomputed all of a packed hand's pairs); never
+    another ``.npz`` a user keeps there."""
+    out: set[Path] = set()
+    for hand, entry in hands.items():
+        for sh in entry.get("shards", {}).values():
+            out |= {root / f for f in (sh.get("file"), sh.get("pack", {}).get("file")) if f}
+        if (root / hand).is_dir():
+            out |= {f for f in (root / hand).iterdir() if PACK_NAME.fullmatch(f.name)}
+    return {f for f in out if f.suffix == ".npz" and f.is_file()}
 
 
 def pack(root: str | Path) -> PackReport:
     """Pack every hand's shards of the dataset ``root`` (see the module doc), fold loose shards into
-    the packs, and delete every other ``.npz`` in the hands' folders.
+    the packs, and delete the shard and pack files they replace (other files are left alone).
+    Holds the dataset folder's lock, as a build does.
 
     Args:
         root: a finished dataset directory (holding ``manifest.json``).
@@ -141,11 +152,18 @@ def pack(root: str | Path) -> PackReport:
         DatasetError: no or unreadable manifest; a shard or pack missing, damaged or not
             re-serialising to its recorded bytes; shards of one hand with differing arrays, dtypes or
             trailing shapes (in all these cases nothing is changed).
+        FolderInUseError: another process (a build) is writing ``root``.
     """
     root = Path(root)
-    manifest = require_manifest(root)
+    require_manifest(root)  # before the lock, which would create a missing folder
+    with folder_lock(root, "dataset"):  # a build writing into root holds it
+        return _pack(root, require_manifest(root))
+
+
+def _pack(root: Path, manifest: dict) -> PackReport:
     hands = manifest.get("hands", {})
-    before = sum(f.stat().st_size for h in hands for f in _npz_files(root, h))
+    old = _dataset_files(root, hands)
+    before = sum(f.stat().st_size for f in old)
     new_packs, folded = {}, 0
     for hand, entry in hands.items():
         shards = entry.get("shards", {})
@@ -166,20 +184,24 @@ def pack(root: str | Path) -> PackReport:
             sh["pack"] = {"file": name, "sha256": sha, "row": row}
     ManifestWriter(root / "manifest.json").write(manifest)
     keep = {root / name for name, _, _ in new_packs.values()}
-    for hand in hands:
-        for f in _npz_files(root, hand):
-            if f not in keep:
-                f.unlink()
-    after = sum(f.stat().st_size for h in hands for f in _npz_files(root, h))
+    for f in old - keep:
+        f.unlink()
+    after = sum(f.stat().st_size for f in keep)
     packed = sum(len(e.get("shards", {})) for e in hands.values())
     return PackReport(str(root), len(new_packs), packed, folded, before, after)
 
 
 def unpack(root: str | Path) -> int:
     """Write every packed pair of ``root`` back to its own shard file (byte-identical to the one
-    packed) and drop the packs; returns the number of shards written."""
+    packed) and drop the packs; returns the number of shards written. Holds the dataset folder's
+    lock (:class:`~ohra.errors.FolderInUseError` while a build writes ``root``)."""
     root = Path(root)
-    manifest = require_manifest(root)
+    require_manifest(root)  # before the lock, which would create a missing folder
+    with folder_lock(root, "dataset"):
+        return _unpack(root, require_manifest(root))
+
+
+def _unpack(root: Path, manifest: dict) -> int:
     n, packs = 0, set()
     for hand, entry in manifest.get("hands", {}).items():
         for key, sh in entry.get("shards", {}).items():

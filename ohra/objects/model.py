@@ -47,9 +47,10 @@ def _load_mesh_file(path: Path, scale: np.ndarray | None = None) -> trimesh.Trim
     return loaded
 
 
-def _urdf_mesh(path: Path) -> tuple[Path, np.ndarray, np.ndarray, Path | None, np.ndarray]:
-    """Visual mesh, its scale and origin (4x4 in the link frame), and the collision mesh and origin
-    named by a PyBullet-style object URDF (the first ``<mesh>`` of each kind)."""
+def _urdf_mesh(path: Path) -> tuple[Path, np.ndarray, np.ndarray, Path | None, np.ndarray, np.ndarray]:
+    """Visual mesh, its (3,) scale and origin (4x4 in the link frame), and the collision mesh, its scale
+    and origin named by a PyBullet-style object URDF (the first ``<mesh>`` of each kind; without a
+    ``<visual>`` mesh the collision mesh is also the visual one)."""
     from ohra.transforms import xyzrpy_to_matrix
 
     try:
@@ -69,12 +70,12 @@ def _urdf_mesh(path: Path) -> tuple[Path, np.ndarray, np.ndarray, Path | None, n
         return None, np.ones(3), np.eye(4)
 
     vis, scale, T_vis = find("visual")
-    col, _, T_col = find("collision")
+    col, col_scale, T_col = find("collision")
     if vis is None and col is None:
         raise ObjectError(f"{path}: no <mesh> geometry in the object URDF")
     if vis is None:
-        vis, T_vis = col, T_col
-    return vis, scale, T_vis, col, T_col  # type: ignore[return-value]
+        vis, scale, T_vis = col, col_scale, T_col
+    return vis, scale, T_vis, col, col_scale, T_col  # type: ignore[return-value]
 
 
 class ObjectModel:
@@ -92,13 +93,16 @@ class ObjectModel:
         exact_sdf: closed-form signed distance of the shape the (convex) mesh approximates.
 
     Raises:
-        ObjectError: the mesh has no faces or spans no volume (a point, a line, a flat sheet).
+        ObjectError: ``density`` is not a finite number > 0; the mesh has no faces or spans no volume
+            (a point, a line, a flat sheet).
     """
 
     def __init__(self, mesh: trimesh.Trimesh, name: str, density: float = DEFAULT_DENSITY,
                  source: Path | None = None, convex_pieces: list[trimesh.Trimesh] | None = None,
                  repair: bool = True, primitives: list[dict] | None = None, exact_sdf: SDF | None = None,
                  pieces_label: str = "provided"):
+        if not (np.isfinite(float(density)) and float(density) > 0):
+            raise ObjectError(f"object {name!r}: density must be a finite number > 0 kg/m^3, got {density}")
         if len(mesh.faces) == 0:
             raise ObjectError(f"object {name!r}: mesh has no faces")
         check_solid(mesh, name)  # before repair: Qhull and V-HACD fail (or hang) on flat input
@@ -129,7 +133,8 @@ class ObjectModel:
 
         Args:
             path: ``.obj/.stl/.ply/.off/.glb``, ``.urdf``, or a folder (its
-                ``textured_simple_reoriented.obj``, ``model.urdf``, else first ``.obj``/``.stl``).
+                ``textured_simple_reoriented.obj``, ``model.urdf``, else the first mesh by name, ``.obj``
+                before ``.stl``, ``.ply``, ``.off``, ``.glb``).
             density: [kg/m^3] for :attr:`mass`.
             name: label; None: the file stem (the folder name for a URDF, a folder or a
                 ``textured*`` mesh).
@@ -141,25 +146,27 @@ class ObjectModel:
 
         Raises:
             ObjectError: missing path or a folder without a mesh; unsupported type; unreadable mesh,
-                URDF or decomposition; ``scale`` <= 0; a mesh with no faces or no volume.
+                URDF or decomposition; ``scale`` or ``density`` <= 0; a mesh with no faces or no volume.
         """
         path = Path(path)
         if not path.exists():
             raise ObjectError(f"object file not found: {path}")
         if path.is_dir():
-            cands = [path / "textured_simple_reoriented.obj", path / "model.urdf"] + sorted(path.glob("*.obj")) + sorted(path.glob("*.stl"))
+            files = sorted(path.iterdir())
+            cands = [path / "textured_simple_reoriented.obj", path / "model.urdf"]
+            cands += [f for suffix in MESH_SUFFIXES for f in files if f.suffix.lower() == suffix]
             cands = [c for c in cands if c.is_file() and c.name not in DECOMPOSITION_NAMES]
             if not cands:
-                raise ObjectError(f"{path}: folder holds no mesh (.obj/.stl) or model.urdf")
+                raise ObjectError(f"{path}: folder holds no mesh ({', '.join(MESH_SUFFIXES)}) or model.urdf")
             return cls.load(cands[0], density, name or path.name, scale)
         pieces, label_pieces = None, "provided"
         if path.suffix.lower() == ".urdf":
             # the object frame is the URDF link frame: mesh scale, then the <visual>/<collision> origin
-            mesh_path, urdf_scale, T_vis, col, T_col = _urdf_mesh(path)
-            mesh = _load_mesh_file(mesh_path, urdf_scale)
+            mesh_path, vis_scale, T_vis, col, col_scale, T_col = _urdf_mesh(path)
+            mesh = _load_mesh_file(mesh_path, vis_scale)
             mesh.apply_transform(T_vis)
             if col is not None and col.is_file() and col != mesh_path:
-                pieces = [pc.apply_transform(T_col) for pc in load_convex_pieces(col, urdf_scale)]
+                pieces = [pc.apply_transform(T_col) for pc in load_convex_pieces(col, col_scale)]
                 label_pieces = f"provided:{col.name}"
             label = name or path.parent.name
         elif path.suffix.lower() in MESH_SUFFIXES:
@@ -170,7 +177,7 @@ class ObjectModel:
                     break
             label = name or (path.parent.name if path.stem.startswith("textured") else path.stem)
         else:
-            raise ObjectError(f"{path}: unsupported object file type {path.suffix!r} (use .obj, .stl, .ply or .urdf)")
+            raise ObjectError(f"{path}: unsupported object file type {path.suffix!r} (use {', '.join(MESH_SUFFIXES)} or .urdf)")
         if scale is not None:
             if not float(scale) > 0:
                 raise ObjectError(f"{path}: scale must be > 0, got {scale}")
@@ -346,8 +353,13 @@ class ObjectModel:
 
         Returns:
             (n, 3) points in the mesh frame [m] and (n, 3) unit outward normals (of their faces).
+
+        Raises:
+            ObjectError: ``n`` < 1.
         """
-        m = max(int(n) * max(int(oversample), 1), 1)
+        if not int(n) >= 1:
+            raise ObjectError(f"object {self.name!r}: sample_surface needs n >= 1 points, got {n}")
+        m = int(n) * max(int(oversample), 1)
         pts, fid = trimesh.sample.sample_surface(self.mesh, m, seed=seed)
         nrm = self.mesh.face_normals[fid]
         if m > n:
