@@ -336,6 +336,66 @@ def test_a_hand_the_model_cannot_condition_on_fails_before_any_simulation(datase
         evaluate_model(model, ["barrett_hand"], ["builtin:capsule"], n=1, condition_hand="leap_3333")
 
 
+class _RecordingEvaluator:
+    """Stands in for ohra.sim.GraspEvaluator: every grasp succeeds, the simulated hands are recorded."""
+
+    hands: list = []
+
+    def __init__(self, hand, obj, protocol=None):
+        type(self).hands.append(hand.name)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    def evaluate(self, grasps, workers=1, progress=False):
+        from types import SimpleNamespace
+
+        return SimpleNamespace(success=np.ones(len(grasps), bool))
+
+
+def test_workers_below_one_are_refused_before_any_sampling_or_simulation(dataset, monkeypatch):
+    model = train_grasp(dataset, tiny_model_config(), tiny_train_config(steps=1), progress=False).model
+
+    def must_not_run(*args, **kwargs):
+        raise AssertionError("a pair was sampled or simulated before workers was checked")
+
+    import ohra.sim
+
+    monkeypatch.setattr(ohra.sim, "GraspEvaluator", must_not_run)
+    monkeypatch.setattr(model, "sample", must_not_run)
+    for workers in (0, -1, 1.5, True):
+        with pytest.raises(GraspError, match=rf"workers must be an integer >= 1, got {workers!r}"):
+            evaluate_model(model, ["barrett_hand"], ["builtin:capsule"], n=1, workers=workers)
+
+
+def test_hands_given_as_params_keep_apart_in_the_report(dataset, monkeypatch):
+    """A hand given as params has no name: it is labelled by its content hash (``hand_key``, as
+    ``meta["condition_hand"]`` names one), so two such hands are two rows of ``per_hand`` (they were
+    both "hand", pooled); the label, and so the pair's seed, does not depend on the hand's place in the
+    list; a name keeps its name."""
+    from ohra.learn.grasp.condition import hand_key
+    from ohra.learn.grasp.evaluate import hand_label
+
+    import ohra.sim
+
+    model = train_grasp(dataset, tiny_model_config(), tiny_train_config(steps=1), progress=False).model
+    monkeypatch.setattr(ohra.sim, "GraspEvaluator", _RecordingEvaluator)
+    monkeypatch.setattr(_RecordingEvaluator, "hands", [])
+    a, b = get_hand("barrett_hand"), get_hand("shadow_hand_right")
+    rep = evaluate_model(model, [a, b, "barrett_hand"], ["builtin:capsule"], n=2, seed=5)
+    labels = [hand_key(a), hand_key(b), "barrett_hand"]
+    assert [p.hand for p in rep.pairs] == labels == _RecordingEvaluator.hands
+    assert list(rep.per_hand()) == labels and all(r["n"] == 2 for r in rep.per_hand().values())
+    assert [p["hand"] for p in json.loads(rep.to_json())["pairs"]] == labels
+    alone = evaluate_model(model, [b], ["builtin:capsule"], n=2, seed=5)
+    assert alone.pairs[0].hand == labels[1] and alone.pairs[0].seed == rep.pairs[1].seed
+    np.testing.assert_array_equal(alone.pairs[0].grasps, rep.pairs[1].grasps)
+    assert hand_label(dataset / "x" / "params.json", a) == str(dataset / "x" / "params.json")  # a path: all of it
+
+
 # -- CLI ------------------------------------------------------------------------------------------------
 @pytest.fixture
 def cli():

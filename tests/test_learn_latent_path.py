@@ -64,6 +64,31 @@ def test_geodesic_is_deterministic(vae):
     assert all(p.isclose(q) for p, q in zip(one.params, two.params))
 
 
+def test_the_module_level_interpolate_takes_the_same_default_path_as_the_method():
+    """``ohra.learn.interpolate(a, b, n, vae=vae)`` is ``vae.interpolate(a, b, n)``: the geodesic by
+    default (it defaulted to the straight line at equal arc length); a given ``spacing`` passes through.
+    (A stand-in model records the call: a real geodesic of more than 3 hands takes seconds.)"""
+    import inspect
+
+    from ohra.learn import morph
+
+    default = inspect.signature(morph.VAEBundle.interpolate).parameters["spacing"].default
+    assert default == "geodesic"
+
+    class Recorder:
+        def __init__(self):
+            self.calls = []
+
+        def interpolate(self, a, b, n=8, spacing=default):
+            self.calls.append((a, b, n, spacing))
+            return "interpolation"
+
+    rec = Recorder()
+    assert morph.interpolate("dex3_right", "shadow_hand_right", 5, vae=rec) == "interpolation"
+    morph.interpolate("dex3_right", "shadow_hand_right", vae=rec, spacing="even")
+    assert rec.calls == [("dex3_right", "shadow_hand_right", 5, "geodesic"), ("dex3_right", "shadow_hand_right", 8, "even")]
+
+
 def test_the_energy_tips_equal_the_torch_fk_at_q0(vae):
     """The geodesic's closed-form q = 0 tips (base + reach along the finger) are the FK's tips."""
     geom = GeometryLoss(vae.model.config, vae.standardizer.mean, vae.standardizer.std)

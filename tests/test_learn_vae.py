@@ -233,6 +233,15 @@ def test_encode_is_deterministic_and_decode_of_any_latent_is_valid_and_plausible
         vae.decode(np.full(d, np.nan))
 
 
+def test_encoding_no_hands_is_a_params_error_naming_the_problem(vae):
+    from ohra.errors import ParamsError
+    from ohra.learn.morph import encode
+
+    for call in (lambda: vae.encode([]), lambda: vae.encode(()), lambda: encode([], vae=vae)):
+        with pytest.raises(ParamsError, match="no hands given"):
+            call()
+
+
 def test_registered_hands_encode_and_reconstruct_their_presence_pattern(vae):
     """Every registered base hand is inside the sampler's support and gets its presence pattern
     and handedness back exactly."""

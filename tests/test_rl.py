@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 
+from ohra.errors import CheckpointError
 from ohra.learn.rl.config import PPOSettings, RLConfigError
 
 sb3 = pytest.importorskip("stable_baselines3", reason="rotation training needs the rl extra (stable-baselines3)")
@@ -219,3 +220,98 @@ def test_a_recurrent_policy_without_a_critic_lstm_trains_and_reloads_as_such(tin
     train_rotation(env_cfg, replace(ppo, policy="lstm", lstm_hidden=8, lstm_critic=False, total_steps=24), run)
     for pol in (Policy(run), Policy(export_policy(run, run.parent / "export"))):
         assert pol._policy.lstm_critic is None and pol._policy.lstm_actor.hidden_size == 8
+
+
+# -- runs trained without observation normalisation, exports, bad arguments and bad config files -----
+@pytest.fixture(scope="module")
+def raw_obs_run(tmp_path_factory):
+    """A 24-step run trained with ``normalize_obs=False`` (~5 s), its cache folder, and its export."""
+    root = tmp_path_factory.mktemp("raw_obs")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("OHRA_CACHE_DIR", str(root / "cache"))
+        env_cfg = RotationConfig(grasp_count=2, episode_steps=24)
+        ppo = PPOSettings(total_steps=24, n_envs=1, n_steps=24, batch_size=24, n_epochs=1, net_arch=(16, 16),
+                          checkpoint_every=24, normalize_obs=False)
+        train_rotation(env_cfg, ppo, root / "run")
+        from ohra.learn.rl.evaluate import export_policy
+
+        export_policy(root / "run", root / "export")
+    return root / "run", root / "cache", root / "export"
+
+
+def test_a_run_trained_without_observation_normalisation_exports_and_reads_back_unnormalised(raw_obs_run, tmp_path,
+                                                                                             monkeypatch):
+    """The export says ``norm_obs=False`` (no pickled None) and its policy acts on raw observations as the
+    run's does; a run without any ``vecnormalize.pkl`` exports the same way; an export made before the
+    flag (statistics only) still reads its statistics."""
+    import shutil
+
+    from ohra.learn.rl.evaluate import Policy, export_policy
+
+    run, cache, export = raw_obs_run
+    monkeypatch.setenv("OHRA_CACHE_DIR", str(cache))
+    with np.load(export / "obs_stats.npz", allow_pickle=False) as st:
+        assert st.files == ["norm_obs"] and not st["norm_obs"]
+    mine, theirs = Policy(run), Policy(export)
+    assert mine._mean is None and theirs._mean is None
+    obs = np.linspace(-3.0, 3.0, mine._policy.observation_space.shape[0])
+    assert theirs.normalize(obs) is obs
+    np.testing.assert_array_equal(theirs(obs), mine(obs))
+
+    bare = tmp_path / "bare"  # a run with no observation statistics at all
+    shutil.copytree(run, bare, ignore=shutil.ignore_patterns("*vecnormalize.pkl"))
+    again = tmp_path / "again"
+    again.mkdir()
+    np.savez(again / "obs_stats.npz", mean=np.zeros(3), var=np.ones(3), clip=5.0, eps=1e-8)  # a stale file: replaced
+    export_policy(bare, again)
+    assert Policy(again)._mean is None
+    np.testing.assert_array_equal(Policy(again)(obs), mine(obs))
+
+    old = tmp_path / "old"  # an export written before norm_obs existed: mean, var, clip, eps
+    shutil.copytree(export, old)
+    n = obs.shape[0]
+    np.savez(old / "obs_stats.npz", mean=np.full(n, 1.0), var=np.full(n, 4.0), clip=2.0, eps=0.0)
+    np.testing.assert_allclose(Policy(old).normalize(obs), np.clip((obs - 1.0) / 2.0, -2.0, 2.0))
+    (old / "obs_stats.npz").unlink()
+    with pytest.raises(CheckpointError, match=r"obs_stats\.npz does not exist"):
+        Policy(old)
+
+
+def test_which_must_be_model_or_last_for_a_run_and_for_an_export(raw_obs_run):
+    from ohra.learn.rl.evaluate import Policy
+
+    run, _, export = raw_obs_run
+    for folder in (run, export):
+        with pytest.raises(CheckpointError, match=r"which must be 'model' or 'last', got 'best'"):
+            Policy(folder, which="best")
+    assert Policy(export, which="last")._policy is not None  # an export has one policy: either name means it
+
+
+@pytest.mark.parametrize("kw, name", [({"every": 0}, "every"), ({"every": -2}, "every"), ({"every": 1.5}, "every"),
+                                      ({"strip_frames": 0}, "strip_frames")])
+def test_record_episode_needs_every_and_strip_frames_of_at_least_one(raw_obs_run, tmp_path, monkeypatch, kw, name):
+    from ohra.learn.rl.evaluate import record_episode
+    from ohra.sim.rotation.config import RotationConfigError
+
+    run, cache, _ = raw_obs_run
+    monkeypatch.setenv("OHRA_CACHE_DIR", str(cache))
+    with pytest.raises(RotationConfigError, match=rf"{name} must be an integer >= 1, got {list(kw.values())[0]}"):
+        record_episode(run, tmp_path / "episode", seed=10, size=32, **kw)
+    assert not (tmp_path / "episode").exists()
+
+
+@pytest.mark.parametrize("text, problem", [
+    ('{"env": {', r"config\.json is not valid JSON"),
+    ("[1, 2]", r"config\.json: expected a JSON object with 'env' and 'ppo', got list"),
+    ('{"ppo": {}}', r"config\.json: no 'env' settings"),
+    ('{"env": {}}', r"config\.json: no 'ppo' settings"),
+    ('{"env": {}, "ppo": 3}', r"config\.json: 'ppo' must be a JSON object of settings, got int"),
+])
+def test_a_malformed_run_config_is_a_checkpoint_error_naming_the_file_on_load_and_on_resume(tmp_path, text, problem):
+    from ohra.learn.rl.train import _check_resume, load_run
+
+    (tmp_path / "config.json").write_text(text)
+    with pytest.raises(CheckpointError, match=problem):
+        load_run(tmp_path)
+    with pytest.raises(CheckpointError, match=problem):
+        _check_resume(tmp_path, RotationConfig(), PPOSettings())

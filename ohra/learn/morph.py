@@ -24,7 +24,7 @@ from typing import Any, Sequence, Union
 import numpy as np
 import torch
 
-from ohra.errors import CheckpointError
+from ohra.errors import CheckpointError, ParamsError
 from ohra.canonical.params import BaseParams, ExtendedParams
 from ohra.canonical.urdfgen import render
 from ohra.learn.encoding import LatentError, Standardizer, as_base
@@ -109,10 +109,12 @@ class VAEBundle:
         Raises:
             HandNotFoundError: an unknown name or a missing file; a name with no base form (a LEAP
                 variant, an extended-only hand).
-            ParamsError: extended params with no base form.
+            ParamsError: extended params with no base form; an empty sequence.
         """
         single = isinstance(hands, (str, Path, BaseParams, ExtendedParams))
         items = [hands] if single else list(hands)
+        if not items:
+            raise ParamsError("encode: no hands given (expected a hand or a non-empty sequence of hands)")
         x = np.stack([self.encoding.encode_vectors(resolve_hand(h).to_vector()) for h in items])
         mu, logvar = self.encode_encodings(x)
         return (mu[0], logvar[0]) if single else (mu, logvar)
@@ -349,7 +351,8 @@ def decode(z: Any, vae: VAEBundle | None = None, limits: Any = None) -> BasePara
 
 
 def interpolate(hand_a: HandLike, hand_b: HandLike, n: int = 8, vae: VAEBundle | None = None,
-                spacing: str = "arc") -> Interpolation:
-    """Decoded hands (params + URDF texts) along the latent line from ``hand_a`` to ``hand_b``
-    (``spacing`` as in :meth:`VAEBundle.interpolate`)."""
+                spacing: str = "geodesic") -> Interpolation:
+    """Decoded hands (params + URDF texts) from ``hand_a`` to ``hand_b``: :meth:`VAEBundle.interpolate`
+    of ``vae`` (default the shipped model), with the same default ``spacing``, ``"geodesic"`` (a bent
+    latent path of short fingertip travel); ``"arc"`` or ``"even"`` for the straight latent line."""
     return (vae or load_vae()).interpolate(hand_a, hand_b, n, spacing)

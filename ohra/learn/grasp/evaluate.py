@@ -136,6 +136,17 @@ def pair_seed(seed: int, hand: str, object_hash: str) -> int:
     return int(rng.integers(2**62))
 
 
+def hand_label(hand: HandLike, params: Any) -> str:
+    """The name an evaluated hand goes by in :class:`PairResult` (and so :meth:`GraspEvalReport.per_hand`,
+    the JSON report and :func:`pair_seed`): a name or path as given (a :class:`~pathlib.Path` as its
+    string), params by content, :func:`~ohra.learn.grasp.condition.hand_key` (as ``meta["condition_hand"]``
+    names them): different hands never share a label, and a hand's label does not depend on its place in
+    the list."""
+    if isinstance(hand, (str, Path)):
+        return str(hand)
+    return hand_key(params)
+
+
 def check_unseen(model: GraspModel, objects: Sequence[Any]) -> None:
     """Refuse objects the model was trained on (by name or mesh hash)."""
     train = model.meta.get("train_objects", {})
@@ -160,7 +171,8 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
             ``original=True`` or ``inertials="original"``.
         objects: objects as :func:`~ohra.learn.grasp.model.resolve_object` takes them; unseen in training.
         n: grasps per pair, >= 1, each with its own uniformly random wrist rotation.
-        seed: base seed; each pair's seed is :func:`pair_seed` of it, the hand name and the mesh hash.
+        seed: base seed; each pair's seed is :func:`pair_seed` of it, the hand's label
+            (:func:`hand_label`: its name or path, or for params their content hash) and the mesh hash.
         original: replay the grasps on the hand's original URDF through its action map.
         workers: simulation processes per pair (:meth:`ohra.sim.GraspEvaluator.evaluate`).
         protocol: a :class:`ohra.sim.Protocol`; None for the default.
@@ -177,15 +189,16 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
             shapes do from what the rest of it does.
 
     Returns:
-        :class:`GraspEvalReport`: one :class:`PairResult` per (hand, object), hand-major, each with the
+        :class:`GraspEvalReport`: one :class:`PairResult` per (hand, object), hand-major, labelled by
+        :func:`hand_label`, each with the
         sampled grasps (n, 31) (palm frame in the object mesh frame [m]; joints [rad]), their success
         (n,), timings [s] and diversity; ``meta`` holds the settings and the model's metadata.
 
     Raises:
         GraspError: ``n`` not a positive integer; no hands or no objects; an unknown ``inertials`` or
             ``collisions``; ``collisions="canonical"`` without ``original``; ``original`` or
-            ``inertials="original"`` with a hand that is not a registered name; ``workers < 1`` (only
-            when the first pair is simulated).
+            ``inertials="original"`` with a hand that is not a registered name; ``workers`` not an
+            integer >= 1.
         ObjectError: an object cannot be resolved to one object.
         DatasetError: an object is in the model's training set (by name or mesh hash) and not
             ``allow_seen``.
@@ -201,6 +214,8 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
         raise GraspError(f"n must be a positive integer, got {n!r}")
     if not hands or not objects:
         raise GraspError("evaluation needs at least one hand and one object")
+    if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1:
+        raise GraspError(f"workers must be an integer >= 1, got {workers!r}")
     if inertials not in INERTIALS:
         raise GraspError(f"inertials must be one of {INERTIALS}, got {inertials!r}")
     if collisions not in COLLISIONS:
@@ -230,10 +245,9 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
         except ParamsError as exc:
             who = hand if condition_hand is None else condition_hand
             raise ParamsError(f"hand {str(who) if isinstance(who, (str, Path)) else type(who).__name__!r}: {exc}") from None
-        resolved.append((hand, params))
+        resolved.append((hand_label(hand, params), params))
     pairs = []
-    for hand, params in resolved:
-        name = hand if isinstance(hand, str) else getattr(hand, "name", "hand")
+    for name, params in resolved:
         movable = np.asarray(params.movable_joints)
         hybrid = None
         if original and collisions == "canonical":  # one fit per hand, shared by its objects
@@ -268,4 +282,5 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
     return GraspEvalReport(pairs, meta)
 
 
-__all__ = ["COLLISIONS", "evaluate_model", "GraspEvalReport", "PairResult", "diversity", "pair_seed", "check_unseen"]
+__all__ = ["COLLISIONS", "evaluate_model", "GraspEvalReport", "PairResult", "diversity", "hand_label", "pair_seed",
+           "check_unseen"]

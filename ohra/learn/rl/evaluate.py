@@ -13,13 +13,16 @@ from __future__ import annotations
 
 import json
 import os
+import zipfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ohra.errors import CheckpointError
-from ohra.sim.rotation.config import RotationConfig
+from ohra.sim.rotation.config import RotationConfig, RotationConfigError
+
+WHICH = ("model", "last")  # a run's final policy, or its last checkpoint
 
 
 @dataclass
@@ -111,19 +114,29 @@ class Policy:
 
     ``run_dir`` is a training run (``model.zip`` + ``vecnormalize.pkl``, or with ``which="last"`` the
     last checkpoint) or an exported policy (:func:`export_policy`: ``policy.pth`` + ``obs_stats.npz``,
-    no optimizer state, no pickles). ``grasps`` holds the starting states shipped with an export.
+    no optimizer state, no pickles). ``grasps`` holds the starting states shipped with an export. A run
+    trained without observation normalisation (no ``vecnormalize.pkl``, or its ``norm_obs`` off; an export
+    whose ``obs_stats.npz`` says ``norm_obs=False``) gets the raw observations.
 
     A recurrent policy (``PPOSettings.policy="lstm"``) carries its LSTM state from call to call;
     :meth:`reset` clears it at the start of each episode (:func:`run_episode` does).
+
+    Raises:
+        CheckpointError: ``which`` not ``"model"`` or ``"last"`` (for an export too, where either means
+            the exported policy); no ``config.json``; no trained policy file; an export's
+            ``obs_stats.npz`` missing, unreadable or without its statistics.
+        RotationConfigError, RLConfigError: an unknown or invalid setting in the run's ``config.json``.
     """
 
     def __init__(self, run_dir: str | Path, which: str = "model"):
         from ohra.learn.rl.train import load_run
 
+        if which not in WHICH:
+            raise CheckpointError(f"which must be 'model' or 'last', got {which!r}")
         run = Path(run_dir)
         self.env_cfg, self.ppo = load_run(run)
         self.grasps = None
-        self._mean = self._var = None
+        self._mean = self._var = self._clip = self._eps = None  # no observation normalisation unless set below
         self.reset()
         if (run / "policy.pth").is_file():
             from ohra.sim.rotation.grasps import GraspSet
@@ -134,16 +147,12 @@ class Policy:
                 from stable_baselines3.common.policies import ActorCriticPolicy as policy_class
 
             self._policy = policy_class.load(str(run / "policy.pth"), device="cpu")
-            st = np.load(run / "obs_stats.npz")
-            self._mean, self._var, self._clip, self._eps = st["mean"], st["var"], float(st["clip"]), float(st["eps"])
+            self._read_obs_stats(run / "obs_stats.npz")
             if (run / "grasps.npz").is_file():
                 self.grasps = GraspSet.load(run / "grasps.npz")
             return
-        paths = {"model": (run / "model.zip", run / "vecnormalize.pkl"),
-                 "last": (run / "checkpoints" / "last.zip", run / "checkpoints" / "last_vecnormalize.pkl")}
-        if which not in paths:
-            raise CheckpointError(f"which must be 'model' or 'last', got {which!r}")
-        zip_path, stats = paths[which]
+        zip_path, stats = {"model": (run / "model.zip", run / "vecnormalize.pkl"),
+                           "last": (run / "checkpoints" / "last.zip", run / "checkpoints" / "last_vecnormalize.pkl")}[which]
         if not zip_path.is_file():
             raise CheckpointError(f"no trained policy at {zip_path}")
         from ohra.learn.rl.train import ppo_class
@@ -156,6 +165,25 @@ class Policy:
                 vn = pickle.load(fh)
             if vn.norm_obs:
                 self._mean, self._var, self._clip, self._eps = vn.obs_rms.mean, vn.obs_rms.var, vn.clip_obs, vn.epsilon
+
+    def _read_obs_stats(self, path: Path) -> None:
+        """An export's observation statistics: ``norm_obs`` (False: the policy sees raw observations;
+        exports made before the flag have none and always hold statistics) and ``mean``, ``var``,
+        ``clip``, ``eps``."""
+        if not path.is_file():
+            raise CheckpointError(f"{path} does not exist: an exported policy needs its observation statistics "
+                                  "(export it again with export_policy)")
+        try:
+            with np.load(path) as st:
+                stats = {k: st[k] for k in st.files}
+        except (OSError, ValueError, zipfile.BadZipFile) as exc:
+            raise CheckpointError(f"{path} is not a readable observation statistics file: {exc}") from None
+        if not bool(stats.get("norm_obs", True)):
+            return
+        missing = [k for k in ("mean", "var", "clip", "eps") if k not in stats]
+        if missing:
+            raise CheckpointError(f"{path}: observation statistics {missing} are missing (has {sorted(stats)})")
+        self._mean, self._var, self._clip, self._eps = stats["mean"], stats["var"], float(stats["clip"]), float(stats["eps"])
 
     @property
     def recurrent(self) -> bool:
@@ -195,8 +223,9 @@ class Policy:
 
 def export_policy(run_dir: str | Path, out_dir: str | Path, which: str = "model") -> Path:
     """A small, pickle-free copy of a run for committing: ``config.json``, ``policy.pth`` (actor and
-    critic weights, no optimizer), ``obs_stats.npz``, the starting states ``grasps.npz``, and the run's
-    ``progress.csv`` / ``eval.json`` when present.
+    critic weights, no optimizer), ``obs_stats.npz`` (``norm_obs`` and, when it is true, the observation
+    ``mean``, ``var``, ``clip`` and ``eps``; false for a run trained without observation normalisation),
+    the starting states ``grasps.npz``, and the run's ``progress.csv`` / ``eval.json`` when present.
 
     Args:
         run_dir: a training run (or an exported policy).
@@ -220,7 +249,10 @@ def export_policy(run_dir: str | Path, out_dir: str | Path, which: str = "model"
     pol = Policy(run, which)
     out.mkdir(parents=True, exist_ok=True)
     pol._policy.save(str(out / "policy.pth"))
-    np.savez(out / "obs_stats.npz", mean=pol._mean, var=pol._var, clip=pol._clip, eps=pol._eps)
+    if pol._mean is None:  # trained without observation normalisation: the policy reads raw observations
+        np.savez(out / "obs_stats.npz", norm_obs=False)
+    else:
+        np.savez(out / "obs_stats.npz", norm_obs=True, mean=pol._mean, var=pol._var, clip=pol._clip, eps=pol._eps)
     load_or_generate(resolve(pol.env_cfg)).save(out / "grasps.npz")
     for name in ("config.json", "progress.csv", "eval.json"):
         if (run / name).is_file():
@@ -381,7 +413,7 @@ def record_episode(run_dir: str | Path, out_dir: str | Path, seed: int = 1000, e
         out_dir: the output folder.
         seed: the episode's seed.
         every: render every ``every``-th control step (>= 1).
-        strip_frames: frames in the strip (at most).
+        strip_frames: frames in the strip (at most; >= 1).
         which: ``"model"`` or ``"last"`` (see :func:`evaluate_run`).
         size: frame width and height [px].
         urdf: on the hand's other URDF (:func:`on_urdf`).
@@ -393,7 +425,11 @@ def record_episode(run_dir: str | Path, out_dir: str | Path, seed: int = 1000, e
     Raises:
         CheckpointError, RotationConfigError, RLConfigError: as in :func:`evaluate_run`, less the
             shipped-policy write check.
+        RotationConfigError: ``every`` or ``strip_frames`` not an integer >= 1 (checked before the policy loads).
     """
+    for name, value in (("every", every), ("strip_frames", strip_frames)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+            raise RotationConfigError(f"record_episode: {name} must be an integer >= 1, got {value!r}")
     from ohra.sim.render import write_png
     from ohra.sim.rotation.render import render, strip, write_gif
 

@@ -212,7 +212,7 @@ def _check_resume(run_dir: Path, env_cfg: RotationConfig, ppo: PPOSettings) -> N
     """Refuse a resume whose environment or (non-budget) PPO settings differ from the run's. The saved
     config is read through the dataclasses, so a setting added to ohra after the run was made counts
     at the value the run had (``SAVED_BEFORE``) or its default instead of failing the comparison."""
-    saved = json.loads((run_dir / "config.json").read_text())
+    saved = read_config(run_dir)
     theirs = _plain(RotationConfig.from_saved(saved["env"], f"{run_dir}/config.json").to_dict())
     mine = _plain(env_cfg.to_dict())
     diff = sorted(k for k in set(theirs) | set(mine) if theirs.get(k) != mine.get(k))
@@ -249,6 +249,8 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
     Raises:
         RLConfigError: nothing to resume; a fresh run into a folder that holds one; on resume, an
             environment config or non-budget PPO setting that differs from the run's.
+        CheckpointError: on resume, the run's ``config.json`` missing, not valid JSON, or without its
+            ``env`` or ``ppo`` object.
         FolderInUseError: another process is training into ``run_dir``.
         MissingDependencyError: ``tensorboard`` without the tensorboard package; ``ppo.policy="lstm"``
             without sb3-contrib.
@@ -348,6 +350,35 @@ def _write_config(run_dir: Path, env_cfg: RotationConfig, ppo: PPOSettings) -> N
     os.replace(tmp, run_dir / "config.json")
 
 
+def read_config(run_dir: str | Path) -> dict:
+    """The parsed ``run_dir/config.json`` of a run or exported policy (a JSON object with ``env`` and
+    ``ppo`` objects; not yet checked setting by setting).
+
+    Raises:
+        CheckpointError: the file does not exist, is not valid JSON, is not a JSON object, or lacks the
+            ``env`` or ``ppo`` object (the file and the problem named).
+    """
+    from ohra.errors import CheckpointError
+
+    path = Path(run_dir) / "config.json"
+    if not path.is_file():
+        raise CheckpointError(f"{run_dir} is not a rotation run or exported policy: {path} does not exist")
+    try:
+        d = json.loads(path.read_text())
+    except UnicodeDecodeError as exc:
+        raise CheckpointError(f"{path} is not a text file: {exc}") from None
+    except json.JSONDecodeError as exc:
+        raise CheckpointError(f"{path} is not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}") from None
+    if not isinstance(d, dict):
+        raise CheckpointError(f"{path}: expected a JSON object with 'env' and 'ppo', got {type(d).__name__}")
+    for key in ("env", "ppo"):
+        if key not in d:
+            raise CheckpointError(f"{path}: no {key!r} settings (keys: {sorted(d)}); a run's config.json has 'env' and 'ppo'")
+        if not isinstance(d[key], dict):
+            raise CheckpointError(f"{path}: {key!r} must be a JSON object of settings, got {type(d[key]).__name__}")
+    return d
+
+
 def load_run(run_dir: str | Path) -> tuple[RotationConfig, PPOSettings]:
     """The env config and PPO settings a run was trained with.
 
@@ -359,16 +390,12 @@ def load_run(run_dir: str | Path) -> tuple[RotationConfig, PPOSettings]:
         run had (:data:`ohra.sim.rotation.config.SAVED_BEFORE`) or their default.
 
     Raises:
-        CheckpointError: ``run_dir/config.json`` does not exist.
+        CheckpointError: ``run_dir/config.json`` does not exist, is not valid JSON, or has no ``env`` or
+            ``ppo`` object (:func:`read_config`).
         RotationConfigError: an unknown or invalid environment setting in it.
         RLConfigError: an unknown or invalid PPO setting in it.
     """
-    from ohra.errors import CheckpointError
-
-    path = Path(run_dir) / "config.json"
-    if not path.is_file():
-        raise CheckpointError(f"{run_dir} is not a rotation run or exported policy: {path} does not exist")
-    d = json.loads(path.read_text())
+    d = read_config(run_dir)
     return RotationConfig.from_saved(d["env"], f"{run_dir}/config.json"), PPOSettings.from_dict(d["ppo"])
 
 
