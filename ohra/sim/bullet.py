@@ -109,3 +109,20 @@ def load_hand(hand: "SimHand", urdf: str, flags: int, friction: float, client: i
             pb.changeDynamics(b, j, jointDamping=0.0, physicsClientId=client)
     return LoadedHand(b, links, [by_name[n] for n in hand.joints], mimic,
                       {j: hand.link_finger.get(name, -1) for j, name in links})
+
+
+def convex_pieces_shape(pieces: list, client: int) -> int:
+    """One PyBullet collision shape of convex trimesh pieces (their vertices in the body's link frame [m])."""
+    if len(pieces) == 1:
+        return pb.createCollisionShape(pb.GEOM_MESH, vertices=[list(map(float, v)) for v in pieces[0].vertices],
+                                       physicsClientId=client)
+    # createCollisionShapeArray takes meshes only as files: one temporary OBJ per convex piece
+    n = len(pieces)
+    with tempfile.TemporaryDirectory() as tmp:
+        files = []
+        for k, piece in enumerate(pieces):
+            files.append(str(Path(tmp) / f"piece{k}.obj"))
+            piece.export(files[-1])
+        return pb.createCollisionShapeArray([pb.GEOM_MESH] * n, fileNames=files, meshScales=[[1, 1, 1]] * n,
+                                            collisionFramePositions=[[0, 0, 0]] * n,
+                                            collisionFrameOrientations=[[0, 0, 0, 1]] * n, physicsClientId=client)

@@ -16,14 +16,12 @@ other fingers, never with its own finger or the palm; the palm collides with the
 from __future__ import annotations
 
 import math
-import tempfile
 import xml.etree.ElementTree as ET
-from pathlib import Path
 
 import numpy as np
 import pybullet as pb
 
-from ohra.sim.bullet import load_hand
+from ohra.sim.bullet import convex_pieces_shape, load_hand
 from ohra.objects.model import ObjectModel
 from ohra.rotations import matrix_to_quat, quat_to_matrix
 from ohra.sim.hands import SimHand
@@ -193,21 +191,8 @@ class World:
                 lengths=[p["size"][1] if p["type"] in ("cylinder", "capsule") else 0.0 for p in prims],
                 collisionFramePositions=[list(p["pos"]) for p in prims],
                 collisionFrameOrientations=[[0, 0, 0, 1]] * len(prims), physicsClientId=c)
-        elif len(pieces) == 1:
-            self.obj_shape = pb.createCollisionShape(pb.GEOM_MESH, vertices=np.asarray(pieces[0].vertices).tolist(), physicsClientId=c)
         else:
-            # createCollisionShapeArray takes meshes only as files: one temporary OBJ per convex piece
-            n = len(pieces)
-            with tempfile.TemporaryDirectory() as tmp:
-                files = []
-                for k, piece in enumerate(pieces):
-                    f = Path(tmp) / f"piece{k}.obj"
-                    piece.export(str(f))
-                    files.append(str(f))
-                self.obj_shape = pb.createCollisionShapeArray(
-                    [pb.GEOM_MESH] * n, fileNames=files, meshScales=[[1, 1, 1]] * n,
-                    collisionFramePositions=[[0, 0, 0]] * n, collisionFrameOrientations=[[0, 0, 0, 1]] * n,
-                    physicsClientId=c)
+            self.obj_shape = convex_pieces_shape(pieces, c)
         self.mass = o.volume * prot.density
         I = np.asarray(o.inertia, dtype=float) / o.density * prot.density  # about the COM, mesh axes
         w, V = np.linalg.eigh(0.5 * (I + I.T))

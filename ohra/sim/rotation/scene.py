@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import pybullet as pb
 
-from ohra.sim.bullet import load_hand
+from ohra.sim.bullet import convex_pieces_shape, load_hand
 from ohra.sim.hands import SimHand
 from ohra.sim.rotation.config import RotationConfig
 from ohra.sim.rotation.objects import ObjectShape
@@ -184,28 +184,11 @@ class RotationScene:
 
     def _make_mesh_shape(self) -> None:
         """Collision shape of an object without primitives: its convex pieces, link frame at the centre of mass."""
-        import tempfile
-        from pathlib import Path
-
         c, o = self.client, self.obj
         pieces = [p.copy() for p in o.pieces]
         for p in pieces:
             p.apply_translation(-o.com)
-        if len(pieces) == 1:
-            self.obj_shape = pb.createCollisionShape(pb.GEOM_MESH, vertices=np.asarray(pieces[0].vertices).tolist(),
-                                                     physicsClientId=c)
-        else:
-            # createCollisionShapeArray takes meshes only as files: one temporary OBJ per convex piece
-            with tempfile.TemporaryDirectory() as tmp:
-                files = []
-                for k, p in enumerate(pieces):
-                    files.append(str(Path(tmp) / f"piece{k}.obj"))
-                    p.export(files[-1])
-                n = len(files)
-                self.obj_shape = pb.createCollisionShapeArray(
-                    [pb.GEOM_MESH] * n, fileNames=files, meshScales=[[1, 1, 1]] * n,
-                    collisionFramePositions=[[0, 0, 0]] * n, collisionFrameOrientations=[[0, 0, 0, 1]] * n,
-                    physicsClientId=c)
+        self.obj_shape = convex_pieces_shape(pieces, c)
         self.obj_visual = -1
         if self.visual:
             m = o.mesh
