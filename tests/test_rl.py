@@ -222,6 +222,36 @@ def test_a_recurrent_policy_without_a_critic_lstm_trains_and_reloads_as_such(tin
         assert pol._policy.lstm_critic is None and pol._policy.lstm_actor.hidden_size == 8
 
 
+def test_a_run_started_in_the_folder_meanwhile_is_not_overwritten_and_torch_threads_are_restored(tmp_path, monkeypatch):
+    """The "already holds a run" check is repeated under the folder lock: another process may have
+    started a run there while this one generated its starting states. torch's thread count is the
+    caller's again afterwards, however training ends."""
+    import torch
+
+    import ohra.sim.rotation.grasps as grasps
+
+    monkeypatch.setenv("OHRA_CACHE_DIR", str(tmp_path / "cache"))
+    run = tmp_path / "run"
+
+    def another_run_starts(*args, **kwargs):
+        run.mkdir(parents=True, exist_ok=True)
+        (run / "config.json").write_text("{}")
+
+    monkeypatch.setattr(grasps, "load_or_generate", another_run_starts)
+    before = torch.get_num_threads()
+    want = 2 if before != 2 else 1
+    torch.set_num_threads(want)
+    try:
+        with pytest.raises(RLConfigError, match="already holds a run"):
+            train_rotation(RotationConfig(grasp_count=2, episode_steps=24),
+                           PPOSettings(total_steps=24, n_envs=1, n_steps=24, batch_size=24, n_epochs=1, net_arch=(16, 16),
+                                       checkpoint_every=24, threads=3 if want != 3 else 4), run)
+        assert torch.get_num_threads() == want
+    finally:
+        torch.set_num_threads(before)
+    assert (run / "config.json").read_text() == "{}"
+
+
 # -- runs trained without observation normalisation, exports, bad arguments and bad config files -----
 @pytest.fixture(scope="module")
 def raw_obs_run(tmp_path_factory):

@@ -20,10 +20,11 @@ import csv
 import json
 import os
 import time
+from contextlib import contextmanager
 from dataclasses import replace
 from functools import lru_cache, partial
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 import numpy as np
 
@@ -264,16 +265,13 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
 
     run_dir = Path(run_dir)
     last = run_dir / "checkpoints" / "last.zip"
-    if resume and not last.is_file():
-        raise RLConfigError(f"nothing to resume: {last} does not exist")
-    if not resume and (run_dir / "config.json").is_file():
-        raise RLConfigError(f"{run_dir} already holds a run; pass resume=True (--resume) or choose another folder")
-    torch.set_num_threads(ppo.threads)
+    _check_start(run_dir, last, resume)  # before the minutes of starting-state generation ...
     tb_dir = str(run_dir / "tensorboard") if tensorboard else None
     if tensorboard:
         _require_tensorboard()
     load_or_generate(resolve(env_cfg), progress=True if verbose > 0 else None)  # once here, not in every worker
-    with folder_lock(run_dir, "rotation training run"):  # one writer per run folder
+    with folder_lock(run_dir, "rotation training run"), _torch_threads(ppo.threads):  # one writer per run folder
+        _check_start(run_dir, last, resume)  # ... and again under the lock: another run may have started meanwhile
         if resume:
             _check_resume(run_dir, env_cfg, ppo)
         else:
@@ -301,6 +299,27 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
         finally:
             venv.close()
         return run_dir / "model.zip"
+
+
+def _check_start(run_dir: Path, last: Path, resume: bool) -> None:
+    if resume and not last.is_file():
+        raise RLConfigError(f"nothing to resume: {last} does not exist")
+    if not resume and (run_dir / "config.json").is_file():
+        raise RLConfigError(f"{run_dir} already holds a run; pass resume=True (--resume) or choose another folder")
+
+
+@contextmanager
+def _torch_threads(n: int) -> Iterator[None]:
+    """torch's intra-op thread count set to ``n`` while training, restored afterwards (a library call
+    should not change the caller's torch settings)."""
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(n)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
 
 
 def _require_tensorboard() -> None:
