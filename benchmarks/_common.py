@@ -43,6 +43,18 @@ def machine() -> dict[str, Any]:
     return {"cpu": platform.processor() or platform.machine(), "cores": os.cpu_count(), "python": platform.python_version()}
 
 
+def read_results(names: list[str], script: str) -> dict[str, dict[str, Any]]:
+    """``name -> parsed benchmarks/results/NAME.json`` for each name; a missing file ends the script with
+    one line naming it (``script``: the reading script, for the message)."""
+    out = {}
+    for name in names:
+        path = RESULTS / f"{name}.json"
+        if not path.is_file():
+            raise SystemExit(f"{script}: no results {path}")
+        out[name] = json.loads(path.read_text())
+    return out
+
+
 def write_results(name: str, data: dict[str, Any], table: str) -> None:
     """Write ``results/<name>.json`` and ``results/<name>.md``."""
     RESULTS.mkdir(parents=True, exist_ok=True)

@@ -20,14 +20,13 @@ runs reached), which compares the URDFs per step rather than per wall minute.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import RESULTS, write_results  # noqa: E402
+from _common import RESULTS, read_results, write_results  # noqa: E402
 
 TARGET = 0.10  # issue 15: canonical within 10 % of original on each metric
 WINDOW = 200_000  # PPO steps of training episodes averaged for the per-step comparison
@@ -103,12 +102,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("results", nargs="+", help="results names of rotation_table3.py runs (benchmarks/results/NAME.json)")
     ap.add_argument("--name", default="rotation_seeds")
     args = ap.parse_args(argv)
-    results = {}
-    for name in args.results:
-        path = RESULTS / f"{name}.json"
-        if not path.is_file():
-            raise SystemExit(f"rotation_seeds: no results {path}")
-        results[name] = json.loads(path.read_text())
+    results = read_results(args.results, "rotation_seeds")
     episodes = {(r["episodes"], r["seed"]) for r in results.values()}
     if len(episodes) != 1:
         raise SystemExit(f"rotation_seeds: the results were evaluated on different episodes (episodes, first seed): {sorted(episodes)}")

@@ -13,12 +13,11 @@ all-data successes) with a 95 % interval from the object-cluster bootstrap over 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import RESULTS, write_results  # noqa: E402
+from _common import read_results, write_results  # noqa: E402
 from _stats import pool, ratio_interval  # noqa: E402
 
 TARGET = 0.95  # issue 14: zero-shot / all-data ratio on each test variant
@@ -34,12 +33,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("results", nargs="+", help="results names of zeroshot_study.py runs (benchmarks/results/NAME.json)")
     ap.add_argument("--name", default="zeroshot_long_seeds")
     args = ap.parse_args(argv)
-    runs = {}
-    for name in args.results:
-        path = RESULTS / f"{name}.json"
-        if not path.is_file():
-            raise SystemExit(f"zeroshot_seeds: no results {path}")
-        runs[name] = json.loads(path.read_text())
+    runs = read_results(args.results, "zeroshot_seeds")
     settings = {k: (r["steps"], r["n"], r["condition_noise"], r.get("refine", False), tuple(r["objects"])) for k, r in runs.items()}
     if len(set(settings.values())) != 1:
         shown = {k: f"steps {s[0]}, n {s[1]}, condition noise {s[2]}, refine {s[3]}, {len(s[4])} objects" for k, s in settings.items()}
