@@ -23,7 +23,7 @@ EPILOG = "Exit codes: 0 ok, 2 bad input. The dataset is a directory with manifes
 
 def configure(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """Add the synth options to ``p`` and make :func:`run` its command; returns ``p``."""
-    p.add_argument("--hand", required=True, help="registered hand, leap_XXXX, a params JSON, or all-leap")
+    p.add_argument("--hand", required=True, help="registered hand, leap_XXXX, a hand spec YAML, a params JSON, or all-leap")
     p.add_argument("--objects", nargs="+", default=["builtin"],
                    help="builtin | builtin:NAME | procedural:FAMILY:SEED | mesh/URDF file | folder (default: builtin)")
     p.add_argument("--scale", type=float, default=None, help="multiply the coordinates of object files (0.001 for millimetre meshes)")
@@ -71,8 +71,9 @@ def _hands(spec: str):
 
     if spec == "all-leap":
         return [(n, get_hand(n)) for n in variant_names() if get_hand(n).num_fingers >= 2]
-    name = Path(spec).stem if spec.endswith(".json") else spec
     ref = resolve_hand(spec)  # its couplings (if any) become equality rows of the NLP
+    # a spec YAML goes by its hand name (the dataset's folder for the hand), a params JSON by its stem
+    name = ref.name if ref.kind == "spec" else Path(spec).stem if spec.endswith(".json") else spec
     return [(name, ref.params, ref.couplings)]
 
 

@@ -117,13 +117,17 @@ class Recipe:
         q = Path(p).expanduser()
         return q if q.is_absolute() or self.source is None else self.source.parent / q
 
-    def resolve_hands(self) -> list[tuple[str, Any]]:
-        """(name, params) of every hand, in recipe order, each once."""
+    def resolve_hands(self, with_couplings: bool = False) -> list[tuple]:
+        """(name, params) of every hand, in recipe order, each once; with ``with_couplings``
+        (name, params, couplings): a coupled hand's couplings (URDF ``<mimic>`` tags, a spec's
+        ``couplings``, a params JSON's ``"couplings"`` key), which synthesis needs as equality rows."""
         out: dict[str, Any] = {}
         for i, h in enumerate(self.hands):
-            for name, params in self._hand(h, f"{self.source or '<recipe>'}: hands[{i}]"):
-                out.setdefault(name, params)
-        return list(out.items())
+            for entry in self._hand(h, f"{self.source or '<recipe>'}: hands[{i}]"):
+                out.setdefault(entry[0], entry)
+        if with_couplings:
+            return [(n, e[1], tuple(e[2]) if len(e) > 2 else _couplings(n)) for n, e in out.items()]
+        return [(n, e[1]) for n, e in out.items()]
 
     def _hand(self, h: Any, where: str) -> list[tuple[str, Any]]:
         from ohra.hands import get_hand, list_hands
@@ -139,8 +143,10 @@ class Recipe:
         if not isinstance(h, dict) or len({"pattern", "params", "spec"} & set(h)) != 1:
             raise RecipeError(f"{where}: a hand is a name, or a mapping with one of 'pattern', 'params', 'spec'")
         if "params" in h:
+            from ohra.canonical.couplings import read_couplings
+
             p = self._path(h["params"])
-            return [(p.stem, get_hand(str(p)))]
+            return [(p.stem, get_hand(str(p)), read_couplings(p))]
         if "spec" in h:
             return [_hand_from_spec(self._path(h["spec"]), h.get("form", "extended"), where)]
         names = [n for n in list_hands(include_variants=True) if fnmatch.fnmatchcase(n, h["pattern"])]
@@ -226,4 +232,12 @@ def _hand_from_spec(path: Path, form: str, where: str) -> tuple[str, Any]:
     if not path.is_file():
         raise RecipeError(f"{where}: hand spec not found: {path}")
     sp = load_spec(path)
-    return sp.name, parse(sp, form, fit_params=True).params
+    res = parse(sp, form, fit_params=True)
+    return sp.name, res.params, res.couplings
+
+
+def _couplings(name: str) -> tuple:
+    """Couplings of a registered hand or LEAP variant (none for a variant)."""
+    from ohra.hands import get_couplings
+
+    return tuple(get_couplings(name))

@@ -314,6 +314,30 @@ def _note_unfollowed(hand: OriginalHand, f: str, fs: FormSpec, moved: list[str],
         warnings.warn(msg, ParseWarning, stacklevel=user_stacklevel())
 
 
+def _note_unmapped_mimics(hand: OriginalHand, fs: FormSpec, palm_link: str, fingers: dict, notes: list[str]) -> None:
+    """Warn about ``<mimic>`` joints inside the hand that drive no slot and move a finger from *below*
+    its last mapped joint (e.g. a palm piece that carries fingers and follows the thumb): the canonical
+    hand holds them at canonical zero. Joints beyond a finger's last mapped joint are noted per finger
+    (:func:`_note_unfollowed`)."""
+    mapped = {sm.name for sm in fs.slots.values()}
+    below = set(hand.descendants(palm_link))
+    beyond: set[str] = set()
+    for fm in fingers.values():
+        beyond.update(hand.descendants(hand.joints[fs.slots[_last_slot(fm.slots)].name].child))
+    for name in hand.mimic_joints:
+        j = hand.joints[name]
+        if name in mapped or j.parent not in below or j.child in beyond:
+            continue
+        moved = set(hand.descendants(j.child))
+        hit = [f for f, fm in fingers.items() if moved & set(fm.seg_links)]
+        if not hit:
+            continue
+        msg = (f"joint {name!r} (mimic of {j.mimic[0]!r}) moves the {', '.join(hit)} finger(s) but drives no slot: the "
+               f"canonical hand holds it at canonical zero, so its motion counts in the errors (map it to a slot to follow it)")
+        notes.append("approximation: " + msg)
+        warnings.warn(msg, ParseWarning, stacklevel=user_stacklevel())
+
+
 BEND_NOTE = np.radians(15.0)  # noted above this (joint origins sit off the finger axis by a few degrees)
 
 
@@ -379,6 +403,7 @@ def measure(hand: OriginalHand, spec: HandSpec, form: str) -> Measurement:
         fm = _measure_finger(hand, spec, fs, f, T_links, notes)
         if fm is not None:
             fingers[f] = fm
+    _note_unmapped_mimics(hand, fs, palm_link, fingers, notes)
     tip_links = {f: fm.distal_links for f, fm in fingers.items()}
     rad_known = [fm.radius for fm in fingers.values() if fm.radius is not None]
     r_guess = float(np.median(rad_known)) if rad_known else 0.01

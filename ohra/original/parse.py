@@ -34,6 +34,42 @@ from ohra.original.urdf import OriginalHand, load_urdf
 Params = BaseParams | ExtendedParams
 
 
+FINGER_GAP = 0.001  # m: how far apart synthesis keeps different fingers (ohra.synth.nlp.NLPSettings.finger_gap)
+
+
+def _separate_fingers(params: Params, am: ActionMap, notes: list[str]) -> Params:
+    """Base form: cap the shared finger radius so that different fingers are at least
+    :data:`FINGER_GAP` apart at rest (canonical zero within the limits, couplings applied).
+
+    The base template's fingers are parallel and share one radius; the fit places their bases for the
+    kinematics alone, so on a hand with closely spaced, splayed fingers (PSYONIC Ability) neighbouring
+    capsules could intersect in every pose and no grasp could ever be synthesised on that hand.
+    """
+    if not isinstance(params, BaseParams):
+        return params
+    import numpy as np
+
+    from ohra.canonical.kinematics import HandModel, _distance
+
+    hm = HandModel.from_params(params)
+    q = np.clip(am.project(np.zeros(22)), hm.lower, hm.upper)
+    objs = [o for o in hm.collision_objects(q) if o[1] >= 0]
+    d = min((_distance(a[2], b[2]) for i, a in enumerate(objs) for b in objs[i + 1:] if a[1] != b[1]), default=np.inf)
+    if d >= FINGER_GAP:
+        return params
+    r_old = float(params.finger_radius)
+    r = np.floor((r_old - (FINGER_GAP - d) / 2.0) * 1e6) / 1e6
+    if r < 0.002:
+        notes.append(f"approximation: neighbouring canonical fingers intersect at rest ({d * 1e3:+.2f} mm apart) and a "
+                     f"radius small enough to separate them would be under 2 mm; check the joint mapping")
+        return params
+    d_params = params.to_dict()
+    d_params["finger_radius"] = float(r)
+    notes.append(f"approximation: finger radius {r_old * 1e3:.2f} -> {r * 1e3:.2f} mm so that neighbouring fingers are "
+                 f"{FINGER_GAP * 1e3:g} mm apart at rest (they were {d * 1e3:+.2f} mm apart: no grasp could be synthesised)")
+    return BaseParams.from_dict(d_params)
+
+
 def apply_overrides(params: Params, spec: HandSpec, form: str) -> Params:
     """``params`` with the spec's overrides for ``form`` applied (validated; errors name the key)."""
     d = params.to_dict()
@@ -126,6 +162,7 @@ def parse(
         params, fr = fit(init, m, spec.fit_samples, spec.fit_seed)
     else:
         params = rounded(init)
+    params = _separate_fingers(params, m.action_map, m.notes)
     params = apply_overrides(params, spec, form)
     notes = list(m.notes) + [f"override {o.key} = {o.value}: {o.reason}" for o in spec.overrides_for(form)]
     notes += [f"coupling: {line}" for line in describe(m.couplings)]

@@ -120,6 +120,10 @@ def finger_object_distance(hand: HandModel, obj: ObjectModel, grasps: np.ndarray
 
 
 def check_hand_for_synthesis(name: str, params: Params) -> None:
+    # the name is the hand's folder in the dataset: a path ("my/hand.yaml", "/abs/x") would write elsewhere
+    if not isinstance(name, str) or name in ("", ".", "..") or "/" in name or "\\" in name:
+        raise OhraError(f"hand name {name!r} cannot name a dataset folder: use a plain name without '/' "
+                        "(a spec YAML's hand is named by its 'name:' key)")
     if params.num_fingers < 2:
         raise OhraError(f"hand {name!r} has {params.num_fingers} finger(s); grasp synthesis needs at least two")
 
