@@ -135,3 +135,180 @@ def test_a_recipe_gives_synthesis_the_couplings_of_its_spec_hands(spec, tmp_path
     assert seen["toy_two_finger"] == (Coupling("index_joint3", "index_joint2", 1.1, 0.0),
                                       Coupling("middle_joint3", "middle_joint2", 1.1, 0.0))
     assert seen["leap_3303"] == ()
+
+
+# -- what `ohra hand` prints for such a hand --------------------------------------------------------
+def _hand_cli(args: list[str], capsys) -> tuple[int, str, str]:
+    from ohra.cli.main import main
+
+    capsys.readouterr()
+    rc = main(["hand", *args])
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+@pytest.mark.parametrize("extra", [[], ["--no-fidelity"]])
+def test_parse_prints_each_coupling_and_approximation_once(spec, tmp_path, capsys, extra):
+    # the notes used to be printed, then the fidelity table repeated their coupling and approximation
+    # lines (and the unmapped 'cup_j' warning came a third time)
+    rc, _, err = _hand_cli(["parse", str(spec), "--extended", "-o", str(tmp_path / "toy.json"), *extra], capsys)
+    assert rc == 0, err
+    lines = err.splitlines()
+    assert [l for l in lines if l.startswith("coupling: index_joint3 = 1.1 * index_joint2")] != []
+    for line in lines:
+        if line.startswith(("coupling: ", "approximation: ")):
+            assert lines.count(line) == 1, line
+    assert len([l for l in lines if "'cup_j'" in l]) == 1
+
+
+def test_parse_table_has_no_empty_surface_column(spec, tmp_path, capsys):
+    # parse skips the (slow) surface distance: the table says so and how to get it, instead of a
+    # column of "-"; --surface computes it as `ohra hand compare` does
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ParseWarning)
+        rc, _, err = _hand_cli(["parse", str(spec), "--extended", "-o", str(tmp_path / "a.json")], capsys)
+    assert rc == 0, err
+    table = err[err.index("toy_two_finger (extended)"):].splitlines()
+    assert "surface" not in table[1] and not any(l.rstrip().endswith("-") for l in table[2:5])
+    assert "surface: not computed; --surface adds it" in err
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ParseWarning)
+        rc, _, err = _hand_cli(["parse", str(spec), "--extended", "--surface", "-o", str(tmp_path / "b.json")], capsys)
+    assert rc == 0, err
+    table = err[err.index("toy_two_finger (extended)"):].splitlines()
+    assert table[1].split() == ["fingertip", "joint", "(axis", "line)", "surface"]
+    hand_row = next(l for l in table if l.startswith("hand "))
+    assert len(hand_row.split()) == 1 + 9 and "not computed" not in err  # mean / p95 / max of three columns
+
+
+def test_info_on_a_spec_names_the_hand_and_lists_its_couplings(spec, capsys):
+    rc, out, err = _hand_cli(["info", str(spec), "--extended"], capsys)
+    assert rc == 0, err
+    assert out.splitlines()[0].startswith("toy_two_finger  form=")  # the spec's name: key, not its path
+    assert "couplings (slot = a * driver + b):" in out
+    assert "  index_joint3 = 1.1 * index_joint2 + 0" in out and "  middle_joint3 = 1.1 * middle_joint2 + 0" in out
+    rc, out, _ = _hand_cli(["info", str(spec), "--extended", "--json"], capsys)
+    import json
+
+    info = json.loads(out)
+    assert info["hand"] == "toy_two_finger"
+    assert [c.split("  (")[0] for c in info["couplings"]] == ["index_joint3 = 1.1 * index_joint2 + 0",
+                                                             "middle_joint3 = 1.1 * middle_joint2 + 0"]
+    rc, out, _ = _hand_cli(["info", "leap_3303"], capsys)  # an uncoupled hand has no couplings block
+    assert rc == 0 and "couplings" not in out
+
+
+@pytest.mark.parametrize("action", ["render", "info", "check", "compare", "show"])
+def test_every_hand_argument_says_it_takes_a_spec_yaml_or_params_json(action):
+    import argparse
+
+    from ohra.cli.main import build_parser
+
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    hand = next(a for a in sub.choices["hand"]._actions if isinstance(a, argparse._SubParsersAction))
+    arg = next(a for a in hand.choices[action]._actions if a.dest in ("hand", "hands"))
+    assert "registered hand" in arg.help and "spec YAML" in arg.help and "params JSON" in arg.help, arg.help
+    assert ("leap_XXXX" in arg.help) == (action != "compare")  # compare needs the original hand
+
+
+def test_extended_params_asked_for_in_base_form_suggest_extended(spec, capsys):
+    # compare's default is the base form; extended params that have none fail in one line, saying what to do
+    from ohra.canonical.couplings import params_json
+    from ohra.canonical.params import ExtendedParams
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ParseWarning)
+        res = parse(spec, "extended", fit_params=False)
+    d = res.params.to_dict()
+    d["finger_radii"][1] = 0.006  # unequal radii: no base form
+    path = spec.with_suffix(".json")  # beside its spec, so compare finds the original
+    path.write_text(params_json(ExtendedParams.from_dict(d), res.couplings))
+    rc, _, err = _hand_cli(["compare", str(path), "--samples", "5", "--no-surface"], capsys)
+    assert rc == 2 and len(err.strip().splitlines()) == 1
+    assert "not representable in base form" in err and "--extended" in err
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ParseWarning)
+        rc, out, err = _hand_cli(["compare", str(path), "--extended", "--samples", "5", "--no-surface"], capsys)
+    assert rc == 0, err
+    assert out.startswith("toy_two_finger (extended)")
+
+
+def test_form_defaults_of_a_spec_are_stated_where_the_user_picks_the_hand(spec, tmp_path):
+    # `synth --hand SPEC.yaml` synthesises on the base form, a recipe's {spec: ...} entry on the extended
+    # form: the behaviour, and the two places that say so (the --hand help, the recipe format)
+    from ohra.canonical.params import BaseParams
+    from ohra.cli.synth import _hands, build_parser
+    from ohra.data import recipe as recipe_mod
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ParseWarning)
+        assert isinstance(_hands(str(spec))[0][1], BaseParams)
+        for entry in ({"spec": str(spec)}, str(spec)):
+            rec = recipe_mod.Recipe.from_dict({"hands": [entry], "objects": ["builtin:sphere"]}, tmp_path / "r.yaml")
+            assert [type(h[1]).__name__ for h in rec.resolve_hands()] == ["ExtendedParams"]
+    help_text = " ".join(next(a for a in build_parser()._actions if a.dest == "hand").help.split())
+    assert "spec YAML is parsed (with the fit) in its BASE form" in help_text
+    assert "{spec: ...} entry defaults to extended" in help_text
+    assert "form defaults to\n" in recipe_mod.__doc__ and "extended (a bare my_hand.yaml too)" in recipe_mod.__doc__
+
+
+# Three fingers 20 mm apart with 8 mm radii; the ring finger hangs off a palm piece 'carrier' that
+# tilts it toward the middle finger (about the palm normal) whenever the index finger flexes, as the
+# Schunk SVH's ring/little carrier follows thumb opposition. The canonical base hand cannot follow it.
+CARRIER_URDF = f"""<?xml version="1.0"?>
+<robot name="toy_carrier">
+  <link name="palm"><collision><origin xyz="0 0 0.045"/><geometry><box size="0.02 0.07 0.09"/></geometry></collision></link>
+  <link name="carrier"/>
+  <joint name="carrier_j" type="revolute"><parent link="palm"/><child link="carrier"/><origin xyz="0 -0.01 0.06"/><axis xyz="1 0 0"/>
+    <limit lower="-1" upper="0"/><mimic joint="index_a" multiplier="-0.5" offset="0"/></joint>
+{FINGER.format(f="index", parent="palm", y=0.02)}
+{FINGER.format(f="middle", parent="palm", y=0.0)}
+{FINGER.format(f="ring", parent="carrier", y=-0.01).replace('xyz="0 -0.01 0.09"', 'xyz="0 -0.01 0.03"')}
+</robot>
+"""
+CARRIER_SPEC = """name: toy_carrier
+urdf: toy_carrier.urdf
+palm_origin: {xyz: [0, 0, 0], rpy: [0, 0, 0]}
+joints: {index_joint2: index_a, index_joint3: index_m, middle_joint2: middle_a, middle_joint3: middle_m,
+         ring_joint2: ring_a, ring_joint3: ring_m}
+forms: {base: {}}
+"""
+
+
+def test_the_base_fit_keeps_finger_bases_apart_when_a_palm_piece_pulls_one_onto_its_neighbour(tmp_path, monkeypatch):
+    # unbounded, the least-squares fit averaged the carrier's sweep into the ring finger's base and moved
+    # it from y = -20 mm onto the middle finger's (+1.9 mm): parallel base fingers intersecting at rest,
+    # on which synthesis rejects every grasp; the unfitted layout was fine
+    monkeypatch.setenv("OHRA_HANDS_ROOT", str(tmp_path / "no_assets_here"))
+    (tmp_path / "toy_carrier.urdf").write_text(CARRIER_URDF)
+    (tmp_path / "toy_carrier.yaml").write_text(CARRIER_SPEC)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ParseWarning)  # the unmapped 'carrier_j'
+        measured = parse(tmp_path / "toy_carrier.yaml", "base", fit_params=False)
+        res = parse(tmp_path / "toy_carrier.yaml", "base", fit_params=True)
+    assert measured.params.finger_xyz[1:4, 1] == pytest.approx([0.02, 0.0, -0.02], abs=1e-6)
+    y = res.params.finger_xyz[1:4, 1]
+    least = 2 * res.params.finger_radius + FINGER_GAP
+    assert res.params.finger_radius == measured.params.finger_radius == pytest.approx(0.008)  # not shrunk instead
+    assert y[0] - y[1] >= least - 1e-6 and y[1] - y[2] >= least - 1e-6
+    assert res.fit.final_rms_mm < res.fit.initial_rms_mm  # still a fit
+    hm = HandModel.from_params(res.params)
+    rest = np.clip(res.action_map.project(np.zeros(22)), hm.lower, hm.upper)
+    assert hm.self_collision_pairs(rest, margin=FINGER_GAP - 1e-5) == []
+    said = [n for n in res.notes if "base fit would move the middle and ring finger bases" in n]
+    assert len(said) == 1 and said[0].startswith("approximation: ") and "kept near its measured place" in said[0]
+
+
+def test_fingers_that_no_radius_can_separate_are_named(tmp_path, monkeypatch):
+    # index and middle 3 mm apart: a radius under 2 mm would be needed; the note says which fingers
+    monkeypatch.setenv("OHRA_HANDS_ROOT", str(tmp_path / "no_assets_here"))
+    urdf = CARRIER_URDF.replace('<origin xyz="0 0.02 0.09"/>', '<origin xyz="0 0.0015 0.09"/>').replace(
+        '<origin xyz="0 0.0 0.09"/>', '<origin xyz="0 -0.0015 0.09"/>')
+    (tmp_path / "toy_carrier.urdf").write_text(urdf)
+    (tmp_path / "toy_carrier.yaml").write_text(CARRIER_SPEC)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ParseWarning)
+        res = parse(tmp_path / "toy_carrier.yaml", "base", fit_params=False)
+    said = [n for n in res.notes if "intersect at rest" in n]
+    assert len(said) == 1 and said[0].startswith("approximation: canonical fingers intersect at rest (index and middle;")
+    assert "no grasp can be synthesised" in said[0]

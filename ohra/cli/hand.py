@@ -4,12 +4,14 @@
     ohra hand render HAND [-o URDF] [--extended]
     ohra hand info HAND [--extended] [--neutral] [--json]
     ohra hand check [HAND ...] [--all]
-    ohra hand parse SPEC.yaml [-o PARAMS.json] [--extended] [--fit] [--no-fidelity]
+    ohra hand parse SPEC.yaml [-o PARAMS.json] [--extended] [--fit] [--no-fidelity] [--surface]
     ohra hand compare HAND [--extended] [--samples N] [--no-surface] [--json] [--html OUT.html]
     ohra hand show HAND [--extended] [--original] [--q Q] [--no-wait]
 
-``HAND`` is a registered hand, a LEAP variant ``leap_XXXX`` or a params JSON file. Plugged into
-:mod:`ohra.cli.main` through :func:`register`.
+``HAND`` is a registered hand, a LEAP variant ``leap_XXXX``, a hand spec YAML (parsed with the fit)
+or a params JSON file (see :func:`ohra.hands.resolve_hand`); ``compare`` and ``show --original`` need
+the original hand, so not a LEAP variant, and a params JSON only with its spec beside it (same stem).
+Plugged into :mod:`ohra.cli.main` through :func:`register`.
 """
 
 from __future__ import annotations
@@ -21,7 +23,10 @@ import warnings
 
 import numpy as np
 
-HAND_HELP = "registered hand, leap_XXXX, or a params JSON file"
+HAND_HELP = "registered hand, leap_XXXX, hand spec YAML (parsed with the fit), or params JSON file"
+# what compare needs: a hand whose original is known
+ORIGINAL_HAND_HELP = ("registered hand, hand spec YAML (parsed with the fit), or params JSON file with its spec "
+                      "YAML beside it (same stem)")
 
 
 def register(sub) -> None:
@@ -49,7 +54,8 @@ def register(sub) -> None:
     p.set_defaults(func=_cmd_info)
 
     p = hsub.add_parser("check", help="render every hand and load it in Pinocchio and PyBullet")
-    p.add_argument("hands", nargs="*", help="hands to check (default: all registered hands and LEAP variants)")
+    p.add_argument("hands", nargs="*", help="hands to check, each a " + HAND_HELP
+                   + " (default: all registered hands and LEAP variants)")
     p.add_argument("--all", action="store_true", help="print every LEAP variant too")
     p.set_defaults(func=_cmd_check)
 
@@ -59,10 +65,12 @@ def register(sub) -> None:
     p.add_argument("--extended", action="store_true", help="extended form (default: base)")
     p.add_argument("--fit", action="store_true", help="refine by least squares against the original kinematics")
     p.add_argument("--no-fidelity", action="store_true", help="skip the fidelity table")
+    p.add_argument("--surface", action="store_true",
+                   help="add the surface distance to the fidelity table (seconds on detailed meshes)")
     p.set_defaults(func=_cmd_parse)
 
-    p = hsub.add_parser("compare", help="canonical vs original fidelity of a registered hand")
-    p.add_argument("hand", help="registered hand")
+    p = hsub.add_parser("compare", help="canonical vs original fidelity of a hand (registered, spec YAML or params JSON)")
+    p.add_argument("hand", help=ORIGINAL_HAND_HELP)
     p.add_argument("--extended", action="store_true", help="use the extended form")
     p.add_argument("--samples", type=int, default=200, help="random configurations (default 200)")
     p.add_argument("--no-surface", action="store_true", help="skip the surface distance (faster)")
@@ -73,7 +81,8 @@ def register(sub) -> None:
     p = hsub.add_parser("show", help="meshcat viewer of a hand (canonical, optionally over the original)")
     p.add_argument("hand", help=HAND_HELP)
     p.add_argument("--extended", action="store_true", help="use the extended form")
-    p.add_argument("--original", action="store_true", help="overlay the original meshes")
+    p.add_argument("--original", action="store_true",
+                   help="overlay the original meshes (a registered hand, spec YAML, or params JSON with its spec beside it)")
     p.add_argument("--q", help="22 canonical joint values (comma or space separated)")
     p.add_argument("--no-wait", action="store_true", help="print the URL and exit")
     p.set_defaults(func=_cmd_show)
@@ -140,14 +149,17 @@ def _cmd_render(args: argparse.Namespace) -> int:
 
 
 def _cmd_info(args: argparse.Namespace) -> int:
+    from ohra.canonical.couplings import describe
     from ohra.canonical.kinematics import HandModel
-    from ohra.canonical.params import FINGERS, JOINT_NAMES
+    from ohra.canonical.params import FINGERS, JOINT_NAMES, BaseParams
+    from ohra.hands.resolve import resolve_hand
 
-    params = _resolve(args.hand, args.extended)
+    ref = resolve_hand(args.hand, "extended" if args.extended else None)  # a spec YAML: its name and couplings
+    params = ref.params.to_extended() if args.extended and isinstance(ref.params, BaseParams) else ref.params
     hm = HandModel.from_params(params)
     tips = hm.fingertips(np.zeros(22) if not args.neutral else hm.neutral())
     info = {
-        "hand": args.hand,
+        "hand": ref.name,
         "form": params.form if params.form == "base" else getattr(params, "template", "extended"),
         "handedness": params.handedness,
         "dof": int(params.dof),
@@ -155,17 +167,24 @@ def _cmd_info(args: argparse.Namespace) -> int:
         "movable_joints": [n for n, m in zip(JOINT_NAMES, params.movable_joints) if m],
         "limits": {n: [float(lo), float(up)] for n, lo, up, m in zip(JOINT_NAMES, hm.lower, hm.upper, params.present_joints) if m},
         "fingertips_q0_m": {f: [round(float(x), 6) for x in tips[i]] for i, f in enumerate(FINGERS) if params.present_fingers[i]},
+        "couplings": describe(ref.couplings),  # "slot = a * driver + b" lines
     }
     if args.json:
         print(json.dumps(info, indent=2))
         return 0
     print(f"{info['hand']}  form={info['form']}  {info['handedness']} hand  dof={info['dof']}  fingers={','.join(info['present_fingers'])}")
+    if ref.kind in ("spec", "params"):
+        print(f"from {args.hand}")
     print("joint limits [rad]:")
     for n, (lo, up) in info["limits"].items():
         print(f"  {n:16s} [{lo:+.4f}, {up:+.4f}]")
     print(f"fingertips at q={'neutral' if args.neutral else '0'} [m, palm frame]:")
     for f, p in info["fingertips_q0_m"].items():
         print(f"  {f:7s} ({p[0]:+.4f}, {p[1]:+.4f}, {p[2]:+.4f})")
+    if info["couplings"]:
+        print("couplings (slot = a * driver + b):")
+        for line in info["couplings"]:
+            print(f"  {line}")
     return 0
 
 
@@ -198,8 +217,13 @@ def _cmd_parse(args: argparse.Namespace) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         res = parse(spec, _form(args), fit_params=args.fit)
+    # each line once: a parse warning that is also a note is printed as the note; the coupling and
+    # approximation notes are the fidelity table's last lines, so with the table they are left to it
+    approx = "approximation: "
+    bodies = {n[len(approx):] if n.startswith(approx) else n for n in res.notes}
     for w in caught:
-        print(f"warning: {w.message}", file=sys.stderr)
+        if str(w.message) not in bodies:
+            print(f"warning: {w.message}", file=sys.stderr)
     from ohra.canonical.couplings import params_json
     from ohra.io import write_text
 
@@ -213,10 +237,14 @@ def _cmd_parse(args: argparse.Namespace) -> int:
         print(f"fit: keypoint rms {res.fit.initial_rms_mm:.2f} -> {res.fit.final_rms_mm:.2f} mm "
               f"({res.fit.samples} configurations, {res.fit.iterations} evaluations)", file=sys.stderr)
     print("measured: palm radius, finger radii, lengths, joint positions/axes, limits from the URDF", file=sys.stderr)
+    rep = None if args.no_fidelity else compare(res, _form(args), samples=100, surface=args.surface)
+    in_table = set() if rep is None else {f"coupling: {c}" for c in rep.couplings} | {approx + a for a in rep.approximations}
     for n in res.notes:
-        print(n, file=sys.stderr)
-    if not args.no_fidelity:
-        print(compare(res, _form(args), samples=100, surface=False).table(), file=sys.stderr)
+        if n not in in_table:
+            print(n, file=sys.stderr)
+    if rep is not None:
+        hint = "--surface adds it (seconds on detailed meshes)"
+        print(rep.table(surface_hint=hint), file=sys.stderr)
     return 0
 
 
@@ -226,7 +254,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the original URDF's mesh warnings are not this command's output
         rep = compare(args.hand, _form(args), samples=args.samples, surface=not args.no_surface)
-    print(json.dumps(rep.to_dict(), indent=2) if args.json else rep.table())
+    print(json.dumps(rep.to_dict(), indent=2) if args.json else rep.table(surface_hint="--no-surface skipped it"))
     if args.html:
         from ohra import viz
 

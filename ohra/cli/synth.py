@@ -23,7 +23,11 @@ EPILOG = "Exit codes: 0 ok, 2 bad input. The dataset is a directory with manifes
 
 def configure(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """Add the synth options to ``p`` and make :func:`run` its command; returns ``p``."""
-    p.add_argument("--hand", required=True, help="registered hand, leap_XXXX, a hand spec YAML, a params JSON, or all-leap")
+    p.add_argument("--hand", required=True,
+                   help="registered hand, leap_XXXX, a hand spec YAML, a params JSON, or all-leap. A spec YAML is parsed "
+                        "(with the fit) in its BASE form (its only form if it has no base); for the extended form write "
+                        "its params first (ohra hand parse SPEC.yaml --extended --fit -o HAND.json) and pass the JSON, "
+                        "which is used in its own form. A dataset recipe's {spec: ...} entry defaults to extended instead")
     p.add_argument("--objects", nargs="+", default=["builtin"],
                    help="builtin | builtin:NAME | procedural:FAMILY:SEED | mesh/URDF file | folder (default: builtin)")
     p.add_argument("--scale", type=float, default=None, help="multiply the coordinates of object files (0.001 for millimetre meshes)")

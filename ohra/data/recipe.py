@@ -8,7 +8,8 @@ A recipe is a YAML mapping (plain values only; unknown keys are errors naming th
       - leap_3333                    # a registered hand or LEAP variant
       - {pattern: "leap_*", digit_sum: [10, 11]}   # glob over hand names; LEAP digit-sum range
       - {params: my_hand.json}       # a params file (or just my_hand.json), named my_hand
-      - {spec: my_hand.yaml, form: extended}       # a hand spec, parsed (and fitted) on load (my_hand.yaml: extended)
+      - {spec: my_hand.yaml, form: base}           # a hand spec, parsed (and fitted) on load; form defaults to
+                                                   # extended (a bare my_hand.yaml too), unlike synth --hand (base)
     objects:
       - builtin                      # all built-ins, or builtin:NAME
       - {path: meshes/mug.obj}       # a folder, a mesh or an object URDF

@@ -104,7 +104,8 @@ def _in_form(params: Params, form: str | None, where: str) -> Params:
         try:
             return params.to_base()
         except ParamsError as exc:
-            raise HandNotFoundError(f"{where}: {exc}") from None
+            raise HandNotFoundError(f"{where}: {exc}; these are extended-form params: ask for the extended form "
+                                    "(--extended on the command line, form='extended' in Python)") from None
     return params
 
 

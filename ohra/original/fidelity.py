@@ -88,18 +88,26 @@ class FidelityReport:
             "couplings": self.couplings,
         }
 
-    def table(self) -> str:
-        """Plain-text table: rows fingers + hand, columns tip / joint / surface mean, p95, max [mm]."""
+    def table(self, surface_hint: str | None = None) -> str:
+        """Plain-text table: rows fingers + hand, columns tip / joint / surface mean, p95, max [mm].
+
+        Without surface errors (``compare(..., surface=False)``) the surface column is left out and a
+        line says so, followed by ``surface_hint`` (how to get them) when given.
+        """
         rows = [f for f in FINGERS if f in self.tips] + ["hand"]
-        lines = [f"{self.hand} ({self.form}), {self.samples} configurations; errors in mm (mean / p95 / max)",
-                 f"{'':8s} {'fingertip':>24s} {'joint (axis line)':>24s} {'surface':>24s}"]
+        with_surface = bool(self.surface)
+        head = f"{'':8s} {'fingertip':>24s} {'joint (axis line)':>24s}" + (f" {'surface':>24s}" if with_surface else "")
+        lines = [f"{self.hand} ({self.form}), {self.samples} configurations; errors in mm (mean / p95 / max)", head]
 
         def cell(d: dict[str, Stats], k: str) -> str:
             s = d.get(k)
             return f"{s.mean:7.2f} {s.p95:7.2f} {s.max:7.2f}" if s is not None and s.n else f"{'-':>23s}"
 
         for r in rows:
-            lines.append(f"{r:8s} {cell(self.tips, r):>24s} {cell(self.joints, r):>24s} {cell(self.surface, r):>24s}")
+            lines.append(f"{r:8s} {cell(self.tips, r):>24s} {cell(self.joints, r):>24s}"
+                         + (f" {cell(self.surface, r):>24s}" if with_surface else ""))
+        if not with_surface:
+            lines.append("surface: not computed" + (f"; {surface_hint}" if surface_hint else ""))
         if self.tips_held is not None:
             lines.append(f"fingertip with the unmapped joints held at their default (as the action map drives the "
                          f"original): {self.tips_held.mean:.2f} / {self.tips_held.p95:.2f} / {self.tips_held.max:.2f}")

@@ -6,11 +6,17 @@ the original ones over seeded random configurations mapped with the ActionMap; c
 >= their diameter. Joint positions are compared as the distance from the canonical joint origin to
 the original joint's axis line (a revolute joint's position along its own axis carries no
 kinematic meaning). The fit is deterministic (seeded sampling, deterministic solver).
+
+Base form: the template's non-thumb fingers are parallel, so two bases closer in y than two radii
+plus :data:`FINGER_GAP` intersect at rest. When the fit would bring measured-apart neighbours that
+close (it averages motion the canonical hand cannot follow, e.g. a palm piece that carries fingers,
+into their bases), the group is refitted with each base y bounded to half the measured slack, and a
+note says so; otherwise the result is exactly the unbounded fit's.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -25,6 +31,7 @@ DECIMALS = 6  # committed numbers: micrometres / microradians
 JOINT_WEIGHT = 0.5  # joint-position residuals relative to fingertip residuals
 ALONG_AXIS_WEIGHT = 0.2
 REG_WEIGHT = 1e-3  # pull toward the measured values (fixes directions the data cannot see)
+FINGER_GAP = 0.001  # m: the gap synthesis keeps between fingers (ohra.synth.nlp.NLPSettings.finger_gap)
 
 
 @dataclass
@@ -35,6 +42,7 @@ class FitResult:
     final_rms_mm: float
     iterations: int
     samples: int
+    notes: list[str] = field(default_factory=list)  # "approximation: ..." lines (bounded finger bases)
 
 
 def _free_mask_base(p: BaseParams) -> tuple[np.ndarray, np.ndarray]:
@@ -124,7 +132,44 @@ def _group_masks(base: bool) -> list[tuple[tuple[str, ...], np.ndarray]]:
     return out
 
 
-def _fit_group(v, free, lb_all, fingers, ok: OriginalKeypoints, qc, present, base: bool):
+_SIDE = ("index", "middle", "ring", "little")
+
+
+def _base_spacing(p: BaseParams) -> list[tuple[str, str, int, int, float, float]]:
+    """Neighbouring non-thumb fingers of the base form whose measured bases are far enough apart:
+    (finger, neighbour, index of its base y, index of the neighbour's, measured y difference, the
+    least allowed |difference|: two finger radii + :data:`FINGER_GAP`).
+
+    The base template's fingers are parallel, so two bases closer than that in y intersect at rest.
+    The little finger counts only without ``little_joint0`` (its base is then in the palm frame).
+    Pairs already closer in the measured layout are left out (the parser caps the radius for them).
+    """
+    links = p.link_presence()
+    side = [f for f in _SIDE if any(links[f]) and not (f == "little" and p.present_joints[17])]
+    least = 2.0 * float(p.finger_radius) + FINGER_GAP
+    out = []
+    for f, g in zip(side, side[1:]):
+        i, k = 8 + 3 * FINGERS.index(f) + 1, 8 + 3 * FINGERS.index(g) + 1
+        d0 = float(p.finger_xyz[FINGERS.index(f), 1] - p.finger_xyz[FINGERS.index(g), 1])
+        if abs(d0) >= least:
+            out.append((f, g, i, k, d0, least))
+    return out
+
+
+def _spacing_bounds(v: np.ndarray, pairs) -> tuple[np.ndarray, np.ndarray]:
+    """Bounds on the base y entries of ``v`` that keep every pair of :func:`_base_spacing` apart: each
+    finger may move toward its neighbour by half the measured slack."""
+    lb, ub = np.full(v.size, -np.inf), np.full(v.size, np.inf)
+    for _, _, i, k, d0, least in pairs:
+        half = 0.5 * (abs(d0) - least)
+        if d0 > 0:  # f on +y of g
+            lb[i], ub[k] = max(lb[i], v[i] - half), min(ub[k], v[k] + half)
+        else:
+            ub[i], lb[k] = min(ub[i], v[i] + half), max(lb[k], v[k] - half)
+    return lb, ub
+
+
+def _fit_group(v, free, lb_all, fingers, ok: OriginalKeypoints, qc, present, base: bool, ub_all=None):
     """Fit the ``free`` entries of ``v`` for ``fingers``; returns (x, sq0, sq1, n_err, nfev)."""
     fidx = [FINGERS.index(f) for f in fingers]
     jmask = np.zeros(22, dtype=bool)
@@ -135,7 +180,8 @@ def _fit_group(v, free, lb_all, fingers, ok: OriginalKeypoints, qc, present, bas
     tmask[fidx] = True
     tmask &= ~np.isnan(ok.tips[0, :, 0])
     lb = lb_all[free]
-    x0 = np.maximum(v[free], lb)
+    ub = np.full_like(lb, np.inf) if ub_all is None else ub_all[free]
+    x0 = np.minimum(np.maximum(v[free], lb), ub)
     ref = v.copy()
 
     def arrays(x):
@@ -156,7 +202,7 @@ def _fit_group(v, free, lb_all, fingers, ok: OriginalKeypoints, qc, present, bas
         return np.concatenate([rt, rj, REG_WEIGHT * (x - x0)])
 
     r0 = residuals(x0)
-    sol = least_squares(residuals, x0, bounds=(lb, np.full_like(lb, np.inf)), method="trf",
+    sol = least_squares(residuals, x0, bounds=(lb, ub), method="trf",
                         max_nfev=300, ftol=1e-9, xtol=1e-9, gtol=1e-9)
     k = x0.size
     n_err = int(tmask.sum() + jmask.sum()) * qc.shape[0]
@@ -171,20 +217,37 @@ def fit(params: Params, m: Measurement, samples: int = 96, seed: int = 0) -> tup
     qc = np.clip(ok.q_canon, params.joint_lowers, params.joint_uppers)
     free_all, lb_all = _free_mask_base(params) if base else _free_mask_ext(params)  # type: ignore[arg-type]
     v = params.to_vector().copy()
+    pairs = _base_spacing(params) if base else []  # type: ignore[arg-type]
     sq0 = sq1 = 0.0
     n_err = nfev = 0
+    notes: list[str] = []
     for fingers, group in _group_masks(base):
         free = free_all & group
         if not free.any():
             continue
         x, s0, s1, ne, nf = _fit_group(v, free, lb_all, fingers, ok, qc, present, base)
+        w = v.copy()
+        w[free] = x
+        # base form: a fit that pulls a finger's base onto its neighbour's (a palm piece the canonical
+        # hand cannot follow, e.g. the Schunk SVH's ring/little carrier) would leave parallel fingers
+        # intersecting at rest: refit with each base kept within half the measured slack of its place
+        close = [(f, g, i, k) for f, g, i, k, d0, least in pairs if free[i] and free[k]
+                 and np.sign(d0) * (w[i] - w[k]) < least - 1e-9]
+        if close:
+            lb_s, ub_s = _spacing_bounds(v, pairs)
+            x, s0, s1, ne, nf2 = _fit_group(v, free, np.maximum(lb_all, lb_s), fingers, ok, qc, present, base, ub_s)
+            nf += nf2
+            for f, g, i, k in close:
+                notes.append(f"approximation: the base fit would move the {f} and {g} finger bases to "
+                             f"y = {w[i] * 1e3:+.1f} / {w[k] * 1e3:+.1f} mm (measured {v[i] * 1e3:+.1f} / {v[k] * 1e3:+.1f}), "
+                             f"intersecting at rest: fitted with each base kept near its measured place instead")
         v[free] = x
         sq0, sq1, n_err, nfev = sq0 + s0, sq1 + s1, n_err + ne, nfev + nf
     v = normalise(v, base)
     new = (BaseParams if base else ExtendedParams).from_vector(np.round(v, DECIMALS) + 0.0)
     rms0 = float(np.sqrt(sq0 / max(n_err, 1)) * 1e3)
     rms1 = float(np.sqrt(sq1 / max(n_err, 1)) * 1e3)
-    return new, FitResult(rms0, rms1, nfev, samples)
+    return new, FitResult(rms0, rms1, nfev, samples, notes)
 
 
 def normalise(v: np.ndarray, base: bool) -> np.ndarray:

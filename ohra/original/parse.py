@@ -26,7 +26,7 @@ from ohra.canonical.couplings import Coupling, describe
 from ohra.original.action import ActionMap
 from ohra.original.checks import check_palm_frame
 from ohra.original.estimate import initial_base, initial_extended
-from ohra.original.fit import FitResult, fit, rounded
+from ohra.original.fit import FINGER_GAP, FitResult, fit, rounded
 from ohra.original.measure import Measurement, ParseWarning, measure
 from ohra.original.spec import HandSpec, load_spec
 from ohra.original.urdf import OriginalHand, load_urdf
@@ -34,7 +34,7 @@ from ohra.original.urdf import OriginalHand, load_urdf
 Params = BaseParams | ExtendedParams
 
 
-FINGER_GAP = 0.001  # m: how far apart synthesis keeps different fingers (ohra.synth.nlp.NLPSettings.finger_gap)
+# FINGER_GAP (m): how far apart synthesis keeps different fingers (ohra.synth.nlp.NLPSettings.finger_gap)
 
 
 def _separate_fingers(params: Params, am: ActionMap, notes: list[str]) -> Params:
@@ -54,14 +54,20 @@ def _separate_fingers(params: Params, am: ActionMap, notes: list[str]) -> Params
     hm = HandModel.from_params(params)
     q = np.clip(am.project(np.zeros(22)), hm.lower, hm.upper)
     objs = [o for o in hm.collision_objects(q) if o[1] >= 0]
-    d = min((_distance(a[2], b[2]) for i, a in enumerate(objs) for b in objs[i + 1:] if a[1] != b[1]), default=np.inf)
+    from ohra.canonical.params import FINGERS
+
+    pairs = [(_distance(a[2], b[2]), a[1], b[1]) for i, a in enumerate(objs) for b in objs[i + 1:] if a[1] != b[1]]
+    d, fa, fb = min(pairs, default=(np.inf, 0, 0))
     if d >= FINGER_GAP:
         return params
     r_old = float(params.finger_radius)
     r = np.floor((r_old - (FINGER_GAP - d) / 2.0) * 1e6) / 1e6
     if r < 0.002:
-        notes.append(f"approximation: neighbouring canonical fingers intersect at rest ({d * 1e3:+.2f} mm apart) and a "
-                     f"radius small enough to separate them would be under 2 mm; check the joint mapping")
+        names = sorted({" and ".join(FINGERS[k] for k in sorted((a, b))) for dd, a, b in pairs if dd < FINGER_GAP})
+        notes.append(f"approximation: canonical fingers intersect at rest ({'; '.join(names)}; {FINGERS[min(fa, fb)]} and "
+                     f"{FINGERS[max(fa, fb)]} {d * 1e3:+.2f} mm apart) and a radius small enough to separate them would be "
+                     f"under 2 mm; no grasp can be synthesised on this hand: check the joint mapping, and compare the "
+                     f"layout parsed without the fit")
         return params
     d_params = params.to_dict()
     d_params["finger_radius"] = float(r)
@@ -160,6 +166,7 @@ def parse(
     fr = None
     if fit_params:
         params, fr = fit(init, m, spec.fit_samples, spec.fit_seed)
+        m.notes.extend(fr.notes)
     else:
         params = rounded(init)
     params = _separate_fingers(params, m.action_map, m.notes)
