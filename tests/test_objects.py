@@ -7,6 +7,7 @@ import pytest
 import trimesh
 
 from ohra import ObjectError
+from ohra.errors import ObjectWarning
 from ohra.objects.model import ObjectModel, builtin_object_names, farthest_point_sampling, load_convex_pieces
 from ohra.objects.builtin import ANALYTIC_VOLUME
 
@@ -154,7 +155,7 @@ def test_a_folder_holding_any_supported_mesh_type_loads_it_after_the_preferred_f
 def test_loading_an_unsupported_path_names_every_supported_mesh_type(tmp_path):
     listed = r"\.obj, \.stl, \.ply, \.off, \.glb"
     (tmp_path / "notes.txt").write_text("no mesh here\n")
-    with pytest.raises(ObjectError, match=rf"folder holds no mesh \({listed}\) or model\.urdf"):
+    with pytest.raises(ObjectError, match=rf"folder holds no mesh \({listed}\) or object URDF"):
         ObjectModel.load(tmp_path)
     with pytest.raises(ObjectError, match=rf"unsupported object file type '\.txt' \(use {listed} or \.urdf\)"):
         ObjectModel.load(tmp_path / "notes.txt")
@@ -228,3 +229,76 @@ def test_the_size_check_reads_the_mesh_and_never_builds_the_simulated_body():
     assert "body" not in vars(ball)  # the cached simulated body was never built
     big = ObjectModel(trimesh.creation.icosphere(radius=40.0), "ball_mm")
     assert "--scale 0.001" in size_problem(big)
+
+
+def test_refusing_an_implausibly_sized_object_builds_no_body_and_warns_only_about_its_size():
+    """A concave mesh in millimetres is refused for its size alone: no V-HACD run on the 80 m object
+    first, no warning about how a convex body fits it, and the quoted mass is the mesh's."""
+    import warnings
+
+    from ohra.objects.model import ObjectModel
+    from ohra.objects.resolve import size_problem
+
+    ring = ObjectModel(trimesh.creation.torus(major_radius=30.0, minor_radius=10.0), "ring_mm")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # any warning fails
+        problem = size_problem(ring)
+    assert "--scale 0.001" in problem and "body" not in vars(ring)
+    assert f"({abs(ring.mesh.volume) * 500.0:.4g} kg at 500 kg/m^3)" in problem
+
+
+def test_a_folder_with_an_object_urdf_is_that_urdf_with_its_scale(tmp_path):
+    """A PyBullet-style folder (a URDF scaling a mesh in other units, beside that mesh and its collision
+    decomposition) is the object the URDF describes, whether named as the folder or found in a folder of
+    objects; a folder of several loose meshes says which one it took."""
+    import warnings
+
+    from ohra.objects.model import ObjectModel
+    from ohra.objects.resolve import resolve_objects
+
+    duck = tmp_path / "objects" / "duck"
+    duck.mkdir(parents=True)
+    trimesh.creation.box((1.2, 1.0, 0.8)).export(duck / "duck.obj")  # in decimetres
+    trimesh.creation.box((1.2, 1.0, 0.8)).export(duck / "duck_vhacd.obj")
+    (duck / "duck_vhacd.urdf").write_text(
+        '<robot name="duck"><link name="base"><visual><geometry><mesh filename="duck.obj" scale=".05 .05 .05"/>'
+        '</geometry></visual><collision><geometry><mesh filename="duck_vhacd.obj" scale=".05 .05 .05"/></geometry>'
+        '</collision></link></robot>')
+    for o in (ObjectModel.load(duck), *resolve_objects([str(tmp_path / "objects")])):
+        assert o.name == "duck" and o.source == duck / "duck_vhacd.urdf"
+        assert o.mesh.extents == pytest.approx([0.06, 0.05, 0.04])
+    cup = tmp_path / "cup"  # the URDF's meshes in a sub-folder: still one object, not a folder of objects
+    (cup / "meshes").mkdir(parents=True)
+    trimesh.creation.cylinder(radius=0.6, height=1.4).export(cup / "meshes" / "cup.obj")
+    (cup / "cup_small.urdf").write_text('<robot name="cup"><link name="base"><visual><geometry>'
+                                        '<mesh filename="meshes/cup.obj" scale=".05 .05 .05"/></geometry></visual></link></robot>')
+    (o,) = resolve_objects([str(cup)])
+    assert o.name == "cup" and o.mesh.extents == pytest.approx([0.06, 0.06, 0.07], rel=1e-3)
+    loose = tmp_path / "loose"
+    loose.mkdir()
+    for n in ("bowl", "mug"):
+        trimesh.creation.box((0.05, 0.06, 0.07)).export(loose / f"{n}.obj")
+    with pytest.warns(ObjectWarning, match=r"holds 2 meshes \(bowl.obj, mug.obj\); loading bowl.obj"):
+        assert ObjectModel.load(loose).source == loose / "bowl.obj"
+
+
+def test_an_object_urdf_is_simulated_as_all_its_collision_elements(tmp_path):
+    """A dumbbell URDF (like PyBullet's plate: several <collision> meshes plus a primitive) is grasped and
+    simulated as the union of every collision element, not the first one or the convex hull of the whole:
+    two 4 cm cubes 10 cm apart on a 1 cm bar weigh two cubes and a bar, not a 4 x 4 x 14 cm brick."""
+    from ohra.objects.model import ObjectModel
+
+    left, right = trimesh.creation.box((0.04,) * 3), trimesh.creation.box((0.04,) * 3)
+    left.apply_translation([-0.05, 0, 0]); right.apply_translation([0.05, 0, 0])
+    bar = trimesh.creation.box((0.06, 0.01, 0.01))
+    trimesh.util.concatenate([left, right, bar]).export(tmp_path / "visual.obj")
+    left.export(tmp_path / "left.obj"); right.export(tmp_path / "right.obj")
+    col = '<collision><geometry><mesh filename="{}"/></geometry></collision>'
+    (tmp_path / "dumbbell.urdf").write_text(
+        '<robot name="dumbbell"><link name="base"><visual><geometry><mesh filename="visual.obj"/></geometry></visual>'
+        + col.format("left.obj") + col.format("right.obj")
+        + '<collision><geometry><box size="0.06 0.01 0.01"/></geometry></collision></link></robot>')
+    o = ObjectModel.load(tmp_path / "dumbbell.urdf")
+    assert o.body.kind.startswith("provided") and len(o.body.pieces) == 3
+    assert o.volume == pytest.approx(2 * 0.04**3 + 0.06 * 0.01 * 0.01, rel=0.03)
+    assert o.fidelity.within_tolerance

@@ -75,6 +75,28 @@ def test_nominal_object_pose_rests_just_above_the_palm_surface():
         sc.close()
 
 
+def test_a_mesh_whose_frame_origin_is_off_the_object_still_rests_on_the_palm_centre(tmp_path):
+    """A mesh file in scene coordinates (its origin 10 cm from the object) is placed by its centre of
+    mass, exactly as the same mesh centred on its origin: not off the palm edge, not into the palm."""
+    import trimesh
+
+    centred, offset = tmp_path / "centred.obj", tmp_path / "offset.obj"
+    trimesh.creation.box(extents=(0.05, 0.05, 0.05)).export(centred)
+    trimesh.creation.box(extents=(0.05, 0.05, 0.05)).apply_translation([0.08, 0.05, 0.03]).export(offset)
+    placed = {}
+    for path in (centred, offset):
+        sc = _scene(CFG.with_overrides(object=str(path), object_size=0.06))
+        try:
+            pos, quat = G.nominal_pose(sc)
+            sc.new_object(pos, quat, fixed=True)
+            placed[path.stem] = np.array(pb.getBasePositionAndOrientation(sc.obj_body, physicsClientId=sc.client)[0])
+            assert np.allclose(placed[path.stem][:2], sc.palm_centre_world()[:2], atol=1e-9)
+            assert placed[path.stem][2] == pytest.approx(sc.palm_top + 0.03 + G.CLEARANCE)  # lowest point on the palm
+        finally:
+            sc.close()
+    assert np.allclose(placed["centred"], placed["offset"], atol=1e-9)
+
+
 def test_holding_pose_closes_fingers_onto_the_pinned_object():
     sc = _scene(CFG)
     try:

@@ -47,10 +47,11 @@ def _load_mesh_file(path: Path, scale: np.ndarray | None = None) -> trimesh.Trim
     return loaded
 
 
-def _urdf_mesh(path: Path) -> tuple[Path, np.ndarray, np.ndarray, Path | None, np.ndarray, np.ndarray]:
-    """Visual mesh, its (3,) scale and origin (4x4 in the link frame), and the collision mesh, its scale
-    and origin named by a PyBullet-style object URDF (the first ``<mesh>`` of each kind; without a
-    ``<visual>`` mesh the collision mesh is also the visual one)."""
+def _urdf_mesh(path: Path) -> tuple[Path, np.ndarray, np.ndarray, list[tuple[Path | None, np.ndarray, np.ndarray, trimesh.Trimesh | None]]]:
+    """Visual mesh, its (3,) scale and origin (4x4 in the link frame) named by a PyBullet-style object URDF
+    (its first ``<visual>`` mesh; without one, its first ``<collision>`` mesh), and **every** ``<collision>``
+    element as ``(mesh file, scale, origin, None)`` or, for a ``<box>``/``<sphere>``/``<cylinder>``,
+    ``(None, ones, origin, solid)`` (a plate's rim is six collision meshes and a cylinder)."""
     from ohra.transforms import xyzrpy_to_matrix
 
     try:
@@ -58,24 +59,53 @@ def _urdf_mesh(path: Path) -> tuple[Path, np.ndarray, np.ndarray, Path | None, n
     except ET.ParseError as exc:
         raise ObjectError(f"{path}: not valid XML ({exc})") from None
 
-    def find(tag: str) -> tuple[Path | None, np.ndarray, np.ndarray]:
-        for el in root.iter(tag):
-            m = el.find("geometry/mesh")
-            if m is not None and m.get("filename"):
-                scale = np.array([float(x) for x in (m.get("scale") or "1 1 1").split()])
-                o = el.find("origin")
-                xyz = [float(x) for x in (o.get("xyz", "0 0 0") if o is not None else "0 0 0").split()]
-                rpy = [float(x) for x in (o.get("rpy", "0 0 0") if o is not None else "0 0 0").split()]
-                return path.parent / m.get("filename"), scale, xyzrpy_to_matrix(np.array(xyz + rpy))
-        return None, np.ones(3), np.eye(4)
+    def floats(text: str, what: str) -> list[float]:
+        try:
+            return [float(x) for x in text.split()]
+        except ValueError:
+            raise ObjectError(f"{path}: {what} {text!r} is not a list of numbers") from None
 
-    vis, scale, T_vis = find("visual")
-    col, col_scale, T_col = find("collision")
-    if vis is None and col is None:
-        raise ObjectError(f"{path}: no <mesh> geometry in the object URDF")
+    def origin(el) -> np.ndarray:
+        o = el.find("origin")
+        xyz = floats(o.get("xyz", "0 0 0") if o is not None else "0 0 0", "origin xyz")
+        rpy = floats(o.get("rpy", "0 0 0") if o is not None else "0 0 0", "origin rpy")
+        return xyzrpy_to_matrix(np.array(xyz + rpy))
+
+    def mesh_of(el) -> tuple[Path, np.ndarray] | None:
+        m = el.find("geometry/mesh")
+        if m is None or not m.get("filename"):
+            return None
+        scale = np.array(floats(m.get("scale") or "1 1 1", "mesh scale"))
+        return path.parent / m.get("filename"), scale
+
+    def solid_of(el) -> trimesh.Trimesh | None:
+        g = el.find("geometry")
+        try:
+            if g is not None and (b := g.find("box")) is not None:
+                return trimesh.creation.box(extents=floats(b.get("size", ""), "box size"))
+            if g is not None and (sp := g.find("sphere")) is not None:
+                return trimesh.creation.icosphere(subdivisions=3, radius=float(sp.get("radius", "")))
+            if g is not None and (c := g.find("cylinder")) is not None:
+                return trimesh.creation.cylinder(radius=float(c.get("radius", "")), height=float(c.get("length", "")),
+                                                 sections=48)
+        except (ValueError, TypeError):
+            raise ObjectError(f"{path}: a <collision> primitive with a missing or non-numeric size") from None
+        return None
+
+    vis = next(((m, origin(el)) for el in root.iter("visual") if (m := mesh_of(el)) is not None), None)
+    cols: list[tuple[Path | None, np.ndarray, np.ndarray, trimesh.Trimesh | None]] = []
+    for el in root.iter("collision"):
+        if (m := mesh_of(el)) is not None:
+            cols.append((m[0], m[1], origin(el), None))
+        elif (solid := solid_of(el)) is not None:
+            cols.append((None, np.ones(3), origin(el), solid))
     if vis is None:
-        vis, scale, T_vis = col, col_scale, T_col
-    return vis, scale, T_vis, col, col_scale, T_col  # type: ignore[return-value]
+        first = next((c for c in cols if c[0] is not None), None)
+        if first is None:
+            raise ObjectError(f"{path}: no <mesh> geometry in the object URDF")
+        vis = ((first[0], first[1]), first[2])
+    (vis_path, scale), T_vis = vis
+    return vis_path, scale, T_vis, cols
 
 
 class ObjectModel:
@@ -133,8 +163,9 @@ class ObjectModel:
 
         Args:
             path: ``.obj/.stl/.ply/.off/.glb``, ``.urdf``, or a folder (its
-                ``textured_simple_reoriented.obj``, ``model.urdf``, else the first mesh by name, ``.obj``
-                before ``.stl``, ``.ply``, ``.off``, ``.glb``).
+                ``textured_simple_reoriented.obj``, ``model.urdf``, else its one object URDF, else the first
+                mesh by name, ``.obj`` before ``.stl``, ``.ply``, ``.off``, ``.glb``, with a warning when there
+                are several).
             density: [kg/m^3] for :attr:`mass`.
             name: label; None: the file stem (the folder name for a URDF, a folder or a
                 ``textured*`` mesh).
@@ -152,22 +183,45 @@ class ObjectModel:
         if not path.exists():
             raise ObjectError(f"object file not found: {path}")
         if path.is_dir():
-            files = sorted(path.iterdir())
-            cands = [path / "textured_simple_reoriented.obj", path / "model.urdf"]
-            cands += [f for suffix in MESH_SUFFIXES for f in files if f.suffix.lower() == suffix]
-            cands = [c for c in cands if c.is_file() and c.name not in DECOMPOSITION_NAMES]
+            files = sorted(f for f in path.iterdir() if f.is_file())
+            # an object URDF beside its meshes says how they are scaled and placed: it is the object
+            urdfs = [f for f in files if f.suffix.lower() == ".urdf"]
+            meshes = [f for suffix in MESH_SUFFIXES for f in files
+                      if f.suffix.lower() == suffix and f.name not in DECOMPOSITION_NAMES]
+            preferred = [c for c in (path / "textured_simple_reoriented.obj", path / "model.urdf") if c.is_file()]
+            if not preferred and len(urdfs) > 1:
+                raise ObjectError(f"{path}: folder holds {len(urdfs)} object URDFs ({', '.join(f.name for f in urdfs)}); "
+                                  "name the one to load")
+            cands = preferred + urdfs + meshes
             if not cands:
-                raise ObjectError(f"{path}: folder holds no mesh ({', '.join(MESH_SUFFIXES)}) or model.urdf")
+                raise ObjectError(f"{path}: folder holds no mesh ({', '.join(MESH_SUFFIXES)}) or object URDF")
+            if not preferred and not urdfs and len(meshes) > 1:
+                warnings.warn(f"{path}: folder holds {len(meshes)} meshes ({', '.join(f.name for f in meshes)}); loading "
+                              f"{meshes[0].name} as the object (pass the files themselves to load each)",
+                              ObjectWarning, stacklevel=user_stacklevel())
             return cls.load(cands[0], density, name or path.name, scale)
         pieces, label_pieces = None, "provided"
         if path.suffix.lower() == ".urdf":
             # the object frame is the URDF link frame: mesh scale, then the <visual>/<collision> origin
-            mesh_path, vis_scale, T_vis, col, col_scale, T_col = _urdf_mesh(path)
+            mesh_path, vis_scale, T_vis, cols = _urdf_mesh(path)
             mesh = _load_mesh_file(mesh_path, vis_scale)
             mesh.apply_transform(T_vis)
-            if col is not None and col.is_file() and col != mesh_path:
-                pieces = [pc.apply_transform(T_col) for pc in load_convex_pieces(col, col_scale)]
-                label_pieces = f"provided:{col.name}"
+            # every <collision> element is a candidate body piece (a plate's rim is six meshes and a cylinder);
+            # the visual mesh itself counts only when it is a decomposition (several convex pieces), so that a
+            # concave visual mesh still gets V-HACD rather than its hull
+            pieces, names = [], []
+            for col, col_scale, T_col, solid in cols:
+                if solid is not None:
+                    pieces.append(solid.apply_transform(T_col))
+                    names.append("primitive")
+                elif col is not None and col.is_file():
+                    got = [pc.apply_transform(T_col) for pc in load_convex_pieces(col, col_scale)]
+                    if col != mesh_path or len(got) > 1 or len(cols) > 1:
+                        pieces += got
+                        names.append(col.name)
+            pieces = pieces or None
+            names = list(dict.fromkeys(names))
+            label_pieces = f"provided:{'+'.join(names) if len(names) <= 2 else f'{len(cols)} URDF collisions'}"
             label = name or path.parent.name
         elif path.suffix.lower() in MESH_SUFFIXES:
             mesh = _load_mesh_file(path)

@@ -45,7 +45,7 @@ def parse_procedural(spec: str) -> ObjectModel:
 def _from_path(p: Path, scale: float | None) -> list[ObjectModel]:
     if not p.exists():
         raise ObjectError(f"object file or folder not found: {p}")
-    if p.is_dir() and not any(p.glob("*.obj")) and not (p / "model.urdf").exists():
+    if p.is_dir() and not any(p.glob("*.obj")) and not any(p.glob("*.urdf")):
         subs = sorted(d for d in p.iterdir() if d.is_dir())
         files = sorted(f for f in p.iterdir() if f.suffix.lower() in MESH_SUFFIXES)
         if not subs and not files:
@@ -64,7 +64,10 @@ def size_problem(obj: ObjectModel, extent_range: tuple[float, float] = GRASPABLE
         return None
     k = round(math.log10(0.1 / ext))
     hint = f"if its units are wrong, --scale {10.0 ** k:g} makes it {100 * ext * 10.0 ** k:.3g} cm" if k else ""
-    return (f"object {obj.name!r}: largest extent {ext:.4g} m ({obj.mass:.4g} kg at {obj.density:g} kg/m^3) is outside the "
+    # the mass of the mesh (its hull when open), not of the body: a refused object must not pay for a convex
+    # decomposition (minutes of V-HACD on a 75 m apple) nor warn about how that body fits it
+    volume = abs(float(obj.mesh.volume)) if obj.watertight else float(obj.mesh.convex_hull.volume)
+    return (f"object {obj.name!r}: largest extent {ext:.4g} m ({volume * obj.density:.4g} kg at {obj.density:g} kg/m^3) is outside the "
             f"graspable range {lo:g}-{hi:g} m" + (f"; {hint}" if hint else ""))
 
 

@@ -104,10 +104,15 @@ class GraspSet:
 
 
 def nominal_pose(scene: RotationScene) -> tuple[np.ndarray, np.ndarray]:
-    """(pos (3,), quat (4,) xyzw): the object resting on the palm centre at yaw 0 (world frame)."""
+    """(pos (3,), quat (4,) xyzw): the object frame's pose (world) with the object resting on the palm centre
+    at yaw 0: its centre of mass above the palm centre and its lowest point ``CLEARANCE`` above the palm
+    (``half_height`` is measured below the centre of mass). A mesh whose frame origin lies away from the
+    object (a file in scene coordinates) is placed by its centre of mass, not by that origin."""
     p = scene.palm_centre_world()
-    pos = np.array([p[0], p[1], scene.palm_top + scene.obj.half_height + CLEARANCE])
-    return pos, scene.obj.rest_quat.copy()
+    quat = scene.obj.rest_quat.copy()
+    com = np.array([p[0], p[1], scene.palm_top + scene.obj.half_height + CLEARANCE])
+    R = np.reshape(pb.getMatrixFromQuaternion([float(x) for x in quat]), (3, 3))
+    return com - R @ np.asarray(scene.obj.com, dtype=float), quat
 
 
 def closing_directions(scene: RotationScene, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -160,7 +165,8 @@ def holding_pose(scene: RotationScene) -> np.ndarray:
     q0 = np.clip(0.0, hand.lower, hand.upper)
     scene.set_hand(q0)
     scene.new_object(pos, quat, fixed=True)
-    sign, spread = closing_directions(scene, pos)
+    R = np.reshape(pb.getMatrixFromQuaternion([float(x) for x in quat]), (3, 3))
+    sign, spread = closing_directions(scene, pos + R @ np.asarray(scene.obj.com, dtype=float))  # onto the object
     goal = np.where(spread, q0, q0 + CLOSE_FRACTION * (np.where(sign > 0, hand.upper, hand.lower) - q0))
     target, step = q0.copy(), CLOSE_SPEED / cfg.control_hz
     moving = np.ones(5, dtype=bool)  # per finger
@@ -210,6 +216,8 @@ def cache_key(task: Task) -> str:
     fields.update(noise=cfg.resolved_grasp_noise, object=task.obj.name, mass=task.obj.mass,
                   prims=[dict(p) for p in task.obj.prims], version=VERSION, palm_radius=task.palm_radius,
                   **({"body": task.obj.digest} if task.obj.digest else {}),  # a mesh object (keys of primitives unchanged)
+                  # placed by its centre of mass (keys of objects whose frame is their centre of mass unchanged)
+                  **({"placed": "com"} if np.any(np.asarray(task.obj.com) != 0.0) else {}),
                   pybullet=pb.getAPIVersion())
     h = hashlib.sha256(task.hand.urdf.encode())
     h.update(json.dumps(fields, sort_keys=True, default=float).encode())
