@@ -145,6 +145,28 @@ def test_same_seed_same_grasps(vae_model, capsule):
     assert not np.allclose(a, c)
 
 
+def test_centre_makes_grasps_follow_a_mesh_whose_origin_lies_beside_it(vae_model):
+    """``centre=True``: the network sees the object as if centred on its bounding box, and the grasps come
+    back in the mesh frame, so moving the mesh's origin only moves the grasps. Without it, an origin
+    farther off than any training object's is warned about."""
+    import trimesh
+
+    from ohra.errors import ObjectWarning
+
+    def box(shift):
+        mesh = trimesh.creation.box(extents=(0.05, 0.07, 0.09))
+        mesh.apply_translation(shift)
+        return ObjectModel(mesh, "box")
+
+    shift = np.array([0.15, -0.02, 0.04])
+    at_origin = vae_model.sample("allegro_hand_left", box((0, 0, 0)), 6, seed=3)
+    moved = vae_model.sample("allegro_hand_left", box(shift), 6, seed=3, centre=True)
+    np.testing.assert_allclose(moved[:, :3] - shift, at_origin[:, :3], atol=1e-6)
+    np.testing.assert_allclose(moved[:, 3:], at_origin[:, 3:], atol=1e-6)
+    with pytest.warns(ObjectWarning, match=r"15\.7 cm from its mesh frame's origin.*centre=True"):
+        vae_model.sample("allegro_hand_left", box(shift), 2, seed=3)
+
+
 def _push_joints(model, value: float) -> None:
     """Bias the joint network far outside every limit, so only the clamp keeps outputs valid."""
     with torch.no_grad():

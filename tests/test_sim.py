@@ -13,6 +13,8 @@ import pytest
 from ohra import ActionMap, GraspError, HandModel, JOINT_NAMES
 from ohra.sim import GraspEvaluator, Protocol, SimHand, closes_positive, squeeze_targets
 from ohra.canonical.urdfgen import DUMMY_MASS, render
+from ohra.errors import ObjectWarning
+from ohra.objects.model import ObjectModel
 
 from sim_fixtures import L, R_F, pinch_box, pinch_grasp, pinch_hand
 
@@ -339,3 +341,38 @@ def test_the_evaluator_drops_urdf_joint_damping_unless_the_protocol_keeps_it(han
     assert Protocol().urdf_joint_damping is False
     assert abs(speed_after_a_free_step(Protocol(urdf_joint_damping=True))) > 10.0  # explicit damping overshoots
     assert speed_after_a_free_step(Protocol()) == pytest.approx(1.0, abs=0.2)  # dropped: the joint keeps turning
+
+
+def _shifted(shift) -> tuple:
+    box = pinch_box()
+    mesh = box.mesh.copy()
+    mesh.apply_translation(shift)
+    g = pinch_grasp()
+    g[:3] += shift
+    return ObjectModel(mesh, "pinch_box_moved", repair=False), g
+
+
+@pytest.mark.parametrize("shift", [(0.0, 0.15, 0.0), (0.08, 0.0, 0.08)])
+def test_under_object_point_com_a_mesh_whose_origin_lies_beside_it_holds_as_when_centred(shift):
+    """The same box and grasp, the mesh's frame origin moved off the box: with ``object_point="com"`` the
+    fingers close toward the box and its displacement is measured at its centre of mass, so nothing
+    changes; the reference's ``"frame"`` closes toward the origin beside the box, and says so."""
+    com = Protocol(object_point="com")
+    centred = GraspEvaluator(pinch_hand(), pinch_box(), com).evaluate(pinch_grasp()).results[0]
+    obj, g = _shifted(shift)
+    moved = GraspEvaluator(pinch_hand(), obj, com).evaluate(g).results[0]
+    assert centred.success and moved.success
+    np.testing.assert_allclose(moved.displacement, centred.displacement, atol=2e-4)
+    assert moved.final_distance_from_origin == pytest.approx(centred.final_distance_from_origin, abs=2e-4)
+    with pytest.warns(ObjectWarning, match=r"origin lies .* cm from its centre of mass.*object_point='com'"):
+        GraspEvaluator(pinch_hand(), obj, Protocol())
+
+
+def test_object_point_com_changes_nothing_for_a_centred_object_and_unknown_points_are_refused(evaluator):
+    g = np.stack([pinch_grasp(), pinch_grasp(dx=0.004), pinch_grasp(dy=0.02)])
+    a = evaluator.evaluate(g)
+    b = GraspEvaluator(pinch_hand(), pinch_box(), Protocol(object_point="com")).evaluate(g)
+    assert [r.success for r in a.results] == [r.success for r in b.results]
+    np.testing.assert_allclose([r.displacement for r in a.results], [r.displacement for r in b.results], atol=1e-9)
+    with pytest.raises(ValueError, match="object_point"):
+        Protocol(object_point="centre")

@@ -3,8 +3,8 @@
     ohra train grasp --data DIR [DIR ...] [--hands H ...] [--test-objects O ...] --condition vae|params
                      [--encoder pointnet|dgcnn] [--steps N] [--batch-size B] [--seed S] [--threads T]
                      -o RUN [--resume]
-    ohra grasp sample --hand H --object O [-n 100] [--seed S] [--refine] [--model RUN] -o grasps.npz
-    ohra grasp eval --hands H ... --objects O ... [-n 100] [--seed S] [--original [--collisions canonical] | --inertials original] [--condition-hand H] [--refine] [--model RUN] [-o report.json]
+    ohra grasp sample --hand H --object O [-n 100] [--seed S] [--refine] [--centre] [--model RUN] -o grasps.npz
+    ohra grasp eval --hands H ... --objects O ... [-n 100] [--seed S] [--original [--collisions canonical] | --inertials original] [--condition-hand H] [--refine] [--centre] [--model RUN] [-o report.json]
 
 Plugged into :mod:`ohra.cli.main` by ``register(subparsers)`` (adds the ``grasp`` group and
 ``grasp`` under the ``train`` group, creating ``train`` if no other plugin did). torch is imported
@@ -24,6 +24,8 @@ from ohra.cli.main import subcommand_group
 from ohra.errors import OhraError
 
 
+CENTRE_HELP = ("sample on the object centred on its bounding box, grasps moved back into its mesh frame (for a mesh "
+               "whose frame origin lies away from the object, e.g. exported in scene coordinates)")
 REFINE_HELP = ("open the fingers just enough to clear the object after sampling "
                "(ohra.learn.grasp.refine; tens of ms per grasp)")
 
@@ -43,6 +45,7 @@ def register(sub: Any) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--model", help=model_help)
     p.add_argument("--refine", action="store_true", help=REFINE_HELP)
+    p.add_argument("--centre", action="store_true", help=CENTRE_HELP)
     p.add_argument("-o", "--output", required=True, help="output .npz")
     p.set_defaults(func=_cmd_sample)
 
@@ -61,6 +64,7 @@ def register(sub: Any) -> None:
                    help="with --original: the original URDF's collision shapes (default) or the canonical capsules on "
                         "its links (the hybrid hand: tells the link shapes' effect from the rest of the URDF's)")
     p.add_argument("--refine", action="store_true", help=REFINE_HELP)
+    p.add_argument("--centre", action="store_true", help=CENTRE_HELP)
     p.add_argument("--condition-hand", help="condition the model on this hand instead (paper Table 9); the grasps run on "
                    "the true hand, within its joint limits")
     p.add_argument("--workers", type=int, default=1, help="simulation processes (default 1)")
@@ -173,7 +177,7 @@ def _cmd_sample(args: argparse.Namespace) -> int:
     obj = resolve_object(args.object, scale=args.scale)
     warn_if_ungraspable(obj)
     timing: dict = {}
-    g = model.sample(args.hand, obj, args.n, seed=args.seed, timing=timing, refine=args.refine)
+    g = model.sample(args.hand, obj, args.n, seed=args.seed, timing=timing, refine=args.refine, centre=args.centre)
     out = Path(args.output)
     if out.suffix != ".npz":
         raise OhraError(f"-o must end in .npz, got {out}")
@@ -197,7 +201,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     rep = evaluate_model(model, args.hands, objs, n=args.n, seed=args.seed, original=args.original,
                          workers=args.workers, progress=not args.quiet, allow_seen=args.allow_seen,
                          protocol=Protocol.preset(args.protocol), inertials=args.inertials,
-                         condition_hand=args.condition_hand, refine=args.refine, collisions=args.collisions)
+                         condition_hand=args.condition_hand, refine=args.refine, collisions=args.collisions, centre=args.centre)
     if args.output:
         from ohra.data.dataset import atomic_write_json
 

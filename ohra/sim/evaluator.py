@@ -31,13 +31,13 @@ from typing import Iterable, Sequence, Union
 import numpy as np
 import pybullet as pb
 
-from ohra.errors import GraspError, user_stacklevel
+from ohra.errors import GraspError, ObjectWarning, user_stacklevel
 from ohra.objects.model import ObjectModel
 from ohra.canonical.params import BaseParams, ExtendedParams
 from ohra.rotations import check_grasps, grasp_to_pose, pose_to_grasp
 from ohra.sim.controller import closes_positive, squeeze_targets
 from ohra.sim.hands import SimHand
-from ohra.sim.protocol import DIRECTION_NAMES, DIRECTIONS, Protocol
+from ohra.sim.protocol import COM_OFFSET_WARN, DIRECTION_NAMES, DIRECTIONS, Protocol
 from ohra.sim.world import World
 
 Params = Union[BaseParams, ExtendedParams]
@@ -140,17 +140,19 @@ def run_grasp(world: World, grasp: np.ndarray, mode: str = "eval") -> GraspResul
     for cp in pb.getClosestPoints(world.body, obj, 0.0, physicsClientId=c):
         pen = max(pen, -float(cp[8]))
     axis, link_z, origin = world.joint_frames()
-    q_reset, q_target = squeeze_targets(qs, hand.lower, hand.upper, closes_positive(axis, link_z, origin), prot.outer, prot.inner,
+    toward = world.obj_inertial[:3, 3] if prot.object_point == "com" else None  # the object starts at the origin
+    q_reset, q_target = squeeze_targets(qs, hand.lower, hand.upper, closes_positive(axis, link_z, origin, toward), prot.outer, prot.inner,
                                        couple=hand.project_sim if hand.coupled else None)
     world.set_joints(q_reset)
     world.drive_joints(q_target)
 
-    start = world.object_frame()[:3, 3]
+    point = _displacement_point(world)
+    start = point()
     steps = 0
     for _ in range(prot.squeeze_steps):
         pb.stepSimulation(physicsClientId=c)
         steps += 1
-    p0 = world.object_frame()[:3, 3]
+    p0 = point()
     contacts = len({cp[3] for cp in pb.getContactPoints(world.body, obj, physicsClientId=c)})
     disp = np.full(7, np.nan)
     disp[0] = float(np.linalg.norm(p0 - start))
@@ -169,19 +171,27 @@ def run_grasp(world: World, grasp: np.ndarray, mode: str = "eval") -> GraspResul
             if prot.early_exit and (s + 1) % every == 0 and _failure_is_certain(world, T_root, p0, d, s + 1):
                 early = True
                 break
-        disp[d + 1] = float(np.linalg.norm(world.object_frame()[:3, 3] - p0))
+        disp[d + 1] = float(np.linalg.norm(point() - p0))
         if early:
             break
     pb.setGravity(0, 0, 0, physicsClientId=c)
     T_obj = world.object_frame()
-    p_end = T_obj[:3, 3]
-    final = float(np.linalg.norm(p_end - p0))
+    p_end = point() - (world.obj_inertial[:3, 3] if prot.object_point == "com" else 0.0)  # from where it began
+    final = float(np.linalg.norm(point() - p0))
     success = (not early) and final <= prot.success_displacement
     if mode == "filter":
         success = success and float(np.linalg.norm(p_end)) <= prot.filter_max_distance
     q_end = hand.to_canonical(hand.project_sim(world.joint_values()))  # a coupled hand's settled pose, on its couplings
     post = pose_to_grasp(np.linalg.inv(T_obj) @ T_root @ np.linalg.inv(hand.T_palm_root), q_end)
     return GraspResult(bool(success), disp, float(np.linalg.norm(p_end)), contacts, pen, post, clamped, early, steps)
+
+
+def _displacement_point(world: World):
+    """() -> (3,) world position of the point whose displacement the protocol measures (its
+    ``object_point``: the mesh frame's origin or the centre of mass)."""
+    if world.protocol.object_point == "com":
+        return lambda: world.object_com()[0]
+    return lambda: world.object_frame()[:3, 3]
 
 
 def _failure_is_certain(world: World, T_root: np.ndarray, p0: np.ndarray, d: int, s_done: int) -> bool:
@@ -260,6 +270,11 @@ class GraspEvaluator:
         self.obj = obj
         self.protocol = protocol or Protocol()
         self._world: World | None = None
+        offset = float(np.linalg.norm(obj.center_mass))
+        if self.protocol.object_point == "frame" and offset > COM_OFFSET_WARN:
+            warnings.warn(f"object {obj.name!r}: its mesh frame's origin lies {100 * offset:.1f} cm from its centre of mass; "
+                          "the fingers close toward that origin and the test measures its displacement, so outcomes "
+                          "depend on where the mesh's origin is: centre the mesh, or use Protocol(object_point='com')", ObjectWarning, stacklevel=user_stacklevel())
 
     @classmethod
     def original(cls, name: str, obj: ObjectModel, protocol: Protocol | None = None, form: str | None = None) -> "GraspEvaluator":

@@ -28,6 +28,10 @@ ISAAC_DRIVE = {"stiffness": 1000.0, "damping": 200.0}
 # Protocol.urdf_joint_damping of results saved before the setting existed (a saved protocol without
 # the key ran with the URDF's damping applied)
 URDF_DAMPING_BEFORE = True
+OBJECT_POINTS = ("frame", "com")
+# [m] GraspEvaluator warns when an object's mesh-frame origin lies farther than this from its centre of
+# mass under object_point="frame" (a 0.1 rad turn then moves the origin by over 0.5 cm)
+COM_OFFSET_WARN = 0.05
 
 
 @dataclass(frozen=True)
@@ -66,8 +70,20 @@ class Protocol:
     # carry none, so only a hand whose URDF has it is affected. Evaluations made before this setting
     # kept the damping (URDF_DAMPING_BEFORE).
     urdf_joint_damping: bool = False
+    # The object's reference point: "frame", the origin of its mesh frame (the reference: the fingers
+    # close toward the object origin and Isaac reads the actor's root, the object URDF's link frame), or
+    # "com", its centre of mass. Both the squeeze (each joint turns so that its link swings toward the
+    # point) and the displacement (measured at the point) use it. They differ for a mesh whose frame
+    # origin lies away from the object (a turn of angle a moves the origin |offset| x a; fingers close
+    # toward a point beside the object), so under "frame" the same grasp can pass or fail depending on
+    # where the mesh's author put the origin (a mesh exported in scene coordinates fails almost every
+    # grasp). "com" is frame-independent; "frame" stays the default so published results and dataset
+    # digests hold. GraspEvaluator warns when the choice matters (an origin over COM_OFFSET_WARN off).
+    object_point: str = "frame"
 
     def __post_init__(self) -> None:
+        if self.object_point not in OBJECT_POINTS:
+            raise ValueError(f"Protocol.object_point must be one of {OBJECT_POINTS}, got {self.object_point!r}")
         for name in ("dt", "squeeze_time", "direction_time", "density", "motor_force", "success_displacement"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"Protocol.{name} must be > 0, got {getattr(self, name)}")

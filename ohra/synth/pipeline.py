@@ -91,6 +91,8 @@ class SynthSettings:
         # Synthesis simulates canonical URDFs only, which carry no <dynamics damping>: the setting
         # cannot change a shard, and leaving it out keeps the digests of datasets made before it.
         d["protocol"].pop("urdf_joint_damping", None)
+        if d["protocol"].get("object_point") == "frame":  # the behaviour before the setting existed
+            d["protocol"].pop("object_point")
         return d
 
     def digest(self) -> str:

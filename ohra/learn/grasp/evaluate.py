@@ -160,7 +160,7 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
                    seed: int = 0, original: bool = False, workers: int = 1, protocol: Any = None,
                    progress: bool = False, allow_seen: bool = False, inertials: str = "capsule",
                    condition_hand: HandLike | None = None, refine: bool | RefineSettings = False,
-                   collisions: str = "own") -> GraspEvalReport:
+                   collisions: str = "own", centre: bool = False) -> GraspEvalReport:
     """Sample ``n`` grasps per (hand, object) and run the six-direction test (module docstring).
 
     Every hand and object is checked before the first simulation.
@@ -187,6 +187,8 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
             hand, the original URDF (kinematics, limits, masses, inertias, action map) carrying the
             canonical collision shapes (:mod:`ohra.sim.hybrid`), to tell what the original's link
             shapes do from what the rest of it does.
+        centre: sample each object centred on its bounding box (:meth:`GraspModel.sample`); the
+            grasps and the simulation stay in the mesh frame.
 
     Returns:
         :class:`GraspEvalReport`: one :class:`PairResult` per (hand, object), hand-major, labelled by
@@ -257,7 +259,8 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
         for obj in objs:
             s = pair_seed(seed, str(name), obj.mesh_hash)
             timing: dict = {}
-            grasps = model.sample(params, obj, int(n), seed=s, timing=timing, condition_hand=condition_hand, refine=refine)
+            grasps = model.sample(params, obj, int(n), seed=s, timing=timing, condition_hand=condition_hand, refine=refine,
+                                  centre=centre)
             if hybrid is not None:
                 sim_hand = hybrid
             else:
@@ -276,7 +279,7 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
     ref = None if (rs := as_refine_settings(refine)) is None else asdict(rs)
     meta = {"n_per_pair": int(n), "seed": int(seed), "original": bool(original), "inertials": inertials, "collisions": collisions,
             "condition_hand": cond,
-            "refine": ref,
+            "refine": ref, "centre": bool(centre),
             "model": str(model.path),
             "model_meta": model.meta, "protocol": protocol.__dict__ if protocol is not None else "default"}
     return GraspEvalReport(pairs, meta)

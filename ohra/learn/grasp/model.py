@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import time
+import warnings
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -27,7 +28,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from ohra.errors import CheckpointError, GraspError, ObjectError
+from ohra.errors import CheckpointError, GraspError, ObjectError, ObjectWarning, user_stacklevel
 from ohra.learn.grasp.condition import HandCondition, HandLike, resolve_hand
 from ohra.learn.grasp.config import GraspModelConfig
 from ohra.learn.grasp.diffusion import DDIMScheduler, Denoiser
@@ -81,6 +82,18 @@ class GraspNet(nn.Module):
             return self.denoiser.forward_level(x, t, cond_h)
 
         return self.scheduler.sample(predict, (len(cond), 3), generator, clip=self.cfg.clip_sample)
+
+
+CENTRE_WARN = 0.1
+"""[m] :meth:`GraspModel.sample` warns about objects whose bounding-box centre lies farther than this
+from their mesh frame's origin (the YCB meshes in ``../shared/objects``, some of which the shipped models
+trained on, lie 0.8-9.7 cm off; procedural objects 0)."""
+
+
+def object_offset(obj: ObjectModel) -> np.ndarray:
+    """(3,) [m] the centre of ``obj``'s mesh bounding box in its mesh frame."""
+    b = np.asarray(obj.mesh.bounds, dtype=float)
+    return 0.5 * (b[0] + b[1])
 
 
 def as_rotations(rotations: Any, n: int) -> np.ndarray:
@@ -184,7 +197,7 @@ class GraspModel:
     # -- sampling -------------------------------------------------------------------------------------
     def sample(self, hand: HandLike, obj: ObjectLike, n: int, rotations: Any = None, seed: int = 0,
                timing: dict | None = None, condition_hand: HandLike | None = None,
-               refine: bool | RefineSettings = False) -> np.ndarray:
+               refine: bool | RefineSettings = False, centre: bool = False) -> np.ndarray:
         """``n`` grasps of ``hand`` on ``obj`` (see the module docstring).
 
         Args:
@@ -202,6 +215,12 @@ class GraspModel:
                 clamped to ``hand``'s limits (the paper's wrong-condition study, Table 9).
             refine: True (default settings) or :class:`~ohra.learn.grasp.refine.RefineSettings`: open the
                 fingers just enough to clear the object (:func:`~ohra.learn.grasp.refine.refine_grasps`).
+            centre: sample on the object moved so that its bounding-box centre is at the origin, then move
+                the grasps back (they stay in the mesh frame). The network sees surface points in the mesh
+                frame, and its training objects lay within :data:`CENTRE_WARN` of their frame's origin; a
+                mesh in scene coordinates (its origin far from the object) gets grasps in the wrong place
+                unless centred. Off by default (the published numbers were sampled without it); a warning
+                names objects farther off than that.
 
         Returns:
             (n, 31) float64 grasps ``[t (3), rot6d (6), q (22)]``: ``t`` the palm-frame origin in the
@@ -221,6 +240,13 @@ class GraspModel:
         n = int(n)
         params = resolve_hand(hand)
         obj = resolve_object(obj)
+        offset = object_offset(obj)
+        if not centre and float(np.linalg.norm(offset)) > CENTRE_WARN:
+            warnings.warn(f"object {obj.name!r}: its bounding-box centre lies {100 * np.linalg.norm(offset):.1f} cm from its "
+                          f"mesh frame's origin, over {100 * CENTRE_WARN:g} cm (the shipped models' training objects lie "
+                          "within that): grasps sampled in that frame can miss the object; pass centre=True (--centre)", ObjectWarning,
+                          stacklevel=user_stacklevel())
+        shift = offset if centre else np.zeros(3)
         rng = np.random.default_rng(seed)
         rots = random_rotations(n, rng) if rotations is None else as_rotations(rotations, n)
         t0 = time.perf_counter()
@@ -234,13 +260,13 @@ class GraspModel:
         if self.threads and self.threads != old_threads:
             torch.set_num_threads(int(self.threads))
         try:
-            feat, x, q = self._run(obj, hand_vec, r6, lower, upper, gen)
+            feat, x, q = self._run(obj, hand_vec, r6, lower, upper, gen, shift)
         finally:
             if torch.get_num_threads() != old_threads:
                 torch.set_num_threads(old_threads)
         # clamp again in float64: a float32 limit can lie a hair outside the float64 one
         q64 = np.clip(q.double().numpy(), params.joint_lowers, params.joint_uppers)
-        out = np.concatenate([x.double().numpy() * self.t_scale, r6, q64], axis=1)
+        out = np.concatenate([x.double().numpy() * self.t_scale + shift, r6, q64], axis=1)  # in the mesh frame
         if timing is not None:
             timing["seconds"] = time.perf_counter() - t0
         if (settings := as_refine_settings(refine)) is not None:
@@ -251,11 +277,15 @@ class GraspModel:
         return out
 
     def _run(self, obj: ObjectModel, hand_vec: torch.Tensor, r6: np.ndarray, lower: torch.Tensor, upper: torch.Tensor,
-             gen: torch.Generator) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """The networks: object feature, normalised translations (n, 3), clamped joints (n, 22)."""
+             gen: torch.Generator, shift: np.ndarray | None = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """The networks: object feature, normalised translations (n, 3), clamped joints (n, 22); the
+        object's surface points are seen moved by ``-shift`` [m] (translations come out in that frame)."""
         n = len(r6)
+        cloud = self.object_cloud(obj)
+        if shift is not None and np.any(shift):
+            cloud = cloud - torch.from_numpy(np.asarray(shift, dtype=np.float32))
         with torch.inference_mode():
-            feat = self.net.encoder(self.object_cloud(obj)[None])
+            feat = self.net.encoder(cloud[None])
             cond = torch.cat([feat.expand(n, -1), hand_vec.expand(n, -1), torch.from_numpy(r6.astype(np.float32))], dim=-1)
             x = self.net.sample_translation(cond, gen)
             q = clamp_joints(self.net.joints(torch.cat([cond, x], dim=-1)), lower, upper)
