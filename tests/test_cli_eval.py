@@ -104,3 +104,16 @@ def test_a_millimetre_mesh_is_named_and_scale_makes_it_the_same_object(setup, ca
     assert rc == 0 and "ohra: warning: object 'box_mm'" in err and "--scale 0.001" in err
     rc, out, err = _run(capsys, grasps, "--hand", hand, "--object", mm, "--scale", "0.001")
     assert rc == 0 and "1/2 succeeded (50.0 %)" in out and "warning" not in err
+
+
+def test_a_dataset_folder_for_grasps_names_a_shard_to_pass_and_an_empty_file_says_nothing_ran(setup, capsys):
+    tmp, hand, mesh, grasps = setup
+    shard = tmp / "data" / "pinch" / "box-0123abcd.npz"
+    shard.parent.mkdir(parents=True)
+    np.savez(shard, grasps=np.array([pinch_grasp()]))
+    rc, _, err = _run(capsys, tmp / "data", "--hand", hand, "--object", mesh)
+    assert rc == 2 and "is a folder" in err and "pinch/box-0123abcd.npz" in err and len(err.strip().splitlines()) == 1
+    empty = tmp / "empty.npz"
+    np.savez(empty, grasps=np.zeros((0, 31)))
+    rc, out, _ = _run(capsys, empty, "--hand", hand, "--object", mesh)
+    assert rc == 0 and "holds no grasps; nothing was simulated" in out and "0/0" not in out

@@ -77,6 +77,11 @@ def eval_hand(name: str, original: bool = False, form: str | None = None, inerti
 def load_grasp_file(path: str | Path, key: str | None = None) -> np.ndarray:
     """The (N, 31) array of a grasp file; :class:`GraspError` naming the file when unusable."""
     path = Path(path)
+    if path.is_dir():
+        shards = sorted(str(p.relative_to(path)) for p in path.glob("*/*.npz"))[:3]
+        hint = f" (e.g. {path / shards[0]})" if shards else ""
+        raise GraspError(f"{path} is a folder: pass one grasp file, such as a dataset shard HAND/OBJECT-HASH.npz{hint}, "
+                         "or export a dataset's grasps with GraspDataset(DIR).grasps()")
     if not path.is_file():
         raise GraspError(f"grasp file not found: {path}")
     try:
@@ -144,6 +149,9 @@ def run(args: argparse.Namespace) -> int:
     if args.meshcat and len(g):
         _meshcat(args, hand, obj, g[0])
     n = len(rep.results)
+    if n == 0:
+        print(f"{args.hand} on {obj.name}: {args.grasps} holds no grasps; nothing was simulated")
+        return 0
     print(f"{args.hand} on {obj.name}: {int(rep.success.sum())}/{n} succeeded ({100 * rep.success_rate:.1f} %), "
           f"{rep.clamped_count} clamped, {wall:.1f} s ({n / wall if wall > 0 else 0:.1f} grasps/s)")
     return 0
