@@ -92,7 +92,10 @@ def run_key(run: Path) -> dict:
 
 
 def _protocol_repr(protocol: Any, omit: tuple[str, ...] = ()) -> str:
-    """A protocol as the study keys hold it: its dataclass repr, without the fields ``omit``."""
+    """A protocol as the study keys hold it: its dataclass repr, without the fields ``omit`` (nor
+    ``object_point`` at "frame", what every evaluation did before the setting existed: keys made before it hold)."""
+    if getattr(protocol, "object_point", None) == "frame":
+        omit = (*omit, "object_point")
     return f"{type(protocol).__name__}(" + ", ".join(
         f"{f.name}={getattr(protocol, f.name)!r}" for f in fields(protocol) if f.name not in omit) + ")"
 
