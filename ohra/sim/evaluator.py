@@ -176,8 +176,9 @@ def run_grasp(world: World, grasp: np.ndarray, mode: str = "eval") -> GraspResul
             break
     pb.setGravity(0, 0, 0, physicsClientId=c)
     T_obj = world.object_frame()
-    p_end = point() - (world.obj_inertial[:3, 3] if prot.object_point == "com" else 0.0)  # from where it began
-    final = float(np.linalg.norm(point() - p0))
+    p_last = point()
+    p_end = p_last - (world.obj_inertial[:3, 3] if prot.object_point == "com" else 0.0)  # from where it began
+    final = float(np.linalg.norm(p_last - p0))
     success = (not early) and final <= prot.success_displacement
     if mode == "filter":
         success = success and float(np.linalg.norm(p_end)) <= prot.filter_max_distance
