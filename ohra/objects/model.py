@@ -303,9 +303,20 @@ class ObjectModel:
                           f"body {best.kind} ({len(best.pieces)} piece(s)): volume {1e6 * best.mass_properties.volume:.4g} cm^3, "
                           f"mass properties {best.mass_properties.method}", ObjectWarning, stacklevel=user_stacklevel())
         if not fid.within_tolerance:
-            warnings.warn(f"object {self.name!r}: no convex body within {1e3 * BODY_TOLERANCE_M:.0f} mm of the mesh "
-                          f"(best: {best.kind}, 95th percentile {1e3 * fid.p95:.1f} mm, volume x{fid.volume_ratio:.2f}); "
-                          "grasps are synthesised and simulated on that body", ObjectWarning, stacklevel=user_stacklevel())
+            tol = f"{1e3 * BODY_TOLERANCE_M:.0f} mm"
+            inside = [(f, b) for f, b in scored if f.within_tolerance]
+            if inside:
+                # the ranking is by mean distance, so a body within the 95th-percentile tolerance can lose to one
+                # closer on average; say so rather than claim no body is within it
+                f2, b2 = min(inside, key=lambda fb: fb[0].mean)
+                warnings.warn(f"object {self.name!r}: the body closest to the mesh on average ({best.kind}, mean "
+                              f"{1e3 * fid.mean:.1f} mm) lies beyond {tol} at the 95th percentile ({1e3 * fid.p95:.1f} mm); "
+                              f"{b2.kind} is within it ({1e3 * f2.p95:.1f} mm) but farther on average ({1e3 * f2.mean:.1f} mm); "
+                              f"grasps are synthesised and simulated on {best.kind}", ObjectWarning, stacklevel=user_stacklevel())
+            else:
+                warnings.warn(f"object {self.name!r}: no convex body within {tol} of the mesh "
+                              f"(best: {best.kind}, 95th percentile {1e3 * fid.p95:.1f} mm, volume x{fid.volume_ratio:.2f}); "
+                              "grasps are synthesised and simulated on that body", ObjectWarning, stacklevel=user_stacklevel())
         return best
 
     def _fidelity_of(self, body: Body) -> Fidelity:
