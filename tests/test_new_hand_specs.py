@@ -198,6 +198,13 @@ def test_info_on_a_spec_names_the_hand_and_lists_its_couplings(spec, capsys):
     assert rc == 0 and "couplings" not in out
 
 
+def test_check_on_a_spec_lists_the_hand_by_its_name_not_its_path(spec, capsys):
+    rc, out, err = _hand_cli(["check", str(spec)], capsys)
+    assert rc == 0, err
+    row = next(l for l in out.splitlines() if l.split() and l.split()[-1] == "ok")
+    assert row.split()[0] == "toy_two_finger" and str(spec) not in out
+
+
 @pytest.mark.parametrize("action", ["render", "info", "check", "compare", "show"])
 def test_every_hand_argument_says_it_takes_a_spec_yaml_or_params_json(action):
     import argparse

@@ -43,8 +43,11 @@ def check_hand(name: str, form: str | None = None, client: int | None = None, vi
     Visual shapes (identical to the collision primitives) are skipped in PyBullet unless ``visuals``;
     that halves the load time.
     """
+    from ohra.hands.resolve import resolve_hand
+
     t0 = time.perf_counter()
-    params = get_hand(name, form)
+    ref = resolve_hand(name, form)  # a spec or params file is listed by its hand's name, not its path
+    params, name = ref.params, ref.name
     text = render(params, robot_name=name)
     own = client is None
     with captured_c_output() as captured:
