@@ -52,7 +52,7 @@ def build(recipe: Recipe | str | Path, out: str | Path | None = None, workers: i
     from ohra.synth.pipeline import synthesize
 
     r = recipe if isinstance(recipe, Recipe) else Recipe.load(recipe)
-    hands = _select(r.resolve_hands(with_couplings=True), hands, r)  # coupled hands keep their couplings
+    hands = _select(r.resolve_coupled_hands(), hands, r)  # coupled hands keep their couplings
     objects = r.resolve_objects()
     settings = r.synth_settings()
     split = r.split_objects(object_keys(objects))

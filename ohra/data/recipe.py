@@ -118,17 +118,22 @@ class Recipe:
         q = Path(p).expanduser()
         return q if q.is_absolute() or self.source is None else self.source.parent / q
 
-    def resolve_hands(self, with_couplings: bool = False) -> list[tuple]:
-        """(name, params) of every hand, in recipe order, each once; with ``with_couplings``
-        (name, params, couplings): a coupled hand's couplings (URDF ``<mimic>`` tags, a spec's
-        ``couplings``, a params JSON's ``"couplings"`` key), which synthesis needs as equality rows."""
-        out: dict[str, Any] = {}
+    def resolve_hands(self) -> list[tuple[str, Any]]:
+        """(name, params) of every hand, in recipe order, each once."""
+        return [(n, e[1]) for n, e in self._entries().items()]
+
+    def resolve_coupled_hands(self) -> list[tuple[str, Any, tuple]]:
+        """(name, params, couplings) of every hand, in recipe order, each once: a coupled hand's couplings
+        (URDF ``<mimic>`` tags, a spec's ``couplings``, a params JSON's ``"couplings"`` key), which synthesis
+        needs as equality rows; empty for an uncoupled hand."""
+        return [(n, e[1], tuple(e[2]) if len(e) > 2 else _couplings(n)) for n, e in self._entries().items()]
+
+    def _entries(self) -> dict[str, tuple]:
+        out: dict[str, tuple] = {}
         for i, h in enumerate(self.hands):
             for entry in self._hand(h, f"{self.source or '<recipe>'}: hands[{i}]"):
                 out.setdefault(entry[0], entry)
-        if with_couplings:
-            return [(n, e[1], tuple(e[2]) if len(e) > 2 else _couplings(n)) for n, e in out.items()]
-        return [(n, e[1]) for n, e in out.items()]
+        return out
 
     def _hand(self, h: Any, where: str) -> list[tuple[str, Any]]:
         from ohra.hands import get_hand, list_hands
