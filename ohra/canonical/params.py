@@ -64,6 +64,9 @@ MAX_LENGTH = 0.5  # m, link length
 MAX_POSITION = 0.5  # m, |coordinate| of any joint origin in the palm frame
 MAX_ANGLE = 2.0 * math.pi + 1e-6  # rad, |joint limit| and |rpy component|
 AXIS_UNIT_TOL = 1e-3
+# m: the least gap between capsules of different fingers; synthesis keeps it in every grasp
+# (ohra.synth.nlp.NLPSettings.finger_gap) and the parser keeps a fitted hand's fingers that far apart at rest
+FINGER_GAP = 0.001
 
 Form = Union["BaseParams", "ExtendedParams"]
 

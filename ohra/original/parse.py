@@ -20,13 +20,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from ohra.canonical.params import BaseParams, ExtendedParams
+from ohra.canonical.params import FINGER_GAP, BaseParams, ExtendedParams
 from ohra.errors import ParamsError, ParseError, SpecError
 from ohra.canonical.couplings import Coupling, describe
 from ohra.original.action import ActionMap
 from ohra.original.checks import check_palm_frame
 from ohra.original.estimate import initial_base, initial_extended
-from ohra.original.fit import FINGER_GAP, FitResult, fit, rounded
+from ohra.original.fit import FitResult, fit, rounded
 from ohra.original.measure import Measurement, ParseWarning, measure
 from ohra.original.spec import HandSpec, load_spec
 from ohra.original.urdf import OriginalHand, load_urdf
@@ -34,7 +34,7 @@ from ohra.original.urdf import OriginalHand, load_urdf
 Params = BaseParams | ExtendedParams
 
 
-# FINGER_GAP (m): how far apart synthesis keeps different fingers (ohra.synth.nlp.NLPSettings.finger_gap)
+# FINGER_GAP (m, ohra.canonical.params): how far apart synthesis keeps different fingers
 
 
 def _separate_fingers(params: Params, am: ActionMap, notes: list[str]) -> Params:

@@ -35,6 +35,7 @@ import numpy as np
 
 from ohra.canonical.couplings import Coupling, project, residual
 from ohra.canonical.kinematics import HandModel
+from ohra.canonical.params import FINGER_GAP
 from ohra.errors import OhraError
 from ohra.objects.model import ObjectModel
 from ohra.rotations import matrix_to_rot6d
@@ -59,7 +60,7 @@ class NLPSettings:
     mu: float = 0.5  # design friction
     contact_band: tuple[float, float] = (-0.0005, 0.001)  # m, sdf - r at the contacts
     clearance: float = 0.001  # m, other links and palm
-    finger_gap: float = 0.001  # m between different fingers
+    finger_gap: float = FINGER_GAP  # m between different fingers
     w_force: float = 1e-2
     w_posture: float = 1e-1
     torque_length: float = 0.05  # m, torque normalisation
