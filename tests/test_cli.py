@@ -115,6 +115,14 @@ def test_every_command_module_is_registered():
     assert list(hand.choices) == ["list", "render", "info", "check", "parse", "compare", "show"]
 
 
+def test_the_train_group_names_every_model_it_trains():
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    train = next(a for a in sub.choices["train"]._actions if isinstance(a, argparse._SubParsersAction))
+    help_of = {a.dest: a.help for a in sub._choices_actions}
+    assert list(train.choices) == ["vae", "grasp", "rotate"]
+    assert help_of["train"].endswith(": " + ", ".join(train.choices)), help_of["train"]
+
+
 def test_missing_or_broken_command_module_is_an_error(monkeypatch):
     monkeypatch.setattr(cli_main, "COMMANDS", (*cli_main.COMMANDS, "no_such_group"))
     with pytest.raises(ModuleNotFoundError, match="ohra.cli.no_such_group"):

@@ -32,7 +32,7 @@ REFINE_HELP = ("open the fingers just enough to clear the object after sampling 
 
 def register(sub: Any) -> None:
     """Add ``ohra grasp sample|eval`` and ``ohra train grasp``."""
-    register_train(subcommand_group(sub, "train", "train learned models (vae, grasp, ...)", "train_command"))
+    register_train(subcommand_group(sub, "train", "train learned models", "train_command"))
     g = subcommand_group(sub, "grasp", "the cross-embodiment grasp model: sample and evaluate grasps", "grasp_command")
     model_help = ("run or model directory, .pt file, or a shipped model: 'default' (VAE condition; base-form hands such "
                   "as Allegro, Barrett, Shadow) or 'leap' (raw-parameter condition, trained on 66 LEAP variants); "

@@ -24,7 +24,7 @@ def register(sub) -> None:
     from ohra.learn.config import TrainConfig
 
     d = TrainConfig()
-    train = subcommand_group(sub, "train", "train learned models (vae, ...)", "train_command")
+    train = subcommand_group(sub, "train", "train learned models", "train_command")
     p = train.add_parser("vae", help="train the morphology VAE on synthetic hands")
     p.add_argument("--samples", type=int, default=d.samples, help=f"synthetic training hands (default {d.samples})")
     p.add_argument("--epochs", type=int, default=d.epochs, help=f"epochs (default {d.epochs})")

@@ -46,14 +46,19 @@ class Parser(argparse.ArgumentParser):
 _Parser = Parser  # the name this class had before the CLI became a package
 
 
+# a group several command modules add to keeps one help text, whichever module registers it first
+SHARED_GROUP_HELP = {"train": "train learned models: vae, grasp, rotate"}
+
+
 def subcommand_group(sub: argparse._SubParsersAction, name: str, help_text: str, dest: str) -> argparse._SubParsersAction:
     """The subparsers of top-level command ``name`` (``ohra NAME WHAT ...``), created on first use.
 
-    Lets several command modules add to one group (``ohra train vae``, ``ohra train grasp``).
+    Lets several command modules add to one group (``ohra train vae``, ``ohra train grasp``); such a
+    group's help is :data:`SHARED_GROUP_HELP`'s, not ``help_text``.
     """
     parser = sub.choices.get(name)
     if parser is None:
-        parser = sub.add_parser(name, help=help_text)
+        parser = sub.add_parser(name, help=SHARED_GROUP_HELP.get(name, help_text))
         group = parser.add_subparsers(dest=dest, metavar="WHAT", parser_class=type(parser))
         group.required = True
         return group

@@ -95,7 +95,7 @@ def register(sub: Any) -> None:
 
     _train_args(rs.add_parser("train", help=TRAIN_HELP))
     # the same command under the train group, beside ``ohra train vae`` and ``ohra train grasp``
-    _train_args(subcommand_group(sub, "train", "train learned models (vae, grasp, rotate)", "train_command")
+    _train_args(subcommand_group(sub, "train", "train learned models", "train_command")
                 .add_parser("rotate", help=TRAIN_HELP))
 
     p = rs.add_parser("eval", help="Steps-to-Fall and Cumulative Rotation of a trained run; renders an episode")
