@@ -86,6 +86,17 @@ def test_check_command_loads_hands_cleanly(capsys):
     assert "0 failed" in capsys.readouterr().out
 
 
+def test_check_without_all_hides_only_leap_variants_and_counts_them(capsys):
+    assert main(["hand", "check", "leap_hand_right", "leap_3333", "leap_1111"]) == 0
+    rows = [l.split()[0] for l in capsys.readouterr().out.splitlines() if l.split() and l.split()[-1] == "ok"]
+    assert "leap_hand_right" in rows and "leap_3333" in rows and "leap_1111" not in rows
+
+
+def test_check_footer_counts_the_hidden_variants(capsys):
+    assert main(["hand", "check", "leap_hand_right", "leap_1111", "leap_2222"]) == 0
+    assert "... and 2 more LEAP variants" in capsys.readouterr().out
+
+
 # -- the command package: every group registered, ohra synth == python -m ohra.synth -----------------
 def _run(*argv: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, *argv], capture_output=True, text=True)

@@ -191,12 +191,13 @@ def _cmd_info(args: argparse.Namespace) -> int:
 def _cmd_check(args: argparse.Namespace) -> int:
     from ohra.hands import list_hands, variant_names
     from ohra.hands.check import check_hands
+    from ohra.hands.leap.variants import is_variant
 
     jobs = _jobs(args.hands or list_hands() + variant_names())
     results = check_hands(jobs)
     bad = [r for r in results if not r.ok]
     few = ("leap_3333", "leap_3303", "leap_0000")  # without --all, three LEAP variants stand for the 256
-    shown = results if args.all else [r for r in results if not r.name.startswith("leap_") or r.name in few]
+    shown = results if args.all else [r for r in results if not is_variant(r.name) or r.name in few]
     print(f"{'hand':22s} {'form':9s} {'fingers':>7s} {'dof':>4s} {'pin nq':>6s} {'bullet j':>8s} {'ms':>7s}  status")
     for r in shown:
         print(f"{r.name:22s} {r.form:9s} {r.fingers:7d} {r.dof:4d} {r.pinocchio_nq:6d} {r.bullet_joints:8d} "
