@@ -75,7 +75,7 @@ def test_bad_input_is_one_line_exit_2_nothing_written(tmp_path, argv, message, s
     proc = subprocess.run([sys.executable, "-m", "ohra.cli", *argv, "-o", str(out)] if "render" in argv and len(argv) > 2 else [sys.executable, "-m", "ohra.cli", *argv],
                           capture_output=True, text=True)
     assert proc.returncode == 2
-    lines = [l for l in proc.stderr.splitlines() if l.strip() and "pybullet build time" not in l]
+    lines = [l for l in proc.stderr.splitlines() if l.strip()]
     assert len(lines) == 1 and message in lines[0], proc.stderr
     assert "Traceback" not in proc.stderr
     assert not out.exists()
@@ -103,7 +103,7 @@ def _run(*argv: str) -> subprocess.CompletedProcess:
 
 
 def _stderr_lines(proc: subprocess.CompletedProcess) -> list[str]:
-    return [l for l in proc.stderr.splitlines() if l.strip() and "pybullet build time" not in l]
+    return [l for l in proc.stderr.splitlines() if l.strip()]
 
 
 def _options(help_text: str) -> list[str]:

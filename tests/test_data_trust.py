@@ -27,7 +27,7 @@ def _cli(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
 
 
 def _error_lines(proc: subprocess.CompletedProcess) -> list[str]:
-    return [line for line in proc.stderr.splitlines() if line.strip() and "pybullet build time" not in line]
+    return [line for line in proc.stderr.splitlines() if line.strip()]
 
 
 def _box_file(path: Path, extents) -> Path:

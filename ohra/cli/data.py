@@ -90,7 +90,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """``python -m ohra.data``: the ``ohra data`` commands on their own."""
     from ohra.cli.main import Parser, execute
 
-    parser = Parser(prog="python -m ohra.data")
+    parser = Parser(prog="ohra")  # the same commands as `ohra data ...`; usage lines name them so
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
     register(sub)
     args = parser.parse_args(["data", *(sys.argv[1:] if argv is None else argv)])
