@@ -147,6 +147,20 @@ def test_scale_brings_a_millimetre_mesh_into_range(tmp_path):
     assert np.allclose(obj.extents, [0.06, 0.07, 0.08])
 
 
+@pytest.mark.parametrize("extents, expect", [((0.06, 0.07, 0.08), "without --scale (0.1 now) it is 8 cm"),
+                                             ((60.0, 70.0, 80.0), "--scale 0.001 makes it 8 cm")])
+def test_the_scale_hint_accounts_for_a_scale_already_given(tmp_path, extents, expect):
+    """--scale replaces the factor: on a metre mesh given --scale 0.1 the fix is to drop it, not to add 10."""
+    (obj,) = resolve_objects([str(_box_file(tmp_path / "thing.stl", extents))], scale=0.1)
+    assert expect in size_problem(obj)
+
+
+def test_a_scale_that_is_not_positive_is_refused_for_every_object():
+    for spec in ("builtin:box", "procedural:box:3"):
+        with pytest.raises(ObjectError, match="scale must be a number > 0, got 0"):
+            resolve_objects([spec], scale=0)
+
+
 def test_a_pair_where_nothing_converges_says_why():
     from ohra.canonical.kinematics import HandModel
 

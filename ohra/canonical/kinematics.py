@@ -31,8 +31,8 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from ohra.errors import OhraError, ParamsError
-from ohra.canonical.params import FINGERS, JOINT_NAMES, BaseParams, ExtendedParams, load_params
+from ohra.errors import OhraError
+from ohra.canonical.params import FINGERS, JOINT_NAMES, BaseParams, ExtendedParams, load_params, require_params
 from ohra.canonical.urdfgen import palm_geometry, render
 from ohra.transforms import axis_angle_to_matrix
 
@@ -134,8 +134,7 @@ class HandModel:
         Raises:
             ParamsError: ``params`` is not :class:`BaseParams` or :class:`ExtendedParams`.
         """
-        if not isinstance(params, (BaseParams, ExtendedParams)):
-            raise ParamsError(f"expected BaseParams or ExtendedParams, got {type(params).__name__}")
+        require_params(params)
         return cls(render(params), params)
 
     @classmethod
@@ -220,7 +219,12 @@ class HandModel:
 
         Returns:
             (n, 22) joint angles [rad], canonical joint order.
+
+        Raises:
+            OhraError: ``n`` is not a whole number >= 0.
         """
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
+            raise OhraError(f"random_configurations: n must be a whole number >= 0, got {n!r}")
         rng = np.random.default_rng(seed)
         return self.lower + rng.random((int(n), 22)) * (self.upper - self.lower)
 

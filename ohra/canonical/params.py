@@ -702,3 +702,12 @@ def load_params(source: str | Path | Mapping[str, Any]) -> BaseParams | Extended
         return cls.from_dict(d)
     except ParamsError as exc:
         raise ParamsError(f"{where}: {exc}") from None
+
+
+def require_params(params: Any) -> None:
+    """Raise :class:`ParamsError` unless ``params`` is :class:`BaseParams` or :class:`ExtendedParams`; a hand name
+    or path gets a hint to resolve it first."""
+    if isinstance(params, (BaseParams, ExtendedParams)):
+        return
+    hint = f" (a hand name or file: pass ohra.get_hand({str(params)!r}))" if isinstance(params, (str, Path)) else ""
+    raise ParamsError(f"expected BaseParams or ExtendedParams, got {type(params).__name__}{hint}")

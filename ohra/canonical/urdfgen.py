@@ -19,7 +19,7 @@ from typing import Any, Union
 import jinja2
 import numpy as np
 
-from ohra.canonical.params import BaseParams, ExtendedParams
+from ohra.canonical.params import BaseParams, ExtendedParams, require_params
 from ohra.io import write_text
 from ohra.resources import templates_dir
 from ohra.transforms import inverse_rpy, rpy_to_matrix
@@ -184,9 +184,12 @@ def render(params: Params, robot_name: str = "canonical_hand") -> str:
     Returns:
         URDF text: root link ``world``, fixed to ``palm`` (the palm frame); lengths [m], masses [kg],
         limits [rad]; ends with one newline.
+
+    Raises:
+        ParamsError: ``params`` is not :class:`BaseParams` or :class:`ExtendedParams` (a hand name: resolve it
+            with :func:`ohra.get_hand` first).
     """
-    if not isinstance(params, (BaseParams, ExtendedParams)):
-        raise TypeError(f"expected BaseParams or ExtendedParams, got {type(params).__name__}")
+    require_params(params)
     tpl = _environment().get_template(template_name(params))
     text = tpl.render(**_context(params, robot_name))
     # Blank lines left by conditional blocks carry no meaning; drop them for compact files.

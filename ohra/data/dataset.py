@@ -76,6 +76,10 @@ class GraspDataset:
         which: ``"pre"`` (default): the grasps exactly as evaluated, which passed the test and
             its robustness trials; ``"post"``: the same grasps after the nominal test.
         split: ``"train"`` or ``"test"``: only objects of that side of the recipe's split.
+
+    Raises:
+        DatasetError: a directory without a manifest; ``which`` or ``split`` unknown; a named hand in none of the
+            directories (objects named but absent select nothing: held-out objects are absent by design).
     """
 
     def __init__(self, path: str | Path, hands: list[str] | None = None, objects: list[str] | None = None,
@@ -87,6 +91,7 @@ class GraspDataset:
         self.roots = [Path(path)] if not isinstance(path, (list, tuple)) else [Path(p) for p in path]
         self.which = which
         self.entries: list[tuple[Path, str, str, dict]] = []
+        seen_hands: set[str] = set()
         for root in self.roots:
             manifest = read_manifest(root / "manifest.json")
             if manifest is None:
@@ -96,6 +101,7 @@ class GraspDataset:
                 raise DatasetError(f"{root}: the manifest records no object split (build the dataset from a recipe)")
             side = set(manifest["split"][split]) if split else None
             for hand, entry in manifest.get("hands", {}).items():
+                seen_hands.add(hand)
                 if hands and hand not in hands:
                     continue
                 for key, sh in entry.get("shards", {}).items():
@@ -103,6 +109,10 @@ class GraspDataset:
                     if (objects and key not in objects and name not in objects) or (side is not None and key not in side):
                         continue
                     self.entries.append((root, hand, key, {**sh, "_format": fmt, "_name": name}))
+        unknown = [h for h in (hands or []) if h not in seen_hands]
+        if unknown:  # a typo would otherwise read as an empty dataset (objects may be absent: held-out ones are)
+            raise DatasetError(f"hand(s) {unknown} not in {', '.join(map(str, self.roots))}; it holds "
+                               f"{', '.join(sorted(seen_hands)) or 'no hands'}")
         self.max_per_pair = max_per_pair
 
     @classmethod

@@ -12,6 +12,7 @@ from typing import Union
 
 from ohra.canonical.couplings import Coupling
 from ohra.canonical.params import BaseParams, ExtendedParams
+from ohra.errors import HandNotFoundError
 from ohra.hands.leap.variants import leap_variant, variant_names
 from ohra.hands.resolve import HandRef, resolve_hand
 
@@ -73,7 +74,13 @@ def hands_in_form(form: str = "base") -> dict[str, Params]:
     """Params of every registered hand that has ``form`` (``"base"`` or ``"extended"``), by name in
     :func:`list_hands` order; hands not registered in that form (e.g. extended-only hands for
     ``"base"``) are left out, while a broken spec or params file of a hand that has it still raises.
-    LEAP variants are not included."""
+    LEAP variants are not included.
+
+    Raises:
+        HandNotFoundError: ``form`` is not ``"base"`` or ``"extended"``.
+    """
+    if form not in FORMS:
+        raise HandNotFoundError(f"unknown form {form!r}; expected one of {', '.join(map(repr, FORMS))}")
     reg = _registry()
     return {name: get_hand(name, form) for name in list_hands() if form in reg.registered_forms(name)}
 

@@ -136,6 +136,7 @@ class ObjectModel:
         if len(mesh.faces) == 0:
             raise ObjectError(f"object {name!r}: mesh has no faces")
         check_solid(mesh, name)  # before repair: Qhull and V-HACD fail (or hang) on flat input
+        self.file_scale = 1.0  # the factor :meth:`load` multiplied a file's coordinates by (its ``scale``)
         if repair:
             self.mesh, self.repair_report = repair_mesh(mesh)
         else:
@@ -238,7 +239,9 @@ class ObjectModel:
             mesh.apply_scale(float(scale))
             for pc in pieces or []:
                 pc.apply_scale(float(scale))
-        return cls(mesh, label, density, path, pieces, pieces_label=label_pieces)
+        out = cls(mesh, label, density, path, pieces, pieces_label=label_pieces)
+        out.file_scale = float(scale) if scale is not None else 1.0  # what the file's coordinates were multiplied by
+        return out
 
     @classmethod
     def builtin(cls, name: str, density: float = DEFAULT_DENSITY) -> "ObjectModel":

@@ -20,6 +20,8 @@ def resolve_objects(spec: list[str] | str | None, scale: float | None = None) ->
     """Objects from specs: ``builtin`` (all built-ins), ``builtin:NAME``, ``procedural:FAMILY:SEED``,
     a mesh/URDF file, or a folder (each sub-folder or mesh file in it). ``scale`` multiplies the
     coordinates of objects read from files (e.g. 0.001 for millimetre meshes)."""
+    if scale is not None and not (isinstance(scale, (int, float)) and math.isfinite(scale) and scale > 0):
+        raise ObjectError(f"scale must be a number > 0, got {scale!r}")
     specs = [spec] if isinstance(spec, str) else list(spec or ["builtin"])
     out: list[ObjectModel] = []
     for s in specs:
@@ -34,6 +36,30 @@ def resolve_objects(spec: list[str] | str | None, scale: float | None = None) ->
     return out
 
 
+def resolve_object(obj: "ObjectModel | str | Path", scale: float | None = None) -> ObjectModel:
+    """One object from an ObjectModel or a spec.
+
+    Args:
+        obj: an :class:`ObjectModel` (returned as is), ``builtin:NAME``, ``procedural:FAMILY:SEED``, or
+            a mesh / URDF file or folder that holds exactly one object.
+        scale: multiplies the coordinates of an object read from a file (e.g. 0.001 for a millimetre mesh).
+
+    Returns:
+        The object; its mesh in its mesh frame [m].
+
+    Raises:
+        ObjectError: ``obj`` is of another type, is not found or unusable, or names more than one object.
+    """
+    if isinstance(obj, ObjectModel):
+        return obj
+    if not isinstance(obj, (str, Path)):
+        raise ObjectError(f"object: expected an ObjectModel, builtin:NAME or a mesh path, got {type(obj).__name__}")
+    objs = resolve_objects(str(obj), scale=scale)
+    if len(objs) != 1:
+        raise ObjectError(f"object {str(obj)!r} names {len(objs)} objects, expected one")
+    return objs[0]
+
+
 def parse_procedural(spec: str) -> ObjectModel:
     """``procedural:FAMILY:SEED`` -> :meth:`ObjectModel.procedural`."""
     parts = spec.split(":")
@@ -44,7 +70,8 @@ def parse_procedural(spec: str) -> ObjectModel:
 
 def _from_path(p: Path, scale: float | None) -> list[ObjectModel]:
     if not p.exists():
-        raise ObjectError(f"object file or folder not found: {p}")
+        hint = f" (the built-in object: builtin:{p.name})" if str(p) in builtin_object_names() else ""
+        raise ObjectError(f"object file or folder not found: {p}{hint}")
     if p.is_dir() and not any(p.glob("*.obj")) and not any(p.glob("*.urdf")):
         subs = sorted(d for d in p.iterdir() if d.is_dir())
         files = sorted(f for f in p.iterdir() if f.suffix.lower() in MESH_SUFFIXES)
@@ -63,7 +90,14 @@ def size_problem(obj: ObjectModel, extent_range: tuple[float, float] = GRASPABLE
     if lo <= ext <= hi:
         return None
     k = round(math.log10(0.1 / ext))
-    hint = f"if its units are wrong, --scale {10.0 ** k:g} makes it {100 * ext * 10.0 ** k:.3g} cm" if k else ""
+    given = obj.file_scale  # --scale replaces, not multiplies: suggest the total
+    total = given * 10.0 ** k
+    if not k:
+        hint = ""
+    elif abs(math.log10(total)) < 1e-9:
+        hint = f"if its units are wrong, without --scale ({given:g} now) it is {100 * ext * 10.0 ** k:.3g} cm"
+    else:
+        hint = f"if its units are wrong, --scale {total:g} makes it {100 * ext * 10.0 ** k:.3g} cm"
     # the mass of the mesh (its hull when open), not of the body: a refused object must not pay for a convex
     # decomposition (minutes of V-HACD on a 75 m apple) nor warn about how that body fits it
     volume = abs(float(obj.mesh.volume)) if obj.watertight else float(obj.mesh.convex_hull.volume)

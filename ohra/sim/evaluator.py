@@ -31,8 +31,9 @@ from typing import Iterable, Sequence, Union
 import numpy as np
 import pybullet as pb
 
-from ohra.errors import GraspError, ObjectWarning, user_stacklevel
+from ohra.errors import GraspError, ObjectWarning, OhraError, user_stacklevel
 from ohra.objects.model import ObjectModel
+from ohra.objects.resolve import resolve_object
 from ohra.canonical.params import BaseParams, ExtendedParams
 from ohra.rotations import check_grasps, grasp_to_pose, pose_to_grasp
 from ohra.sim.controller import closes_positive, squeeze_targets
@@ -247,26 +248,24 @@ class GraspEvaluator:
     Args:
         hand: canonical params, a hand name (``ohra.get_hand``), or a :class:`SimHand` (e.g. an
             original hand: :meth:`original`, :meth:`from_urdf`).
-        obj: the object; its mesh frame is the frame of the grasps.
+        obj: the object (an :class:`ObjectModel`, or ``builtin:NAME``, ``procedural:FAMILY:SEED``, a mesh or URDF
+            path); its mesh frame is the frame of the grasps.
         protocol: constants (:class:`Protocol`; ``Protocol.strict()`` for the harder preset).
 
     ``evaluate(grasps, mode, workers)`` returns an :class:`EvalReport` in input order; results are
     identical for any order, batch split and worker count.
     """
 
-    def __init__(self, hand: Params | SimHand | str, obj: ObjectModel, protocol: Protocol | None = None):
+    def __init__(self, hand: Params | SimHand | str, obj: ObjectModel | str, protocol: Protocol | None = None):
         if isinstance(hand, str):
-            from ohra.hands import get_hand
-
-            from ohra.hands import get_couplings
+            from ohra.hands import get_couplings, get_hand
 
             hand = SimHand.from_params(get_hand(hand), name=hand, couplings=get_couplings(hand))
         elif isinstance(hand, (BaseParams, ExtendedParams)):
             hand = SimHand.from_params(hand)
         elif not isinstance(hand, SimHand):
-            raise TypeError(f"hand must be params, a hand name or a SimHand, got {type(hand).__name__}")
-        if not isinstance(obj, ObjectModel):
-            raise TypeError(f"obj must be an ObjectModel, got {type(obj).__name__}")
+            raise OhraError(f"hand must be params, a hand name or a SimHand, got {type(hand).__name__}")
+        obj = resolve_object(obj)  # an ObjectModel, or a spec as the CLI takes it ("builtin:box", a mesh path)
         self.hand = hand
         self.obj = obj
         self.protocol = protocol or Protocol()

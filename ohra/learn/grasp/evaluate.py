@@ -167,9 +167,10 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
 
     Args:
         model: the grasp model.
-        hands: hands as :meth:`GraspModel.sample` takes them; registered names only with
+        hands: hands as :meth:`GraspModel.sample` takes them (or one such hand); registered names only with
             ``original=True`` or ``inertials="original"``.
-        objects: objects as :func:`~ohra.learn.grasp.model.resolve_object` takes them; unseen in training.
+        objects: objects as :func:`~ohra.learn.grasp.model.resolve_object` takes them (or one such object);
+            unseen in training.
         n: grasps per pair, >= 1, each with its own uniformly random wrist rotation.
         seed: base seed; each pair's seed is :func:`pair_seed` of it, the hand's label
             (:func:`hand_label`: its name or path, or for params their content hash) and the mesh hash.
@@ -214,6 +215,9 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
 
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
         raise GraspError(f"n must be a positive integer, got {n!r}")
+    # one hand or object given by itself (a name is a sequence of letters, not of hands)
+    hands = [hands] if isinstance(hands, (str, Path)) or not isinstance(hands, Sequence) else list(hands)
+    objects = [objects] if isinstance(objects, (str, Path)) or not isinstance(objects, Sequence) else list(objects)
     if not hands or not objects:
         raise GraspError("evaluation needs at least one hand and one object")
     if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1:

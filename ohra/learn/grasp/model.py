@@ -134,29 +134,10 @@ def random_rotations(n: int, rng: np.random.Generator) -> np.ndarray:
 
 
 def resolve_object(obj: ObjectLike, scale: float | None = None) -> ObjectModel:
-    """One object from an ObjectModel or a spec.
+    """One object from an ObjectModel or a spec (:func:`ohra.objects.resolve.resolve_object`)."""
+    from ohra.objects.resolve import resolve_object as _resolve
 
-    Args:
-        obj: an :class:`ObjectModel` (returned as is), ``builtin:NAME``, ``procedural:FAMILY:SEED``, or
-            a mesh / URDF file or folder that holds exactly one object.
-        scale: multiplies the coordinates of an object read from a file (e.g. 0.001 for a millimetre mesh).
-
-    Returns:
-        The object; its mesh in its mesh frame [m].
-
-    Raises:
-        ObjectError: ``obj`` is of another type, is not found or unusable, or names more than one object.
-    """
-    if isinstance(obj, ObjectModel):
-        return obj
-    if not isinstance(obj, (str, Path)):
-        raise ObjectError(f"object: expected an ObjectModel, builtin:NAME or a mesh path, got {type(obj).__name__}")
-    from ohra.objects.model import resolve_objects
-
-    objs = resolve_objects(str(obj), scale=scale)
-    if len(objs) != 1:
-        raise ObjectError(f"object {str(obj)!r} names {len(objs)} objects, expected one")
-    return objs[0]
+    return _resolve(obj, scale)
 
 
 @dataclass

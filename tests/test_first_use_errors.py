@@ -1,0 +1,60 @@
+"""Mistakes a first-time user makes with the library get an ohra error that names the fix, not a numpy or
+Python error, nor an empty result (found by trying the README's examples as a new user)."""
+
+from __future__ import annotations
+
+import warnings
+
+import pytest
+
+import ohra
+from ohra.errors import DatasetError, GraspError, HandNotFoundError, ObjectError, OhraError, ParamsError
+
+
+def test_a_hand_name_where_params_are_expected_says_to_resolve_it():
+    for call in (ohra.render, ohra.HandModel.from_params):
+        with pytest.raises(ParamsError, match=r"got str \(a hand name or file: pass ohra.get_hand\('leap_3303'\)\)"):
+            call("leap_3303")
+
+
+@pytest.mark.parametrize("n", [-1, 2.5, True])
+def test_random_configurations_needs_a_whole_count(n):
+    with pytest.raises(OhraError, match="n must be a whole number >= 0"):
+        ohra.HandModel.from_params(ohra.get_hand("leap_3303")).random_configurations(n)
+
+
+def test_an_unknown_form_is_an_error_not_an_empty_registry():
+    assert ohra.hands.hands_in_form("base")
+    with pytest.raises(HandNotFoundError, match="unknown form 'basic'"):
+        ohra.hands.hands_in_form("basic")
+
+
+def test_a_dataset_filtered_by_a_hand_it_does_not_hold_names_the_hands_it_holds(tmp_path):
+    from ohra.data import GraspDataset
+    from ohra.io import write_json
+
+    write_json(tmp_path / "manifest.json", {"format": "ohra-grasps/1", "hands": {"leap_3303": {"shards": {}}}})
+    assert GraspDataset(tmp_path, hands=["leap_3303"]).entries == []
+    with pytest.raises(DatasetError, match=r"hand\(s\) \['leap_hnad'\] not in .*it holds leap_3303"):
+        GraspDataset(tmp_path, hands=["leap_hnad"])
+
+
+def test_the_evaluator_takes_an_object_spec_as_the_cli_does():
+    from ohra.sim import GraspEvaluator
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ev = GraspEvaluator(ohra.get_hand("leap_3303"), "builtin:box")
+    assert ev.obj.name == "box"
+    with pytest.raises(ObjectError, match=r"not found: box \(the built-in object: builtin:box\)"):
+        GraspEvaluator(ohra.get_hand("leap_3303"), "box")
+    with pytest.raises(OhraError, match="hand must be params, a hand name or a SimHand, got int"):
+        GraspEvaluator(3, "builtin:box")
+
+
+def test_evaluate_model_takes_one_hand_by_itself():
+    """A lone name is one hand, not a sequence of one-letter hands (the check fails on the path, not on '/')."""
+    from ohra.learn.grasp.evaluate import evaluate_model
+
+    with pytest.raises(GraspError, match=r"'/nowhere/hand.json' is not a registered hand"):
+        evaluate_model(object(), "/nowhere/hand.json", "builtin:box", n=1, inertials="original", allow_seen=True)
