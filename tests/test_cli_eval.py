@@ -117,3 +117,14 @@ def test_a_dataset_folder_for_grasps_names_a_shard_to_pass_and_an_empty_file_say
     np.savez(empty, grasps=np.zeros((0, 31)))
     rc, out, _ = _run(capsys, empty, "--hand", hand, "--object", mesh)
     assert rc == 0 and "holds no grasps; nothing was simulated" in out and "0/0" not in out
+
+
+def test_a_file_that_is_not_numpy_and_a_variant_replayed_on_its_original_say_what_is_wrong(tmp_path, capsys):
+    report = tmp_path / "report.json"
+    report.write_text("{}")
+    rc, _, err = _run(capsys, report, "--hand", "leap_3303", "--object", "builtin:box")
+    assert rc == 2 and "not a NumPy .npz/.npy file" in err and "pickled" not in err
+    grasps = tmp_path / "g.npz"
+    np.savez(grasps, grasps=np.zeros((1, 31)))
+    rc, _, err = _run(capsys, grasps, "--hand", "leap_3303", "--object", "builtin:box", "--original")
+    assert rc == 2 and "leap_3303 is a LEAP variant, a canonical hand with no original URDF" in err

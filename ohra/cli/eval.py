@@ -87,7 +87,10 @@ def load_grasp_file(path: str | Path, key: str | None = None) -> np.ndarray:
     try:
         data = np.load(path, allow_pickle=False)
     except Exception as exc:  # numpy raises several types for bad files
-        raise GraspError(f"{path}: cannot read as .npz/.npy ({exc})") from None
+        # numpy reads any file that is not .npy/.npz as a pickle, which it refuses: say what the file is not
+        why = "not a NumPy .npz/.npy file" if "pickled" in str(exc) else str(exc)
+        raise GraspError(f"{path}: cannot read grasps: {why} (expected an (N, 31) array, e.g. a shard or "
+                         "`ohra grasp sample` output)") from None
     if isinstance(data, np.ndarray):
         return data
     with data:

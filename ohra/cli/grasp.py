@@ -38,7 +38,7 @@ def register(sub: Any) -> None:
                   "as Allegro, Barrett, Shadow) or 'leap' (raw-parameter condition, trained on 66 LEAP variants); "
                   "default: 'default', or 'leap' when no hand has a base form")
     p = g.add_parser("sample", help="sample grasps of a hand on an object -> .npz (key 'grasps', (N, 31))")
-    p.add_argument("--hand", required=True, help="registered hand, leap_XXXX, or a params JSON file")
+    p.add_argument("--hand", required=True, help="registered hand, leap_XXXX, hand spec YAML, or params JSON file")
     p.add_argument("--object", required=True, help="mesh (.obj/.stl/.ply), object URDF or folder, or builtin:NAME")
     p.add_argument("--scale", type=float, default=None, help="multiply the coordinates of object files (0.001 for millimetre meshes)")
     p.add_argument("-n", type=int, default=100, help="number of grasps (default 100)")
@@ -50,7 +50,8 @@ def register(sub: Any) -> None:
     p.set_defaults(func=_cmd_sample)
 
     p = g.add_parser("eval", help="sample N grasps per (hand, unseen object) and run the six-direction test")
-    p.add_argument("--hands", nargs="+", required=True)
+    p.add_argument("--hands", nargs="+", required=True,
+                   help="hands to evaluate: registered hands, leap_XXXX, hand spec YAMLs or params JSON files")
     p.add_argument("--objects", nargs="+", required=True, help="builtin:NAME, mesh files or folders")
     p.add_argument("--scale", type=float, default=None, help="multiply the coordinates of object files (0.001 for millimetre meshes)")
     p.add_argument("-n", type=int, default=100, help="grasps per (hand, object) (default 100)")

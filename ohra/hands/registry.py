@@ -117,6 +117,11 @@ def spec_path(name: str) -> Path:
     """The spec file of a registered hand."""
     files = _spec_files()
     if name not in files:
+        from ohra.hands.leap.variants import is_variant
+
+        if is_variant(name):  # asked for where an original hand is needed (--original, compare)
+            raise HandNotFoundError(f"{name} is a LEAP variant, a canonical hand with no original URDF; the original "
+                                    "LEAP hand is leap_hand_right / leap_hand_left")
         raise HandNotFoundError(f"unknown hand {name!r}; registered: {', '.join(registered_hands())}")
     return files[name]
 
