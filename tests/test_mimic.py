@@ -245,3 +245,22 @@ def test_a_relative_urdf_path_resolves_against_the_spec_file(hands_dir, tmp_path
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         assert parse(spec, "base", fit_params=False).hand.path.name == "inspire_hand_right.urdf"
+
+
+@pytest.mark.assets
+def test_flipped_mcp_flexion_signs_are_refused_in_the_extended_form_too(hands_dir, tmp_path):
+    """The extended form measures j1/j2 axes freely (either may flex), but a flexion axis opposed to the finger's
+    would make positive canonical angles extend the finger: it gets the base form's 'use sign' advice."""
+    import yaml
+
+    d = yaml.safe_load(registry.spec_path("inspire_hand_right").read_text())
+    d["urdf"] = str(hands_dir / d["urdf"])
+    for f in ("index", "middle", "ring", "little"):
+        d["joints"][f"{f}_joint2"] = {"joint": d["joints"][f"{f}_joint2"], "sign": -1}
+    spec = tmp_path / "flipped.yaml"
+    spec.write_text(yaml.safe_dump(d))
+    for form in ("base", "extended"):
+        with pytest.raises(SpecError, match=r"_joint2.*with sign -1 its axis points opposite.*use sign \+1"):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                parse(spec, form, fit_params=False)

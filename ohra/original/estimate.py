@@ -119,6 +119,11 @@ def _finger_extended(m: Measurement, spec: HandSpec, form: str, fi: int, f: str,
     origins[row + 1, :3] = jo1
     axes[row] = R.T @ fm.a[sj1] if j1 else (1.0, 0.0, 0.0)
     axes[row + 1] = R.T @ fm.a[sj2] if j2 else (0.0, 1.0, 0.0)
+    # j1 / j2 are free axes here (either may be the MCP flexion: LEAP and Sharpa flex at j1), but a flexion
+    # axis opposed to the finger's (a flipped sign) would make positive canonical angles extend the finger
+    for s in (sj1, sj2):
+        if s in fm.a and float(fm.a[s] @ fm.y) < -0.5:
+            check_axis(spec, form, s, fm.a[s], fm.y, f"{f} flexion (+y)", m.notes)
     for s in names[2:]:
         if s in fm.a:
             check_axis(spec, form, s, fm.a[s], fm.y, f"{f} flexion (+y)", m.notes)
