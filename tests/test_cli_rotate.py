@@ -148,3 +148,63 @@ def test_grasps_for_a_mesh_file_object_at_a_given_size(tmp_path, monkeypatch, ca
     assert "+ " + str(mesh) in out and "my-mug" in out
     assert main(["grasps", "--object", "builtin:box", "--object-size", "0.05"]) == 2
     assert "keeps its own size" in capsys.readouterr().err
+
+
+def _saved_run(tmp_path, **env):
+    """A run folder holding only its config.json, as training writes it first."""
+    pytest.importorskip("stable_baselines3", reason="ohra rotate train needs stable-baselines3")
+    from ohra.learn.rl.config import PPOSettings
+    from ohra.learn.rl.train import _write_config
+    from ohra.sim.rotation.config import RotationConfig
+
+    run = tmp_path / "run"
+    run.mkdir()
+    _write_config(run, RotationConfig(**env), PPOSettings(total_steps=2048))
+    return run
+
+
+def test_resume_refuses_options_that_differ_from_the_run_and_accepts_its_own(tmp_path, capsys, monkeypatch):
+    import ohra.learn.rl.train as rl_train
+
+    calls = []
+    monkeypatch.setattr(rl_train, "train_rotation", lambda env_cfg, ppo, out, resume=False, verbose=0, tensorboard=False:
+                        calls.append((env_cfg, ppo)) or out)
+    run = str(_saved_run(tmp_path, hand="shadow_hand_right", joint_damping=True))
+    for extra, named in ((["--hand", "allegro_hand_right"], "hand: run 'shadow_hand_right', given 'allegro_hand_right'"),
+                         (["--set", "sim_dt=0.01"], "sim_dt: run 0.0083"), (["--seed", "3"], "seed: run 0, given 3")):
+        assert main(["train", "-o", run, "--resume", *extra]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "only --steps and --minutes change on --resume" in err and named in err, err
+    assert not calls
+    # the run's own options repeated (the original command plus --resume) resume it, with the new budget
+    assert main(["train", "-o", run, "--resume", "--hand", "shadow_hand_right", "--set", "joint_damping=true",
+                 "--steps", "4096"]) == 0
+    assert calls[0][0].hand == "shadow_hand_right" and calls[0][1].total_steps == 4096
+
+
+@pytest.mark.parametrize("setting, problem", [("sim_dt=abc", "sim_dt must be a number, got 'abc'"),
+                                              ("self_collision=maybe", "self_collision must be true or false"),
+                                              ("episode_steps=1.5", "episode_steps must be a whole number"),
+                                              ('grasp_noise="x"', "grasp_noise must be a number or None")])
+def test_set_values_of_the_wrong_type_are_one_line_and_exit_2(tmp_path, capsys, monkeypatch, setting, problem):
+    monkeypatch.setenv("OHRA_CACHE_DIR", str(tmp_path / "cache"))
+    assert main(["grasps", "--set", setting]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and problem in err and not (tmp_path / "cache").exists()
+
+
+def test_eval_of_no_episodes_is_refused_before_anything_is_written(tmp_path, capsys):
+    pytest.importorskip("stable_baselines3", reason="ohra rotate eval needs stable-baselines3")
+    assert main(["eval", "leap_canonical", "--episodes", "0", "-o", str(tmp_path / "ev")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "episodes must be a whole number >= 1, got 0" in err
+    assert not (tmp_path / "ev" / "eval.json").exists()
+
+
+def test_plot_of_a_column_progress_csv_lacks_names_the_columns(tmp_path, capsys):
+    run = tmp_path / "r"
+    run.mkdir()
+    (run / "progress.csv").write_text("timesteps,ep_reward_mean\n100,1.0\n200,2.0\n")
+    assert main(["plot", f"a={run}", "-o", str(tmp_path / "p.png"), "--key", "nope"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no column 'nope' (columns: timesteps, ep_reward_mean)" in err

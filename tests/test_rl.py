@@ -70,6 +70,11 @@ def test_train_resume_evaluate_and_plot_a_tiny_run(tiny):
     prog = read_progress(run)
     assert list(prog["timesteps"]) == [24, 48, 72, 96]  # appended, continuing the step count
     assert json.loads((run / "checkpoints" / "last.json").read_text())["timesteps"] == 96
+    from ohra.learn.rl.train import load_run
+
+    assert load_run(run)[1].total_steps == 96  # the resume's budget is the run's now
+    with pytest.warns(UserWarning, match="already at 96 of 96 steps: nothing to train"):
+        train_rotation(env_cfg, load_run(run)[1], run, resume=True)
 
     res = evaluate_run(run, episodes=2, seed=10)
     assert len(res.steps_to_fall) == 2 and all(0 < s <= 24 for s in res.steps_to_fall)
@@ -233,9 +238,10 @@ def test_a_run_started_in_the_folder_meanwhile_is_not_overwritten_and_torch_thre
     monkeypatch.setenv("OHRA_CACHE_DIR", str(tmp_path / "cache"))
     run = tmp_path / "run"
 
-    def another_run_starts(*args, **kwargs):
-        run.mkdir(parents=True, exist_ok=True)
+    def another_run_starts(*args, **kwargs):  # ... and reaches its first checkpoint
+        (run / "checkpoints").mkdir(parents=True, exist_ok=True)
         (run / "config.json").write_text("{}")
+        (run / "checkpoints" / "last.zip").write_bytes(b"weights")
 
     monkeypatch.setattr(grasps, "load_or_generate", another_run_starts)
     before = torch.get_num_threads()
@@ -345,3 +351,41 @@ def test_a_malformed_run_config_is_a_checkpoint_error_naming_the_file_on_load_an
         load_run(tmp_path)
     with pytest.raises(CheckpointError, match=problem):
         _check_resume(tmp_path, RotationConfig(), PPOSettings())
+
+
+def test_a_run_stopped_before_its_first_checkpoint_can_be_started_again_not_resumed(tmp_path, monkeypatch):
+    """Only its config and a few progress rows exist: nothing trained to lose, so a fresh start may replace them."""
+    import ohra.learn.rl.train as rl_train
+
+    run = tmp_path / "run"
+    run.mkdir()
+    env_cfg, ppo = RotationConfig(), PPOSettings(total_steps=2048)
+    rl_train._write_config(run, env_cfg, ppo)
+    (run / "progress.csv").write_text("timesteps,wall_s\n1024,3.0\n")
+    with pytest.raises(RLConfigError, match="stopped before its first checkpoint: start it again without resume"):
+        train_rotation(env_cfg, ppo, run, resume=True)
+
+    class Started(Exception):
+        pass
+
+    def started(*args, **kwargs):
+        raise Started
+
+    monkeypatch.setattr("ohra.sim.rotation.grasps.load_or_generate", started)
+    with pytest.raises(Started):  # past the "already holds a run" check, to the starting states
+        train_rotation(env_cfg, ppo, run)
+    (run / "checkpoints").mkdir()
+    (run / "checkpoints" / "last.zip").write_bytes(b"weights")
+    with pytest.raises(RLConfigError, match="already holds a run"):
+        train_rotation(env_cfg, ppo, run)
+
+
+def test_a_resume_budget_is_saved_for_the_next_plain_resume(tmp_path):
+    import ohra.learn.rl.train as rl_train
+
+    run = tmp_path / "run"
+    run.mkdir()
+    rl_train._write_config(run, RotationConfig(), PPOSettings(total_steps=2048))
+    rl_train._save_budget(run, with_budget(PPOSettings(total_steps=2048), 4096, 90.0))
+    _, ppo = rl_train.load_run(run)
+    assert ppo.total_steps == 4096 and ppo.max_minutes == 90.0

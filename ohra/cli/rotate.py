@@ -144,6 +144,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
             raise RLConfigError(f"{given}: a resumed run keeps the PPO settings in {out / 'config.json'}; "
                                 "only --steps and --minutes change on --resume")
         env_cfg, ppo = load_run(out)
+        _same_as_run(args, env_cfg, ppo, out)
         ppo = with_budget(ppo, args.steps, args.minutes)
     else:
         env_cfg = _env_config(args)
@@ -154,6 +155,34 @@ def _cmd_train(args: argparse.Namespace) -> int:
     path = train_rotation(env_cfg, ppo, out, resume=args.resume, verbose=0, tensorboard=args.tensorboard)
     print(f"wrote {path}")
     return 0
+
+
+# environment options as the parser defaults them: any other value was given on the command line
+_ENV_DEFAULTS = {"hand": "leap_hand_right", "urdf": "canonical", "inertials": "capsule", "form": None, "space": None,
+                 "object": "cube", "object_size": None, "grasps": 1000, "set": []}
+
+
+def _same_as_run(args: argparse.Namespace, env_cfg, ppo, out: Path) -> None:
+    """On --resume, refuse environment or PPO options that differ from the run's (they would be ignored);
+    repeating the run's own options is fine."""
+    from ohra.learn.rl.config import PPOSettings, RLConfigError
+
+    from ohra.sim.rotation.config import RotationConfigError
+
+    fields = {"grasps": "grasp_count"}
+    given = {fields.get(k, k): getattr(args, k) for k, v in _ENV_DEFAULTS.items() if k != "set" and getattr(args, k) != v}
+    given.update(_key_values(args.set, "--set", RotationConfigError))
+    theirs, mine = env_cfg.to_dict(), env_cfg.with_overrides(**given).to_dict()
+    diff = [f"{k}: run {theirs[k]!r}, given {mine[k]!r}" for k in mine if mine[k] != theirs[k]]
+    d = PPOSettings()
+    for opt, field in (("seed", "seed"), ("envs", "n_envs"), ("n_steps", "n_steps"), ("batch_size", "batch_size"),
+                       ("checkpoint_every", "checkpoint_every")):
+        v = getattr(args, opt)
+        if v != getattr(d, field) and v != getattr(ppo, field):
+            diff.append(f"{field}: run {getattr(ppo, field)!r}, given {v!r}")
+    if diff:
+        raise RLConfigError(f"{out}: a resumed run keeps the settings in {out / 'config.json'}; only --steps and "
+                            f"--minutes change on --resume (differs: {'; '.join(diff)})")
 
 
 def _cmd_eval(args: argparse.Namespace) -> int:

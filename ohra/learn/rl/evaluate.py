@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ohra.errors import CheckpointError
+from ohra.learn.rl.config import RLConfigError
 from ohra.sim.rotation.config import RotationConfig, RotationConfigError
 
 WHICH = ("model", "last")  # a run's final policy, or its last checkpoint
@@ -310,9 +311,14 @@ def evaluate_policy(policy, env_cfg: RotationConfig, episodes: int = 20, seed: i
         :class:`EvalResult`: per episode the control steps until termination (``episode_steps`` if it
         survived), the rotation [rad] about world +z (positive: the commanded direction), the
         termination reason (None if it survived), and the weighted return of each reward term.
+
+    Raises:
+        RLConfigError: ``episodes`` not a whole number >= 1.
     """
     from ohra.sim.rotation.env import InHandRotateEnv
 
+    if isinstance(episodes, bool) or not isinstance(episodes, (int, np.integer)) or episodes < 1:
+        raise RLConfigError(f"episodes must be a whole number >= 1, got {episodes!r}")
     env = InHandRotateEnv(env_cfg, grasps=grasps, sim_hand=hand)
     try:
         eps = [run_episode(env, policy, seed + i) for i in range(episodes)]
@@ -382,7 +388,8 @@ def evaluate_run(run_dir: str | Path, episodes: int = 20, seed: int = 1000, whic
             file; ``urdf`` names the other URDF for a policy in a native joint space.
         RotationConfigError: an unknown or invalid environment setting in the run's ``config.json``;
             ``urdf`` not ``"canonical"``, ``"original"`` or None.
-        RLConfigError: an unknown or invalid PPO setting in the run's ``config.json``.
+        RLConfigError: an unknown or invalid PPO setting in the run's ``config.json``; ``episodes`` < 1
+            (checked before anything is written).
     """
     run_dir = policy_dir(run_dir)
     if write and out_dir is None and is_shipped(run_dir):

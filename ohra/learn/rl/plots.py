@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ohra.errors import CheckpointError
+
 
 def read_progress(run_dir: str | Path) -> dict[str, np.ndarray]:
     """Columns of ``RUN/progress.csv`` as float arrays (empty cells -> NaN)."""
@@ -37,6 +39,10 @@ def mean_std_curve(runs: list[str | Path], key: str = "ep_reward_mean", x: str =
     curves = []
     for r in runs:
         p = read_progress(r)
+        for col in (key, x):
+            if col not in p:
+                raise CheckpointError(f"{Path(r) / 'progress.csv'} has no column {col!r}"
+                                      + (f" (columns: {', '.join(p)})" if p else " (no rows yet)"))
         ok = np.isfinite(p[key])
         curves.append((p[x][ok], smooth(p[key], window)[ok]))
     end = min(c[0][-1] for c in curves)

@@ -274,7 +274,10 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
         _check_start(run_dir, last, resume)  # ... and again under the lock: another run may have started meanwhile
         if resume:
             _check_resume(run_dir, env_cfg, ppo)
+            _save_budget(run_dir, ppo)  # a later plain resume continues to this budget
         else:
+            # a run stopped before its first checkpoint left only its config and a few progress rows
+            (run_dir / "progress.csv").unlink(missing_ok=True)
             _write_config(run_dir, env_cfg, ppo)
         set_random_seed(ppo.seed)
         venv = _vec_env(env_cfg, ppo)
@@ -292,6 +295,13 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
         try:
             cb = _callback(run_dir, ppo, wall_before)
             remaining = max(0, ppo.total_steps - model.num_timesteps)
+            spent = ppo.max_minutes is not None and wall_before >= 60.0 * ppo.max_minutes
+            if resume and (remaining == 0 or spent):
+                import warnings
+
+                warnings.warn(f"{run_dir}: already at {model.num_timesteps:,} of {ppo.total_steps:,} steps"
+                              + (f" and {wall_before / 60:.0f} of {ppo.max_minutes:g} minutes" if ppo.max_minutes else "")
+                              + ": nothing to train; give a larger --steps / --minutes to continue", UserWarning, stacklevel=2)
             model.learn(total_timesteps=remaining, callback=cb, reset_num_timesteps=False, tb_log_name="ppo")
             save_checkpoint(model, run_dir, cb.wall())
             model.save(run_dir / "model.zip")
@@ -301,10 +311,18 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
         return run_dir / "model.zip"
 
 
+def _trained(run_dir: Path) -> bool:
+    """Whether the folder holds trained weights (a checkpoint or a final policy), which a fresh run must not replace."""
+    return (run_dir / "checkpoints" / "last.zip").is_file() or (run_dir / "model.zip").is_file()
+
+
 def _check_start(run_dir: Path, last: Path, resume: bool) -> None:
     if resume and not last.is_file():
-        raise RLConfigError(f"nothing to resume: {last} does not exist")
-    if not resume and (run_dir / "config.json").is_file():
+        stopped = (run_dir / "config.json").is_file() and not _trained(run_dir)
+        raise RLConfigError(f"nothing to resume: {last} does not exist"
+                            + ("; the run stopped before its first checkpoint: start it again without resume (--resume)"
+                               if stopped else ""))
+    if not resume and _trained(run_dir):
         raise RLConfigError(f"{run_dir} already holds a run; pass resume=True (--resume) or choose another folder")
 
 
@@ -353,6 +371,15 @@ def _new_model(cls, venv, ppo: PPOSettings, verbose: int, tensorboard_log: str |
 def _plain(d: dict) -> dict:
     """``d`` as JSON would round-trip it (tuples as lists), so saved and current settings compare equal."""
     return json.loads(json.dumps(d))
+
+
+def _save_budget(run_dir: Path, ppo: PPOSettings) -> None:
+    """Record a resume's step and time budget in ``config.json`` (the only PPO settings a resume may change)."""
+    d = read_config(run_dir)
+    d["ppo"].update({k: ppo.to_dict()[k] for k in RESUMABLE_CHANGES})
+    tmp = run_dir / ".config.tmp.json"
+    tmp.write_text(json.dumps(d, indent=2) + "\n")
+    os.replace(tmp, run_dir / "config.json")
 
 
 def _write_config(run_dir: Path, env_cfg: RotationConfig, ppo: PPOSettings) -> None:

@@ -18,8 +18,11 @@ N m (the canonical URDF's effort); see :mod:`ohra.sim.rotation.scene` for why no
 
 from __future__ import annotations
 
+import os
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any, Mapping
+
+import numpy as np
 
 from ohra.errors import OhraError, reject_unknown
 
@@ -133,6 +136,7 @@ class RotationConfig:
     start_targets: str = "perturbed"
 
     def __post_init__(self) -> None:
+        self._check_types()
         choices = {"urdf": URDF_KINDS, "inertials": INERTIALS, "grasp_hold": GRASP_HOLDS, "collisions": COLLISIONS,
                    "start_targets": START_TARGETS, "work_velocity": WORK_VELOCITIES}
         for name, allowed in choices.items():
@@ -169,6 +173,25 @@ class RotationConfig:
                 f"1/control_hz = {self.control_dt:.6g} s must be a whole number of sim_dt = {self.sim_dt:.6g} s")
         if isinstance(self.weights, Mapping):
             object.__setattr__(self, "weights", _weights(self.weights, "weights"))
+
+    def _check_types(self) -> None:
+        """Each setting of its declared type (a value given as text, such as ``--set sim_dt=abc``, or a
+        fractional ``episode_steps`` is named here rather than failing later inside a comparison)."""
+        for f in fields(self):
+            v, kind = getattr(self, f.name), str(f.type)
+            if kind == "RewardWeights" or (v is None and kind.endswith("| None")):
+                continue
+            kind = kind.removesuffix(" | None")
+            if kind == "str" and f.name in ("hand", "object") and isinstance(v, os.PathLike):
+                object.__setattr__(self, f.name, os.fspath(v))  # a params JSON or mesh path
+                continue
+            ok = {"str": isinstance(v, str), "bool": isinstance(v, (bool, np.bool_)),
+                  "int": isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_)),
+                  "float": isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_))}[kind]
+            if not ok:
+                what = {"str": "text", "bool": "true or false", "int": "a whole number", "float": "a number"}[kind]
+                raise RotationConfigError(f"RotationConfig.{f.name} must be {what}"
+                                          + (" or None" if str(f.type).endswith("| None") else "") + f", got {v!r}")
 
     @property
     def control_dt(self) -> float:
@@ -220,4 +243,7 @@ def _weights(w: Any, source: str) -> RewardWeights:
     if isinstance(w, RewardWeights):
         return w
     reject_unknown(w, (f.name for f in fields(RewardWeights)), RotationConfigError, source, "reward term(s)")
+    bad = {k: v for k, v in w.items() if isinstance(v, bool) or not isinstance(v, (int, float))}
+    if bad:
+        raise RotationConfigError(f"{source}: reward weights must be numbers, got {bad}")
     return replace(RewardWeights(), **{k: float(v) for k, v in w.items()})
