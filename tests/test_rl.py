@@ -94,8 +94,13 @@ def test_train_resume_evaluate_and_plot_a_tiny_run(tiny):
 
     from ohra.learn.rl.evaluate import export_policy
 
+    (run.parent / "export").mkdir()
+    (run.parent / "export" / "eval.json").write_text("{}")  # an earlier export's evaluation, of another policy
+    (run / "eval.json").unlink()
     small = export_policy(run, run.parent / "export")
     assert not list(small.glob("*.pkl")) and (small / "grasps.npz").is_file()
+    assert not (small / "eval.json").exists()  # the stale evaluation is gone, not shipped beside this policy
+    assert json.loads((small / "trained.json").read_text())["timesteps"] == 96
     shipped = evaluate_run(small, episodes=2, seed=10, write=False)
     assert shipped.cumulative_rotation == res.cumulative_rotation  # same weights, stats and starting states
 

@@ -226,7 +226,8 @@ def export_policy(run_dir: str | Path, out_dir: str | Path, which: str = "model"
     """A small, pickle-free copy of a run for committing: ``config.json``, ``policy.pth`` (actor and
     critic weights, no optimizer), ``obs_stats.npz`` (``norm_obs`` and, when it is true, the observation
     ``mean``, ``var``, ``clip`` and ``eps``; false for a run trained without observation normalisation),
-    the starting states ``grasps.npz``, and the run's ``progress.csv`` / ``eval.json`` when present.
+    the starting states ``grasps.npz``, the run's ``progress.csv`` / ``eval.json`` when present (a stale
+    ``eval.json`` of an earlier export is removed), and ``trained.json`` (PPO steps and wall seconds trained).
 
     Args:
         run_dir: a training run (or an exported policy).
@@ -258,6 +259,10 @@ def export_policy(run_dir: str | Path, out_dir: str | Path, which: str = "model"
     for name in ("config.json", "progress.csv", "eval.json"):
         if (run / name).is_file():
             shutil.copy(run / name, out / name)
+        elif name == "eval.json":  # an earlier export's evaluation is not this policy's
+            (out / name).unlink(missing_ok=True)
+    if (run / "checkpoints" / "last.json").is_file():  # steps and wall seconds it was trained for
+        shutil.copy(run / "checkpoints" / "last.json", out / "trained.json")
     return out
 
 
