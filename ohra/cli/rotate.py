@@ -109,7 +109,8 @@ def register(sub: Any) -> None:
     p.add_argument("--replay", action="store_true", help="also write OUT/episode/replay.html (meshcat)")
     p.add_argument("--on-urdf", choices=("canonical", "original"),
                    help="run the policy on the hand's other URDF through the canonical joint space (a policy "
-                        "trained with space canonical); writes OUT/eval_on_URDF.json and OUT/episode_on_URDF/")
+                        "trained with space canonical); writes OUT/eval_on_URDF.json and OUT/episode_on_URDF/; the first "
+                        "use generates that URDF's starting states (minutes; cached)")
     p.set_defaults(func=_cmd_eval)
 
     p = rs.add_parser("plot", help="reward curves, mean +- std over seeds: LABEL=RUN[,RUN...] per group")
