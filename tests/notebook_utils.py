@@ -10,9 +10,17 @@ NOTEBOOKS = Path(__file__).resolve().parents[1] / "notebooks"
 def cell_text(cell, html_chars: int = 0) -> str:
     """A code cell's printed text and plain-text results, ``<png>`` for each image, and optionally the
     first ``html_chars`` characters of each HTML result."""
-    out = []
+    out: list[str] = []
+    prev_stream, at = None, -1
     for o in cell.get("outputs", []):
         data = o.get("data", {})
+        if o.get("output_type") == "stream" and o.get("name") == prev_stream:
+            # one print may reach the kernel's output thread in pieces on a loaded machine: join them as
+            # Jupyter shows them, not with the line breaks that separate outputs
+            out[at] += o.get("text", "")
+            continue
+        prev_stream = o.get("name") if o.get("output_type") == "stream" else None
+        at = len(out)
         out.append(o.get("text", ""))
         out.append(str(data.get("text/plain", "")))
         if html_chars:
