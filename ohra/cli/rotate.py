@@ -158,20 +158,17 @@ def _cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
-# environment options as the parser defaults them: any other value was given on the command line
-_ENV_DEFAULTS = {"hand": "leap_hand_right", "urdf": "canonical", "inertials": "capsule", "form": None, "space": None,
-                 "object": "cube", "object_size": None, "grasps": 1000, "set": []}
-
-
 def _same_as_run(args: argparse.Namespace, env_cfg, ppo, out: Path) -> None:
     """On --resume, refuse environment or PPO options that differ from the run's (they would be ignored);
     repeating the run's own options is fine."""
     from ohra.learn.rl.config import PPOSettings, RLConfigError
-
     from ohra.sim.rotation.config import RotationConfigError
 
+    env_parser = argparse.ArgumentParser(add_help=False)
+    _env_args(env_parser)
+    defaults = vars(env_parser.parse_args([]))  # an option left at its default was not given (or given as it)
     fields = {"grasps": "grasp_count"}
-    given = {fields.get(k, k): getattr(args, k) for k, v in _ENV_DEFAULTS.items() if k != "set" and getattr(args, k) != v}
+    given = {fields.get(k, k): getattr(args, k) for k, v in defaults.items() if k != "set" and getattr(args, k) != v}
     given.update(_key_values(args.set, "--set", RotationConfigError))
     theirs, mine = env_cfg.to_dict(), env_cfg.with_overrides(**given).to_dict()
     diff = [f"{k}: run {theirs[k]!r}, given {mine[k]!r}" for k in mine if mine[k] != theirs[k]]

@@ -28,7 +28,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from ohra.errors import CheckpointError, GraspError, ObjectError, ObjectWarning, user_stacklevel
+from ohra.errors import CheckpointError, GraspError, ObjectWarning, user_stacklevel
 from ohra.learn.grasp.condition import HandCondition, HandLike, resolve_hand
 from ohra.learn.grasp.config import GraspModelConfig
 from ohra.learn.grasp.diffusion import DDIMScheduler, Denoiser
@@ -36,6 +36,7 @@ from ohra.learn.grasp.encoder import make_encoder
 from ohra.learn.grasp.joints import JointNet, clamp_joints
 from ohra.learn.grasp.refine import RefineSettings, as_refine_settings, refine_grasps
 from ohra.objects.model import ObjectModel
+from ohra.objects.resolve import resolve_object  # noqa: F401  (re-exported: ohra.learn.grasp.model.resolve_object)
 
 MODEL_FORMAT = "ohra-grasp-model"
 CHECKPOINT_FORMAT = "ohra-grasp-checkpoint"
@@ -133,11 +134,6 @@ def random_rotations(n: int, rng: np.random.Generator) -> np.ndarray:
     return quat_to_matrix(qs / np.linalg.norm(qs, axis=1, keepdims=True))
 
 
-def resolve_object(obj: ObjectLike, scale: float | None = None) -> ObjectModel:
-    """One object from an ObjectModel or a spec (:func:`ohra.objects.resolve.resolve_object`)."""
-    from ohra.objects.resolve import resolve_object as _resolve
-
-    return _resolve(obj, scale)
 
 
 @dataclass

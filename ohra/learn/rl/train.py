@@ -377,6 +377,11 @@ def _save_budget(run_dir: Path, ppo: PPOSettings) -> None:
     """Record a resume's step and time budget in ``config.json`` (the only PPO settings a resume may change)."""
     d = read_config(run_dir)
     d["ppo"].update({k: ppo.to_dict()[k] for k in RESUMABLE_CHANGES})
+    _replace_config(run_dir, d)
+
+
+def _replace_config(run_dir: Path, d: dict) -> None:
+    """Write ``run_dir/config.json`` atomically."""
     tmp = run_dir / ".config.tmp.json"
     tmp.write_text(json.dumps(d, indent=2) + "\n")
     os.replace(tmp, run_dir / "config.json")
@@ -391,9 +396,7 @@ def _write_config(run_dir: Path, env_cfg: RotationConfig, ppo: PPOSettings) -> N
     d = {"env": env_cfg.to_dict(), "ppo": ppo.to_dict(),
          "versions": {"stable_baselines3": stable_baselines3.__version__, "gymnasium": gymnasium.__version__,
                       "torch": torch.__version__, "pybullet_api": pybullet.getAPIVersion()}}
-    tmp = run_dir / ".config.tmp.json"
-    tmp.write_text(json.dumps(d, indent=2) + "\n")
-    os.replace(tmp, run_dir / "config.json")
+    _replace_config(run_dir, d)
 
 
 def read_config(run_dir: str | Path) -> dict:
