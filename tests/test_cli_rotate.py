@@ -65,7 +65,7 @@ def test_ppo_settings_from_the_command_line_reach_training(tmp_path, monkeypatch
 
     seen = {}
 
-    def fake_train(env_cfg, ppo, out, resume=False, verbose=0, tensorboard=False):
+    def fake_train(env_cfg, ppo, out, resume=False, verbose=0, tensorboard=False, init_from=None):
         seen.update(ppo=ppo, resume=resume, tensorboard=tensorboard)
         return out
 
@@ -97,7 +97,7 @@ def test_ohra_train_rotate_is_ohra_rotate_train(tmp_path, monkeypatch):
     from ohra.cli.main import main as ohra_main
 
     calls = []
-    monkeypatch.setattr(rl_train, "train_rotation", lambda env_cfg, ppo, out, resume=False, verbose=0, tensorboard=False:
+    monkeypatch.setattr(rl_train, "train_rotation", lambda env_cfg, ppo, out, resume=False, verbose=0, tensorboard=False, init_from=None:
                         calls.append((env_cfg, ppo, str(out), resume)) or out)
     flags = ["--hand", "shadow_hand_right", "--urdf", "original", "--steps", "4096", "--policy", "lstm", "-o", str(tmp_path / "r")]
     assert ohra_main(["train", "rotate", *flags]) == 0
@@ -167,7 +167,7 @@ def test_resume_refuses_options_that_differ_from_the_run_and_accepts_its_own(tmp
     import ohra.learn.rl.train as rl_train
 
     calls = []
-    monkeypatch.setattr(rl_train, "train_rotation", lambda env_cfg, ppo, out, resume=False, verbose=0, tensorboard=False:
+    monkeypatch.setattr(rl_train, "train_rotation", lambda env_cfg, ppo, out, resume=False, verbose=0, tensorboard=False, init_from=None:
                         calls.append((env_cfg, ppo)) or out)
     run = str(_saved_run(tmp_path, hand="shadow_hand_right", joint_damping=True))
     for extra, named in ((["--hand", "allegro_hand_right"], "hand: run 'shadow_hand_right', given 'allegro_hand_right'"),
@@ -208,3 +208,25 @@ def test_plot_of_a_column_progress_csv_lacks_names_the_columns(tmp_path, capsys)
     assert main(["plot", f"a={run}", "-o", str(tmp_path / "p.png"), "--key", "nope"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no column 'nope' (columns: timesteps, ep_reward_mean)" in err
+
+
+def test_init_from_takes_the_source_runs_settings_and_changes_only_the_options_given(tmp_path, capsys, monkeypatch):
+    import ohra.learn.rl.train as rl_train
+
+    calls = []
+    monkeypatch.setattr(rl_train, "train_rotation", lambda env_cfg, ppo, out, resume=False, verbose=0, tensorboard=False,
+                        init_from=None: calls.append((env_cfg, ppo, init_from)) or out)
+    src = str(_saved_run(tmp_path, hand="shadow_hand_right", joint_damping=True, weights={"pose": -0.1}))
+    out = str(tmp_path / "fine")
+    assert main(["train", "-o", out, "--init-from", src, "--set", 'weights={"fall": -25}', "--minutes", "60"]) == 0
+    env_cfg, ppo, init = calls[0]
+    assert init == src and env_cfg.hand == "shadow_hand_right" and env_cfg.joint_damping  # the source's settings
+    assert (env_cfg.weights.fall, env_cfg.weights.pose) == (-25.0, -0.1)  # only the given term changed
+    from ohra.learn.rl.config import PPOSettings
+
+    # the new run's own budget (--steps unset: the default, not the source's 2048); the rest is the source's
+    assert ppo.max_minutes == 60.0 and ppo.total_steps == PPOSettings().total_steps and ppo.n_envs == 2
+    assert main(["train", "-o", out, "--init-from", src, "--seed", "3"]) == 0 and calls[1][1].seed == 3
+    assert main(["train", "-o", out, "--resume", "--init-from", src]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--init-from starts a new run" in err and len(calls) == 2

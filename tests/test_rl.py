@@ -394,3 +394,94 @@ def test_a_resume_budget_is_saved_for_the_next_plain_resume(tmp_path):
     rl_train._save_budget(run, with_budget(PPOSettings(total_steps=2048), 4096, 90.0))
     _, ppo = rl_train.load_run(run)
     assert ppo.total_steps == 4096 and ppo.max_minutes == 90.0
+
+
+# -- a new run started from another run's weights (a fine-tune) ------------------------------------------
+def test_a_run_started_from_another_gets_its_weights_and_statistics_and_records_where_from(raw_obs_run, tmp_path,
+                                                                                           monkeypatch):
+    """``init_from``: a new run whose network and observation statistics begin as the source's, not a
+    random start; config.json names the source, its budget and the settings that differ; another network
+    or a resume are refused by name."""
+    import torch
+
+    import ohra.learn.rl.train as rl_train
+    from ohra.learn.rl.train import load_run
+
+    src, cache, _ = raw_obs_run
+    monkeypatch.setenv("OHRA_CACHE_DIR", str(cache))
+    env_cfg, ppo = load_run(src)
+    fine = env_cfg.with_overrides(weights={"fall": -25.0})
+    captured = {}
+    real_load = rl_train._load_init
+
+    def spy(model, venv, zip_path, stats, source):  # the network right after loading, before any update
+        real_load(model, venv, zip_path, stats, source)
+        captured["start"] = {k: v.clone() for k, v in model.policy.state_dict().items()}
+
+    monkeypatch.setattr(rl_train, "_load_init", spy)
+    train_rotation(fine, ppo, tmp_path / "fine", init_from=src)
+    theirs = sb3.PPO.load(src / "model.zip", device="cpu").policy.state_dict()
+    assert captured["start"].keys() == theirs.keys()
+    assert all(torch.equal(captured["start"][k], theirs[k]) for k in theirs)
+    rec = json.loads((tmp_path / "fine" / "config.json").read_text())["init_from"]
+    assert rec["run"] == str(src) and rec["file"] == "model.zip" and rec["timesteps"] == 24
+    assert rec["env_changes"] == {"weights": {"source": env_cfg.weights.as_dict(), "now": fine.weights.as_dict()}}
+    assert load_run(tmp_path / "fine")[0].weights.fall == -25.0
+
+    with pytest.raises(RLConfigError, match=r"network must be the source run's \(net_arch: source \[16, 16\], now \[32, 32\]\)"):
+        train_rotation(fine, PPOSettings(**{**ppo.to_dict(), "net_arch": (32, 32)}), tmp_path / "other", init_from=src)
+    with pytest.raises(RLConfigError, match="init_from starts a new run"):
+        train_rotation(fine, ppo, tmp_path / "fine", resume=True, init_from=src)
+    with pytest.raises(RLConfigError, match="holds no trained policy"):
+        train_rotation(fine, ppo, tmp_path / "x", init_from=tmp_path / "nothing")
+    assert not (tmp_path / "other").exists() and not (tmp_path / "x").exists()
+
+
+@pytest.fixture(scope="module")
+def normalised_run(tmp_path_factory):
+    """A 24-step run with observation normalisation (~5 s) and its cache folder."""
+    root = tmp_path_factory.mktemp("norm_obs")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("OHRA_CACHE_DIR", str(root / "cache"))
+        ppo = PPOSettings(total_steps=24, n_envs=1, n_steps=24, batch_size=24, n_epochs=1, net_arch=(16, 16),
+                          checkpoint_every=24)
+        train_rotation(RotationConfig(grasp_count=2, episode_steps=24), ppo, root / "run")
+    return root / "run", root / "cache"
+
+
+def test_a_run_started_from_another_begins_with_its_observation_and_return_statistics(normalised_run, tmp_path,
+                                                                                       monkeypatch):
+    import pickle
+
+    import ohra.learn.rl.train as rl_train
+    from ohra.learn.rl.train import load_run
+
+    src, cache = normalised_run
+    monkeypatch.setenv("OHRA_CACHE_DIR", str(cache))
+    env_cfg, ppo = load_run(src)
+    captured = {}
+    real_load = rl_train._load_init
+
+    def spy(model, venv, zip_path, stats, source):
+        real_load(model, venv, zip_path, stats, source)
+        captured.update(mean=venv.obs_rms.mean.copy(), var=venv.obs_rms.var.copy(), ret=venv.ret_rms.var.copy())
+
+    monkeypatch.setattr(rl_train, "_load_init", spy)
+    train_rotation(env_cfg, ppo, tmp_path / "fine", init_from=src)
+    with open(src / "vecnormalize.pkl", "rb") as fh:
+        theirs = pickle.load(fh).__dict__
+    assert theirs["obs_rms"].count > 1  # the source saw observations: its statistics are not the initial ones
+    np.testing.assert_array_equal(captured["mean"], theirs["obs_rms"].mean)
+    np.testing.assert_array_equal(captured["var"], theirs["obs_rms"].var)
+    np.testing.assert_array_equal(captured["ret"], theirs["ret_rms"].var)
+
+
+def test_a_run_started_from_another_of_another_size_is_refused(raw_obs_run, tmp_path, monkeypatch):
+    from ohra.learn.rl.train import load_run
+
+    src, cache, _ = raw_obs_run
+    monkeypatch.setenv("OHRA_CACHE_DIR", str(cache))
+    env_cfg, ppo = load_run(src)
+    other = env_cfg.with_overrides(urdf="original")  # the original LEAP acts in its 16 own joints, not 22
+    with pytest.raises(RLConfigError, match="do not fit this run's spaces"):
+        train_rotation(other, ppo, tmp_path / "o", init_from=src)

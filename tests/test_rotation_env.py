@@ -109,6 +109,29 @@ def test_episode_terminates_when_the_object_leaves_the_hand_sideways(env):
     assert terminated and info["termination"] == "left"
 
 
+@pytest.mark.parametrize("shift, why", [((0.0, 0.0, -2 * CFG.fall_height), "fell"), ((0.0, 0.3, 0.1), "left")])
+def test_fall_weight_is_paid_once_on_the_step_the_object_is_lost(grasps, shift, why):
+    """``weights.fall`` (default 0: the paper's reward) adds its weight on the terminating step only."""
+    cfg = CFG.with_overrides(weights={"fall": -25.0})
+    twice = CFG.with_overrides(weights={"pose": -0.1}).with_overrides(weights={"fall": -1.0})
+    assert (twice.weights.pose, twice.weights.fall) == (-0.1, -1.0)  # an override changes only the terms it names
+    rewards = {}
+    for name, c in (("off", CFG), ("on", cfg)):
+        env = InHandRotateEnv(c, grasps=grasps)
+        try:
+            env.reset(seed=0)
+            held = env.step(np.zeros(env.action_space.shape))
+            _move_object(env, shift)
+            lost = env.step(np.zeros(env.action_space.shape))
+        finally:
+            env.close()
+        rewards[name] = (held, lost)
+    (held_off, lost_off), (held_on, lost_on) = rewards["off"], rewards["on"]
+    assert held_on[1] == held_off[1] and held_on[4]["reward/fall"] == 0.0  # held: nothing paid
+    assert lost_on[2] and lost_on[4]["termination"] == why and lost_on[4]["reward/fall"] == 1.0
+    assert lost_on[1] == pytest.approx(lost_off[1] - 25.0, abs=1e-9)
+
+
 def test_zero_actions_hold_a_starting_grasp_until_truncation(grasps):
     env = InHandRotateEnv(CFG.with_overrides(episode_steps=40), grasps=grasps)
     try:

@@ -28,6 +28,12 @@ def test_rotation_term_is_angular_velocity_clipped():
     assert Rw.rotation(0.1, 0.05, 0.5) == 0.5 and Rw.rotation(-0.1, 0.05, 0.5) == -0.5
 
 
+def test_fall_term_counts_a_lost_object_not_a_diverged_simulation():
+    assert Rw.fall("fell") == 1.0 and Rw.fall("left") == 1.0
+    assert Rw.fall(None) == 0.0 and Rw.fall("broken") == 0.0
+    assert RewardWeights().fall == 0.0  # off unless a run sets it: the paper's reward has no such term
+
+
 def test_penalty_terms_on_analytic_states():
     assert Rw.drift(np.array([0.03, 0.04, 0.0]), np.zeros(3)) == pytest.approx(0.05)
     assert Rw.pose(np.array([0.1, -0.2]), np.zeros(2)) == pytest.approx(0.05)
@@ -37,11 +43,12 @@ def test_penalty_terms_on_analytic_states():
 
 
 def test_total_is_the_weighted_sum_and_a_zero_weight_removes_a_term():
-    terms = {"rotation": 0.4, "drift": 0.01, "pose": 0.2, "torque": 0.5, "work": 0.1, "linvel": 0.05}
+    terms = {"rotation": 0.4, "drift": 0.01, "pose": 0.2, "torque": 0.5, "work": 0.1, "linvel": 0.05, "fall": 1.0}
     w = RewardWeights()
     expected = 0.4 - 0.1 * 0.01 - 0.3 * 0.2 - 0.1 * 0.5 - 2.0 * 0.1 - 0.3 * 0.05
     assert Rw.total(terms, w) == pytest.approx(expected)
     assert Rw.total(terms, replace(w, work=0.0)) == pytest.approx(expected + 2.0 * 0.1)
+    assert Rw.total(terms, replace(w, fall=-25.0)) == pytest.approx(expected - 25.0)
 
 
 @pytest.mark.parametrize("drop, fell", [(0.029, False), (0.031, True)])

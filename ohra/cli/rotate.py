@@ -78,6 +78,9 @@ def _train_args(p: argparse.ArgumentParser) -> None:
                         "not with --resume: a resumed run keeps its settings)")
     p.add_argument("-o", "--output", required=True, help="run directory")
     p.add_argument("--resume", action="store_true", help="continue OUTPUT from its last checkpoint")
+    p.add_argument("--init-from", metavar="RUN", help="a new run that starts from RUN's trained policy and settings "
+                   "(a fine-tune): options given here change them, e.g. --set 'weights={\"fall\": -25}'; "
+                   "--steps and --minutes count the new run only")
     p.add_argument("--tensorboard", action="store_true", help="also log to OUTPUT/tensorboard (tensorboard --logdir OUTPUT)")
     p.set_defaults(func=_cmd_train)
 
@@ -144,39 +147,67 @@ def _cmd_train(args: argparse.Namespace) -> int:
             given = f"--ppo {' '.join(args.ppo)}" if extra else f"--policy {args.policy}"
             raise RLConfigError(f"{given}: a resumed run keeps the PPO settings in {out / 'config.json'}; "
                                 "only --steps and --minutes change on --resume")
+        if args.init_from:
+            raise RLConfigError("--init-from starts a new run; --resume continues OUTPUT from its own checkpoint")
         env_cfg, ppo = load_run(out)
         _same_as_run(args, env_cfg, ppo, out)
         ppo = with_budget(ppo, args.steps, args.minutes)
+    elif args.init_from:
+        env_cfg, ppo = load_run(args.init_from)
+        env_cfg = env_cfg.with_overrides(**_given_env(args))
+        base = {"total_steps": args.steps or PPOSettings().total_steps, "max_minutes": args.minutes,
+                **{field: getattr(args, opt) for opt, field in _PPO_OPTIONS if opt in _given_ppo(args)},
+                **({"policy": args.policy} if args.policy else {})}
+        ppo = PPOSettings.from_dict({**ppo.to_dict(), **base, **extra}, "command line (--ppo)")
     else:
         env_cfg = _env_config(args)
         base = {"total_steps": args.steps or PPOSettings().total_steps, "max_minutes": args.minutes, "seed": args.seed,
                 "n_envs": args.envs, "n_steps": args.n_steps, "batch_size": args.batch_size,
                 "checkpoint_every": args.checkpoint_every, **({"policy": args.policy} if args.policy else {})}
         ppo = PPOSettings.from_dict({**base, **extra}, "command line (--ppo)")
-    path = train_rotation(env_cfg, ppo, out, resume=args.resume, verbose=0, tensorboard=args.tensorboard)
+    path = train_rotation(env_cfg, ppo, out, resume=args.resume, verbose=0, tensorboard=args.tensorboard,
+                          init_from=args.init_from)
     print(f"wrote {path}")
     return 0
+
+
+_PPO_OPTIONS = (("seed", "seed"), ("envs", "n_envs"), ("n_steps", "n_steps"), ("batch_size", "batch_size"),
+                ("checkpoint_every", "checkpoint_every"))
+
+
+def _given_env(args: argparse.Namespace) -> dict[str, Any]:
+    """The environment options given on the command line, as RotationConfig fields (an option left at its
+    default counts as not given: it cannot be told from one given at that value) and --set items."""
+    from ohra.sim.rotation.config import RotationConfigError
+
+    env_parser = argparse.ArgumentParser(add_help=False)
+    _env_args(env_parser)
+    defaults = vars(env_parser.parse_args([]))
+    fields = {"grasps": "grasp_count"}
+    given = {fields.get(k, k): getattr(args, k) for k, v in defaults.items() if k != "set" and getattr(args, k) != v}
+    given.update(_key_values(args.set, "--set", RotationConfigError))
+    return given
+
+
+def _given_ppo(args: argparse.Namespace) -> set[str]:
+    """The PPO options (of ``_PPO_OPTIONS``) given at a value other than their default."""
+    from ohra.learn.rl.config import PPOSettings
+
+    d = PPOSettings()
+    return {opt for opt, field in _PPO_OPTIONS if getattr(args, opt) != getattr(d, field)}
 
 
 def _same_as_run(args: argparse.Namespace, env_cfg, ppo, out: Path) -> None:
     """On --resume, refuse environment or PPO options that differ from the run's (they would be ignored);
     repeating the run's own options is fine."""
-    from ohra.learn.rl.config import PPOSettings, RLConfigError
-    from ohra.sim.rotation.config import RotationConfigError
+    from ohra.learn.rl.config import RLConfigError
 
-    env_parser = argparse.ArgumentParser(add_help=False)
-    _env_args(env_parser)
-    defaults = vars(env_parser.parse_args([]))  # an option left at its default was not given (or given as it)
-    fields = {"grasps": "grasp_count"}
-    given = {fields.get(k, k): getattr(args, k) for k, v in defaults.items() if k != "set" and getattr(args, k) != v}
-    given.update(_key_values(args.set, "--set", RotationConfigError))
-    theirs, mine = env_cfg.to_dict(), env_cfg.with_overrides(**given).to_dict()
+    theirs, mine = env_cfg.to_dict(), env_cfg.with_overrides(**_given_env(args)).to_dict()
     diff = [f"{k}: run {theirs[k]!r}, given {mine[k]!r}" for k in mine if mine[k] != theirs[k]]
-    d = PPOSettings()
-    for opt, field in (("seed", "seed"), ("envs", "n_envs"), ("n_steps", "n_steps"), ("batch_size", "batch_size"),
-                       ("checkpoint_every", "checkpoint_every")):
+    given = _given_ppo(args)
+    for opt, field in _PPO_OPTIONS:
         v = getattr(args, opt)
-        if v != getattr(d, field) and v != getattr(ppo, field):
+        if opt in given and v != getattr(ppo, field):
             diff.append(f"{field}: run {getattr(ppo, field)!r}, given {v!r}")
     if diff:
         raise RLConfigError(f"{out}: a resumed run keeps the settings in {out / 'config.json'}; only --steps and "

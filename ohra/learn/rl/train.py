@@ -12,6 +12,11 @@ Run directory::
 
 ``resume=True`` continues from ``checkpoints/last.zip`` up to ``total_steps`` (or until the
 ``max_minutes`` budget, counted over all sessions, is spent); the env config must be the same.
+
+``init_from=RUN`` starts a *new* run (its own steps, budget and settings: a fine-tune, e.g. with
+another reward weight) from another run's trained weights and observation/return statistics;
+``config.json`` records where they came from (``init_from``: run, file, its PPO steps and minutes,
+and the environment settings that differ), so a budget is stated as the source's plus the new run's.
 """
 
 from __future__ import annotations
@@ -227,8 +232,59 @@ def _check_resume(run_dir: Path, env_cfg: RotationConfig, ppo: PPOSettings) -> N
                             f"(only {RESUMABLE_CHANGES} may change)")
 
 
+NETWORK_SETTINGS = ("policy", "net_arch", "activation", "lstm_hidden", "lstm_critic", "normalize_obs")
+
+
+def init_source(src: str | Path) -> tuple[Path, Path, dict]:
+    """The policy file, observation-statistics file and budget of the run ``src`` a new run starts from:
+    its final policy (``model.zip``) when it has one, else its last checkpoint.
+
+    Raises:
+        RLConfigError: ``src`` holds no trained policy.
+    """
+    src = Path(src)
+    for zip_path, stats, budget in ((src / "model.zip", src / "vecnormalize.pkl", src / "checkpoints" / "last.json"),
+                                    (src / "checkpoints" / "last.zip", src / "checkpoints" / "last_vecnormalize.pkl",
+                                     src / "checkpoints" / "last.json")):
+        if zip_path.is_file() and stats.is_file():
+            done = json.loads(budget.read_text()) if budget.is_file() else {}
+            return zip_path, stats, {"timesteps": done.get("timesteps"), "wall_s": done.get("wall_s")}
+    raise RLConfigError(f"init_from: {src} holds no trained policy (model.zip or checkpoints/last.zip with its "
+                        "observation statistics)")
+
+
+def _init_record(src: Path, zip_path: Path, budget: dict, env_cfg: RotationConfig, ppo: PPOSettings) -> dict:
+    """What ``config.json`` says about the source of a new run's weights; refuses a different network."""
+    theirs_env, theirs_ppo = load_run(src)
+    a, b = _plain(theirs_ppo.to_dict()), _plain(ppo.to_dict())
+    diff = [f"{k}: source {a.get(k)!r}, now {b[k]!r}" for k in NETWORK_SETTINGS if a.get(k) != b[k]]
+    if diff:
+        raise RLConfigError(f"init_from {src}: the network must be the source run's ({'; '.join(diff)})")
+    a, b = _plain(theirs_env.to_dict()), _plain(env_cfg.to_dict())
+    changes = {k: {"source": a.get(k), "now": b[k]} for k in b if a.get(k) != b[k]}
+    return {"run": str(src), "file": str(zip_path.relative_to(src)), **budget, "env_changes": changes}
+
+
+def _load_init(model, venv, zip_path: Path, stats: Path, src: Path) -> None:
+    """Copy the source's weights into ``model`` and its observation/return statistics into ``venv``."""
+    import pickle
+
+    try:
+        model.set_parameters(str(zip_path), exact_match=True, device="cpu")
+    except (RuntimeError, ValueError) as exc:  # torch's size mismatch: another hand, space or observation layout
+        raise RLConfigError(f"init_from {src}: its weights do not fit this run's spaces "
+                            f"(same hand, joint space and object kind needed): {str(exc).splitlines()[0]}") from None
+    with open(stats, "rb") as fh:
+        theirs = pickle.load(fh).__dict__  # an unpickled VecNormalize has no venv: read its fields, not attributes
+    mine = venv.__dict__
+    if "obs_rms" in theirs and "obs_rms" in mine:  # a run without observation normalisation has none
+        venv.obs_rms = theirs["obs_rms"]
+    if "ret_rms" in theirs and "ret_rms" in mine:
+        venv.ret_rms = theirs["ret_rms"]
+
+
 def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Path, resume: bool = False,
-                   verbose: int = 0, tensorboard: bool = False) -> Path:
+                   verbose: int = 0, tensorboard: bool = False, init_from: str | Path | None = None) -> Path:
     """Train (or resume) a PPO rotation policy into ``run_dir`` (layout in the module docstring).
 
     Generates (or loads) the cached starting states first; sets torch's thread count to ``ppo.threads``.
@@ -243,13 +299,17 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
         verbose: SB3 verbosity; > 0 also forces a progress bar while starting states are generated
             (else one only when stderr is a terminal).
         tensorboard: also log to ``run_dir/tensorboard`` (needs the ``tensorboard`` package; rl extra).
+        init_from: a fresh run only: start from this run's trained weights (:func:`init_source`) and
+            observation/return statistics instead of a random network; the network settings
+            (``NETWORK_SETTINGS``) must be the source's, the spaces the same size.
 
     Returns:
         Path of the final policy, ``run_dir/model.zip`` (``vecnormalize.pkl`` beside it).
 
     Raises:
         RLConfigError: nothing to resume; a fresh run into a folder that holds one; on resume, an
-            environment config or non-budget PPO setting that differs from the run's.
+            environment config or non-budget PPO setting that differs from the run's; ``init_from`` with
+            ``resume``, without a trained policy, or with another network or space size.
         CheckpointError: on resume, the run's ``config.json`` missing, not valid JSON, or without its
             ``env`` or ``ppo`` object.
         FolderInUseError: another process is training into ``run_dir``.
@@ -265,6 +325,15 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
 
     run_dir = Path(run_dir)
     last = run_dir / "checkpoints" / "last.zip"
+    init = None
+    if init_from is not None:
+        if resume:
+            raise RLConfigError("init_from starts a new run; a resumed run continues from its own checkpoint")
+        src = Path(init_from)
+        zip_path, stats, budget = init_source(src)
+        if src.resolve() == run_dir.resolve():
+            raise RLConfigError(f"init_from {src}: the new run needs its own folder")
+        init = (src, zip_path, stats, _init_record(src, zip_path, budget, env_cfg, ppo))
     _check_start(run_dir, last, resume)  # before the minutes of starting-state generation ...
     tb_dir = str(run_dir / "tensorboard") if tensorboard else None
     if tensorboard:
@@ -278,7 +347,7 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
         else:
             # a run stopped before its first checkpoint left only its config and a few progress rows
             (run_dir / "progress.csv").unlink(missing_ok=True)
-            _write_config(run_dir, env_cfg, ppo)
+            _write_config(run_dir, env_cfg, ppo, init_from=init[3] if init else None)
         set_random_seed(ppo.seed)
         venv = _vec_env(env_cfg, ppo)
         cls = ppo_class(ppo.policy)
@@ -292,6 +361,8 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
         else:
             venv = VecNormalize(venv, norm_obs=ppo.normalize_obs, norm_reward=ppo.normalize_reward, gamma=ppo.gamma)
             model = _new_model(cls, venv, ppo, verbose, tb_dir)
+            if init:
+                _load_init(model, venv, init[1], init[2], init[0])
         try:
             cb = _callback(run_dir, ppo, wall_before)
             remaining = max(0, ppo.total_steps - model.num_timesteps)
@@ -387,7 +458,7 @@ def _replace_config(run_dir: Path, d: dict) -> None:
     os.replace(tmp, run_dir / "config.json")
 
 
-def _write_config(run_dir: Path, env_cfg: RotationConfig, ppo: PPOSettings) -> None:
+def _write_config(run_dir: Path, env_cfg: RotationConfig, ppo: PPOSettings, init_from: dict | None = None) -> None:
     import gymnasium
     import pybullet
     import stable_baselines3
@@ -396,6 +467,8 @@ def _write_config(run_dir: Path, env_cfg: RotationConfig, ppo: PPOSettings) -> N
     d = {"env": env_cfg.to_dict(), "ppo": ppo.to_dict(),
          "versions": {"stable_baselines3": stable_baselines3.__version__, "gymnasium": gymnasium.__version__,
                       "torch": torch.__version__, "pybullet_api": pybullet.getAPIVersion()}}
+    if init_from is not None:
+        d["init_from"] = init_from
     _replace_config(run_dir, d)
 
 

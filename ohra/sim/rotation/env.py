@@ -105,6 +105,7 @@ class InHandRotateEnv(gym.Env):
             dyaw = rewards.delta_yaw(self._quat, snap.obj_quat)
             self._quat = snap.obj_quat
             terms = self._terms(snap, prev, dyaw)
+            terms["fall"] = rewards.fall(why)
         self._rotation += dyaw
         reward = rewards.total(terms, cfg.weights)
         terminated = why is not None

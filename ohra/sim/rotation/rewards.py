@@ -3,7 +3,8 @@
 The rotation term is the object's angular velocity about world +z over the control step, taken
 from the orientation change (the rotation vector of ``R_t R_{t-1}^T`` divided by the step time),
 not PyBullet's instantaneous velocity at the last sub-step: it is what the object actually turned.
-Penalty terms are >= 0 and enter with negative weights (``RewardWeights``).
+Penalty terms are >= 0 and enter with negative weights (``RewardWeights``); ``fall`` is 1 on the
+step the object falls or leaves the hand, else 0 (weight 0 unless a run sets it).
 """
 
 from __future__ import annotations
@@ -14,7 +15,8 @@ import numpy as np
 
 from ohra.sim.rotation.config import RewardWeights
 
-TERMS = ("rotation", "drift", "pose", "torque", "work", "linvel")
+TERMS = ("rotation", "drift", "pose", "torque", "work", "linvel", "fall")
+DROPPED = ("fell", "left")  # terminations the fall term counts (not "broken": the simulation diverged)
 
 
 def delta_yaw(quat_prev: np.ndarray, quat_now: np.ndarray) -> float:
@@ -69,6 +71,12 @@ def work(tau: np.ndarray, dq: np.ndarray) -> float:
 def linvel(v: np.ndarray) -> float:
     """Object speed, L1 norm of the linear velocity [m/s]."""
     return float(np.abs(np.asarray(v)).sum())
+
+
+def fall(why: str | None) -> float:
+    """1 when the episode ends because the object fell or left the hand (``why`` from
+    :func:`ohra.sim.rotation.termination.reason`), else 0."""
+    return 1.0 if why in DROPPED else 0.0
 
 
 def total(terms: dict[str, float], weights: RewardWeights) -> float:
