@@ -171,6 +171,8 @@ def test_resume_refuses_options_that_differ_from_the_run_and_accepts_its_own(tmp
                         calls.append((env_cfg, ppo)) or out)
     run = str(_saved_run(tmp_path, hand="shadow_hand_right", joint_damping=True))
     for extra, named in ((["--hand", "allegro_hand_right"], "hand: run 'shadow_hand_right', given 'allegro_hand_right'"),
+                         # an option given at its default value is still given (it was read as left out)
+                         (["--hand", "leap_hand_right"], "hand: run 'shadow_hand_right', given 'leap_hand_right'"),
                          (["--set", "sim_dt=0.01"], "sim_dt: run 0.0083"), (["--seed", "3"], "seed: run 0, given 3")):
         assert main(["train", "-o", run, "--resume", *extra]) == 2
         err = capsys.readouterr().err

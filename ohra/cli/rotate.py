@@ -16,29 +16,44 @@ from typing import Any, Sequence
 from ohra.errors import OhraError
 
 
+# command-line option -> RotationConfig field; the options default to None (= not given), so a resume or a
+# run started from another can tell an option given at the default value from one left out
+_ENV_FIELDS = (("hand", "hand"), ("urdf", "urdf"), ("inertials", "inertials"), ("form", "form"), ("space", "space"),
+               ("object", "object"), ("object_size", "object_size"), ("grasps", "grasp_count"))
+
+
 def _env_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--hand", default="leap_hand_right", help="registered hand, leap_XXXX or params JSON (default LEAP)")
-    p.add_argument("--urdf", choices=("canonical", "original"), default="canonical")
-    p.add_argument("--inertials", choices=("capsule", "original"), default="capsule",
+    from ohra.sim.rotation.config import RotationConfig
+
+    d = RotationConfig()
+    p.add_argument("--hand", help=f"registered hand, leap_XXXX or params JSON (default {d.hand})")
+    p.add_argument("--urdf", choices=("canonical", "original"), help=f"default {d.urdf}")
+    p.add_argument("--inertials", choices=("capsule", "original"),
                    help="canonical URDF: finger masses of the template's capsules (default) or of the original URDF")
     p.add_argument("--form", choices=("base", "extended"), help="canonical form (default: extended when registered)")
     p.add_argument("--space", choices=("canonical", "native"), help="joint space of actions (default: by --urdf)")
-    p.add_argument("--object", default="cube", help="cube, sphere, cylinder (default cube), builtin:NAME, "
+    p.add_argument("--object", help=f"cube, sphere, cylinder (default {d.object}), builtin:NAME, "
                    "procedural:FAMILY:SEED, or a mesh/URDF file or one-object folder")
     p.add_argument("--object-size", type=float, metavar="M",
                    help="cube side / sphere, cylinder diameter (default: the palm radius); a mesh file's largest extent")
-    p.add_argument("--grasps", type=int, default=1000, help="cached starting states (default 1000)")
+    p.add_argument("--grasps", type=int, help=f"cached starting states (default {d.grasp_count})")
     p.add_argument("--set", action="append", default=[], metavar="KEY=JSON",
                    help="any other RotationConfig field, e.g. --set sim_dt=0.0166 (repeatable)")
 
 
-def _env_config(args: argparse.Namespace):
-    from ohra.sim.rotation.config import RotationConfig, RotationConfigError
+def _given_env(args: argparse.Namespace) -> dict[str, Any]:
+    """The environment options given on the command line, as RotationConfig fields, and the --set items."""
+    from ohra.sim.rotation.config import RotationConfigError
 
-    kw: dict[str, Any] = {"hand": args.hand, "urdf": args.urdf, "inertials": args.inertials, "form": args.form, "space": args.space,
-                          "object": args.object, "object_size": args.object_size, "grasp_count": args.grasps}
-    kw.update(_key_values(args.set, "--set", RotationConfigError))
-    return RotationConfig.from_dict(kw, "command line")
+    given = {field: getattr(args, opt) for opt, field in _ENV_FIELDS if getattr(args, opt) is not None}
+    given.update(_key_values(args.set, "--set", RotationConfigError))
+    return given
+
+
+def _env_config(args: argparse.Namespace):
+    from ohra.sim.rotation.config import RotationConfig
+
+    return RotationConfig.from_dict(_given_env(args), "command line")
 
 
 def _key_values(items: Sequence[str], flag: str, error: type[OhraError]) -> dict[str, Any]:
@@ -66,11 +81,11 @@ def _train_args(p: argparse.ArgumentParser) -> None:
     _env_args(p)
     p.add_argument("--steps", type=int, help=f"total env steps (default {d.total_steps}; on --resume: the run's)")
     p.add_argument("--minutes", type=float, help="wall-clock budget over all sessions (stops and saves)")
-    p.add_argument("--seed", type=int, default=d.seed)
-    p.add_argument("--envs", type=int, default=d.n_envs, help=f"subprocess environments (default {d.n_envs})")
-    p.add_argument("--n-steps", type=int, default=d.n_steps, help=f"steps per env per rollout (default {d.n_steps})")
-    p.add_argument("--batch-size", type=int, default=d.batch_size)
-    p.add_argument("--checkpoint-every", type=int, default=d.checkpoint_every, help="steps between checkpoints")
+    p.add_argument("--seed", type=int, help=f"default {d.seed}")
+    p.add_argument("--envs", type=int, help=f"subprocess environments (default {d.n_envs})")
+    p.add_argument("--n-steps", type=int, help=f"steps per env per rollout (default {d.n_steps})")
+    p.add_argument("--batch-size", type=int, help=f"default {d.batch_size}")
+    p.add_argument("--checkpoint-every", type=int, help=f"steps between checkpoints (default {d.checkpoint_every})")
     p.add_argument("--policy", choices=("mlp", "lstm"), help=f"policy network: MLP {'-'.join(map(str, d.net_arch))} "
                    f"(default) or a recurrent one, an LSTM of {d.lstm_hidden} units before it (sb3-contrib RecurrentPPO)")
     p.add_argument("--ppo", action="append", default=[], metavar="KEY=JSON",
@@ -155,15 +170,13 @@ def _cmd_train(args: argparse.Namespace) -> int:
     elif args.init_from:
         env_cfg, ppo = load_run(args.init_from)
         env_cfg = env_cfg.with_overrides(**_given_env(args))
-        base = {"total_steps": args.steps or PPOSettings().total_steps, "max_minutes": args.minutes,
-                **{field: getattr(args, opt) for opt, field in _PPO_OPTIONS if opt in _given_ppo(args)},
+        base = {"total_steps": args.steps or PPOSettings().total_steps, "max_minutes": args.minutes, **_given_ppo(args),
                 **({"policy": args.policy} if args.policy else {})}
         ppo = PPOSettings.from_dict({**ppo.to_dict(), **base, **extra}, "command line (--ppo)")
     else:
         env_cfg = _env_config(args)
-        base = {"total_steps": args.steps or PPOSettings().total_steps, "max_minutes": args.minutes, "seed": args.seed,
-                "n_envs": args.envs, "n_steps": args.n_steps, "batch_size": args.batch_size,
-                "checkpoint_every": args.checkpoint_every, **({"policy": args.policy} if args.policy else {})}
+        base = {"total_steps": args.steps or PPOSettings().total_steps, "max_minutes": args.minutes, **_given_ppo(args),
+                **({"policy": args.policy} if args.policy else {})}
         ppo = PPOSettings.from_dict({**base, **extra}, "command line (--ppo)")
     path = train_rotation(env_cfg, ppo, out, resume=args.resume, verbose=0, tensorboard=args.tensorboard,
                           init_from=args.init_from)
@@ -175,26 +188,9 @@ _PPO_OPTIONS = (("seed", "seed"), ("envs", "n_envs"), ("n_steps", "n_steps"), ("
                 ("checkpoint_every", "checkpoint_every"))
 
 
-def _given_env(args: argparse.Namespace) -> dict[str, Any]:
-    """The environment options given on the command line, as RotationConfig fields (an option left at its
-    default counts as not given: it cannot be told from one given at that value) and --set items."""
-    from ohra.sim.rotation.config import RotationConfigError
-
-    env_parser = argparse.ArgumentParser(add_help=False)
-    _env_args(env_parser)
-    defaults = vars(env_parser.parse_args([]))
-    fields = {"grasps": "grasp_count"}
-    given = {fields.get(k, k): getattr(args, k) for k, v in defaults.items() if k != "set" and getattr(args, k) != v}
-    given.update(_key_values(args.set, "--set", RotationConfigError))
-    return given
-
-
-def _given_ppo(args: argparse.Namespace) -> set[str]:
-    """The PPO options (of ``_PPO_OPTIONS``) given at a value other than their default."""
-    from ohra.learn.rl.config import PPOSettings
-
-    d = PPOSettings()
-    return {opt for opt, field in _PPO_OPTIONS if getattr(args, opt) != getattr(d, field)}
+def _given_ppo(args: argparse.Namespace) -> dict[str, Any]:
+    """The PPO options (of ``_PPO_OPTIONS``) given on the command line, as PPOSettings fields."""
+    return {field: getattr(args, opt) for opt, field in _PPO_OPTIONS if getattr(args, opt) is not None}
 
 
 def _same_as_run(args: argparse.Namespace, env_cfg, ppo, out: Path) -> None:
@@ -204,10 +200,8 @@ def _same_as_run(args: argparse.Namespace, env_cfg, ppo, out: Path) -> None:
 
     theirs, mine = env_cfg.to_dict(), env_cfg.with_overrides(**_given_env(args)).to_dict()
     diff = [f"{k}: run {theirs[k]!r}, given {mine[k]!r}" for k in mine if mine[k] != theirs[k]]
-    given = _given_ppo(args)
-    for opt, field in _PPO_OPTIONS:
-        v = getattr(args, opt)
-        if opt in given and v != getattr(ppo, field):
+    for field, v in _given_ppo(args).items():
+        if v != getattr(ppo, field):
             diff.append(f"{field}: run {getattr(ppo, field)!r}, given {v!r}")
     if diff:
         raise RLConfigError(f"{out}: a resumed run keeps the settings in {out / 'config.json'}; only --steps and "
