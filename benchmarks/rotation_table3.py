@@ -25,6 +25,15 @@ PAPER = {"leap_hand_right": {"canonical": (326.98, 6.31), "original": (397.62, 5
          "shadow_hand_right": {"canonical": (390.62, 10.92), "original": (369.66, 9.09)}}
 
 
+def _budget_text(budget: dict) -> str:
+    """``1688k steps, 120 min``; a run started from another's policy: ``3578k + 2200k steps, 170 + 60 min``."""
+    src = budget.get("init_from")
+    if not src:
+        return f"{budget['steps'] / 1e3:.0f}k steps, {budget['minutes']:.0f} min"
+    return (f"{src['steps'] / 1e3:.0f}k + {budget['steps'] / 1e3:.0f}k steps, "
+            f"{src['minutes']:.0f} + {budget['minutes']:.0f} min")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--episodes", type=int, default=20)
@@ -38,6 +47,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     from ohra.learn.rl.evaluate import Policy, evaluate_policy, on_urdf
     from ohra.learn.rl.plots import read_progress, reward_curves
+    from ohra.learn.rl.train import read_config
     from ohra.sim.rotation.rewards import TERMS
 
     runs = dict(r.split("=", 1) for r in args.runs) if args.runs else _shipped()
@@ -51,6 +61,9 @@ def main(argv: list[str] | None = None) -> int:
         prog = read_progress(d)
         budget = {"steps": int(prog["timesteps"][-1]), "minutes": float(prog["wall_s"][-1]) / 60.0,
                   "envs": pol.ppo.n_envs, "seed": pol.ppo.seed}
+        init = read_config(d).get("init_from")  # a run started from another's policy: state both budgets
+        if init:
+            budget["init_from"] = {"run": init["run"], "steps": init["timesteps"], "minutes": init["wall_s"] / 60.0}
         s = res.summary()
         cfg = pol.env_cfg
         hybrid = cfg.collisions == "canonical"  # the original URDF with the canonical collision shapes
@@ -60,7 +73,7 @@ def main(argv: list[str] | None = None) -> int:
                        "per_episode": res.to_dict(), "paper": paper, "starting_grip": grip}
         rows.append(f"| {label} | {cfg.hand} | {urdf} | {s['steps_to_fall_mean']:.1f} +- {s['steps_to_fall_std']:.1f} | "
                     f"{s['rotation_mean']:.2f} +- {s['rotation_std']:.2f} | {100 * s['survived']:.0f} % | "
-                    f"{budget['steps'] / 1e3:.0f}k steps, {budget['minutes']:.0f} min, seed {budget['seed']} | "
+                    f"{_budget_text(budget)}, seed {budget['seed']} | "
                     f"{'%.1f / %.2f' % paper if paper else '-'} |")
         print(rows[-1], file=sys.stderr)
         zero_res = evaluate_policy(lambda o, n=pol.space_dim: np.zeros(n), cfg, args.episodes, args.seed,

@@ -80,3 +80,15 @@ def test_an_arm_whose_seeds_are_not_all_evaluated_is_refused(results):
     _evals(results, "ev0", {"x": (a, [400, 200], [4.0, 2.0])})
     with pytest.raises(SystemExit, match="arm 'A' has 2 run"):
         rotation_attribution.main(_refs(results) + ["--runs", f"A={a},{b}", "--evals", "ev0", "--name", "attr"])
+
+
+def test_table3_states_both_budgets_of_a_run_started_from_another():
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    try:
+        import rotation_table3
+    finally:
+        sys.path.pop(0)
+    own = {"steps": 1_688_000, "minutes": 120.2}
+    assert rotation_table3._budget_text(own) == "1688k steps, 120 min"
+    fine = {"steps": 2_200_000, "minutes": 60.0, "init_from": {"run": "src", "steps": 3_578_340, "minutes": 170.0}}
+    assert rotation_table3._budget_text(fine) == "3578k + 2200k steps, 170 + 60 min"
