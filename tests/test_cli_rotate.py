@@ -229,6 +229,8 @@ def test_init_from_takes_the_source_runs_settings_and_changes_only_the_options_g
     # the new run's own budget (--steps unset: the default, not the source's 2048); the rest is the source's
     assert ppo.max_minutes == 60.0 and ppo.total_steps == PPOSettings().total_steps and ppo.n_envs == 2
     assert main(["train", "-o", out, "--init-from", src, "--seed", "3"]) == 0 and calls[1][1].seed == 3
+    assert main(["train", "-o", out, "--init-from", "leap_canonical"]) == 0  # a shipped policy by name
+    assert calls[2][2].endswith("rotate_leap_canonical") and calls[2][0].hand == "leap_hand_right"
     assert main(["train", "-o", out, "--resume", "--init-from", src]) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "--init-from starts a new run" in err and len(calls) == 2
+    assert err.count("\n") == 1 and "--init-from starts a new run" in err and len(calls) == 3

@@ -485,3 +485,37 @@ def test_a_run_started_from_another_of_another_size_is_refused(raw_obs_run, tmp_
     other = env_cfg.with_overrides(urdf="original")  # the original LEAP acts in its 16 own joints, not 22
     with pytest.raises(RLConfigError, match="do not fit this run's spaces"):
         train_rotation(other, ppo, tmp_path / "o", init_from=src)
+
+
+def test_a_run_started_from_an_exported_policy_gets_its_weights_and_observation_statistics(normalised_run, tmp_path,
+                                                                                           monkeypatch):
+    """An export (what ``ohra/learn/models/rotate_*`` ship) carries no optimizer or return statistics,
+    but its weights and observation statistics start the new run."""
+    import torch
+
+    import ohra.learn.rl.train as rl_train
+    from ohra.learn.rl.evaluate import Policy, export_policy
+    from ohra.learn.rl.train import load_run
+
+    src, cache = normalised_run
+    monkeypatch.setenv("OHRA_CACHE_DIR", str(cache))
+    export = export_policy(src, tmp_path / "export")
+    env_cfg, ppo = load_run(export)
+    captured = {}
+    real_load = rl_train._load_init
+
+    def spy(model, venv, zip_path, stats, source):
+        real_load(model, venv, zip_path, stats, source)
+        captured.update(weights={k: v.clone() for k, v in model.policy.state_dict().items()},
+                        mean=venv.obs_rms.mean.copy(), var=venv.obs_rms.var.copy(), count=venv.obs_rms.count)
+
+    monkeypatch.setattr(rl_train, "_load_init", spy)
+    train_rotation(env_cfg, ppo, tmp_path / "fine", init_from=export)
+    theirs = Policy(export)
+    want = theirs._policy.state_dict()
+    assert all(torch.equal(captured["weights"][k], want[k]) for k in want)
+    np.testing.assert_allclose(captured["mean"], theirs._mean)
+    np.testing.assert_allclose(captured["var"], theirs._var)
+    assert captured["count"] == 24  # the observations the source saw (trained.json), not a fresh start
+    rec = json.loads((tmp_path / "fine" / "config.json").read_text())["init_from"]
+    assert rec["file"] == "policy.pth" and rec["timesteps"] == 24 and rec["env_changes"] == {}

@@ -94,6 +94,7 @@ def _train_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("-o", "--output", required=True, help="run directory")
     p.add_argument("--resume", action="store_true", help="continue OUTPUT from its last checkpoint")
     p.add_argument("--init-from", metavar="RUN", help="a new run that starts from RUN's trained policy and settings "
+                   "(RUN: a run, an exported policy, or a shipped one by name such as leap_canonical) "
                    "(a fine-tune): options given here change them, e.g. --set 'weights={\"fall\": -25}'; "
                    "--steps and --minutes count the new run only")
     p.add_argument("--tensorboard", action="store_true", help="also log to OUTPUT/tensorboard (tensorboard --logdir OUTPUT)")
@@ -168,6 +169,9 @@ def _cmd_train(args: argparse.Namespace) -> int:
         _same_as_run(args, env_cfg, ppo, out)
         ppo = with_budget(ppo, args.steps, args.minutes)
     elif args.init_from:
+        from ohra.learn.rl.evaluate import policy_dir
+
+        args.init_from = str(policy_dir(args.init_from))  # a run, an export, or a shipped policy by name
         env_cfg, ppo = load_run(args.init_from)
         env_cfg = env_cfg.with_overrides(**_given_env(args))
         base = {"total_steps": args.steps or PPOSettings().total_steps, "max_minutes": args.minutes, **_given_ppo(args),

@@ -237,20 +237,23 @@ NETWORK_SETTINGS = ("policy", "net_arch", "activation", "lstm_hidden", "lstm_cri
 
 def init_source(src: str | Path) -> tuple[Path, Path, dict]:
     """The policy file, observation-statistics file and budget of the run ``src`` a new run starts from:
-    its final policy (``model.zip``) when it has one, else its last checkpoint.
+    a training run's final policy (``model.zip`` + ``vecnormalize.pkl``) when it has one, else its last
+    checkpoint; or an exported / shipped policy (``policy.pth`` + ``obs_stats.npz``, budget from
+    ``trained.json``; no optimizer state or return statistics travel with an export).
 
     Raises:
         RLConfigError: ``src`` holds no trained policy.
     """
     src = Path(src)
-    for zip_path, stats, budget in ((src / "model.zip", src / "vecnormalize.pkl", src / "checkpoints" / "last.json"),
-                                    (src / "checkpoints" / "last.zip", src / "checkpoints" / "last_vecnormalize.pkl",
-                                     src / "checkpoints" / "last.json")):
+    last = src / "checkpoints" / "last.json"
+    for zip_path, stats, budget in ((src / "model.zip", src / "vecnormalize.pkl", last),
+                                    (src / "checkpoints" / "last.zip", src / "checkpoints" / "last_vecnormalize.pkl", last),
+                                    (src / "policy.pth", src / "obs_stats.npz", src / "trained.json")):
         if zip_path.is_file() and stats.is_file():
             done = json.loads(budget.read_text()) if budget.is_file() else {}
             return zip_path, stats, {"timesteps": done.get("timesteps"), "wall_s": done.get("wall_s")}
     raise RLConfigError(f"init_from: {src} holds no trained policy (model.zip or checkpoints/last.zip with its "
-                        "observation statistics)")
+                        "observation statistics, or an exported policy.pth with obs_stats.npz)")
 
 
 def _init_record(src: Path, zip_path: Path, budget: dict, env_cfg: RotationConfig, ppo: PPOSettings) -> dict:
@@ -269,11 +272,29 @@ def _load_init(model, venv, zip_path: Path, stats: Path, src: Path) -> None:
     """Copy the source's weights into ``model`` and its observation/return statistics into ``venv``."""
     import pickle
 
+    fit = (f"init_from {src}: its weights do not fit this run's spaces (same hand, joint space and object kind "
+           "needed): ")
+    if zip_path.name == "policy.pth":  # an export: weights and observation statistics, no optimizer or returns
+        from ohra.learn.rl.evaluate import Policy
+
+        pol = Policy(src)
+        try:
+            model.policy.load_state_dict(pol._policy.state_dict())
+        except RuntimeError as exc:
+            raise RLConfigError(fit + str(exc).splitlines()[0]) from None
+        if pol._mean is not None and "obs_rms" in venv.__dict__:
+            if pol._mean.shape != venv.obs_rms.mean.shape:
+                raise RLConfigError(fit + f"observation size {pol._mean.shape[0]}, this run {venv.obs_rms.mean.shape[0]}")
+            # counted as the observations the source was trained on, so the first rollouts refine the
+            # statistics rather than replace them
+            done = json.loads((src / "trained.json").read_text()).get("timesteps") if (src / "trained.json").is_file() else None
+            venv.obs_rms.mean, venv.obs_rms.var = pol._mean.astype(np.float64), pol._var.astype(np.float64)
+            venv.obs_rms.count = float(done or 1e6)
+        return
     try:
         model.set_parameters(str(zip_path), exact_match=True, device="cpu")
     except (RuntimeError, ValueError) as exc:  # torch's size mismatch: another hand, space or observation layout
-        raise RLConfigError(f"init_from {src}: its weights do not fit this run's spaces "
-                            f"(same hand, joint space and object kind needed): {str(exc).splitlines()[0]}") from None
+        raise RLConfigError(fit + str(exc).splitlines()[0]) from None
     with open(stats, "rb") as fh:
         theirs = pickle.load(fh).__dict__  # an unpickled VecNormalize has no venv: read its fields, not attributes
     mine = venv.__dict__
