@@ -234,3 +234,10 @@ def test_init_from_takes_the_source_runs_settings_and_changes_only_the_options_g
     assert main(["train", "-o", out, "--resume", "--init-from", src]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--init-from starts a new run" in err and len(calls) == 3
+
+
+def test_help_defaults_are_the_configs():
+    from ohra.cli.rotate import HELP_DEFAULTS
+    from ohra.sim.rotation.config import RotationConfig
+
+    assert HELP_DEFAULTS == {k: getattr(RotationConfig(), k) for k in HELP_DEFAULTS}

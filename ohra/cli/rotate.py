@@ -22,10 +22,13 @@ _ENV_FIELDS = (("hand", "hand"), ("urdf", "urdf"), ("inertials", "inertials"), (
                ("object", "object"), ("object_size", "object_size"), ("grasps", "grasp_count"))
 
 
-def _env_args(p: argparse.ArgumentParser) -> None:
-    from ohra.sim.rotation.config import RotationConfig
+# RotationConfig's defaults, named in the help texts (a test keeps them equal): importing ohra.sim while the
+# parser is built would import PyBullet before ohra.cli.main silences its build-time line
+HELP_DEFAULTS = {"hand": "leap_hand_right", "urdf": "canonical", "object": "cube", "grasp_count": 1000}
 
-    d = RotationConfig()
+
+def _env_args(p: argparse.ArgumentParser) -> None:
+    d = argparse.Namespace(**HELP_DEFAULTS)
     p.add_argument("--hand", help=f"registered hand, leap_XXXX or params JSON (default {d.hand})")
     p.add_argument("--urdf", choices=("canonical", "original"), help=f"default {d.urdf}")
     p.add_argument("--inertials", choices=("capsule", "original"),
