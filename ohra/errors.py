@@ -74,6 +74,16 @@ def reject_unknown(keys: Iterable[str], known: Iterable[str], error: type[OhraEr
         raise error(f"{source}: unknown {what} {unknown}; known: {sorted(names)}")
 
 
+def require_seed(seed: object, error: type[OhraError], what: str = "seed") -> int:
+    """``seed`` as an int, or ``error`` naming it: NumPy's generators take whole numbers >= 0 only (a
+    negative or fractional seed would otherwise fail deep inside them with a bare ValueError)."""
+    import numbers
+
+    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or int(seed) < 0:
+        raise error(f"{what} must be a whole number >= 0, got {seed!r}")
+    return int(seed)
+
+
 def user_stacklevel() -> int:
     """The ``stacklevel`` that attributes a warning to the first frame outside ohra (and ``functools``, whose
     ``cached_property`` runs some of ohra's checks): a notebook user sees their own line, not ohra's internals.

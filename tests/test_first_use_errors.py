@@ -58,3 +58,55 @@ def test_evaluate_model_takes_one_hand_by_itself():
 
     with pytest.raises(GraspError, match=r"'/nowhere/hand.json' is not a registered hand"):
         evaluate_model(object(), "/nowhere/hand.json", "builtin:box", n=1, inertials="original", allow_seen=True)
+
+
+def test_evaluate_model_refuses_a_bad_seed_protocol_or_a_repeated_hand_or_object_before_simulating():
+    from ohra.learn.grasp.evaluate import evaluate_model
+    from ohra.learn.grasp.model import load_grasp_model
+
+    leap = load_grasp_model("leap")
+    with pytest.raises(GraspError, match="seed must be a whole number >= 0, got -1"):
+        evaluate_model(leap, "leap_2211", "procedural:box:1234", n=1, seed=-1)
+    with pytest.raises(GraspError, match="unknown protocol preset 'nosuch'"):
+        evaluate_model(leap, "leap_2211", "procedural:box:1234", n=1, protocol="nosuch")
+    with pytest.raises(GraspError, match="protocol must be an ohra.sim.Protocol, a preset name or None, got int"):
+        evaluate_model(leap, "leap_2211", "procedural:box:1234", n=1, protocol=3)
+    with pytest.raises(GraspError, match=r"hand\(s\) \['leap_2211'\] given more than once"):
+        evaluate_model(leap, ["leap_2211", "leap_2211"], "procedural:box:1234", n=1)
+    with pytest.raises(GraspError, match=r"object\(s\) \['box-1234'\] given more than once"):
+        evaluate_model(leap, "leap_2211", ["procedural:box:1234", "procedural:box:1234"], n=1)
+
+
+def test_evaluate_model_takes_a_protocol_preset_by_name(monkeypatch):
+    from ohra.learn.grasp.evaluate import evaluate_model
+    from ohra.learn.grasp.model import load_grasp_model
+    from ohra.sim import Protocol
+
+    rep = evaluate_model(load_grasp_model("leap"), "leap_2211", "procedural:box:1234", n=1, protocol="strict")
+    assert rep.meta["protocol"] == Protocol.strict().__dict__
+
+
+def test_evaluate_model_simulates_a_coupled_hand_with_its_couplings_as_ohra_eval_does(monkeypatch):
+    """Inspire's coupled joints follow their drivers in simulation (``ohra eval`` and synthesis do so)."""
+    from ohra.hands import get_couplings
+    from ohra.learn.grasp.evaluate import evaluate_model
+    from ohra.learn.grasp.model import load_grasp_model
+    from ohra.sim import SimHand
+
+    seen = []
+    real = SimHand.from_params.__func__
+
+    def spy(cls, params, name="canonical_hand", couplings=()):
+        seen.append(tuple(couplings))
+        return real(cls, params, name=name, couplings=couplings)
+
+    monkeypatch.setattr(SimHand, "from_params", classmethod(spy))
+    evaluate_model(load_grasp_model(), "inspire_hand_left", "procedural:box:1234", n=1)
+    assert get_couplings("inspire_hand_left") and seen == [get_couplings("inspire_hand_left")]
+
+
+def test_load_grasp_model_names_what_it_takes():
+    from ohra.learn.grasp.model import load_grasp_model
+
+    with pytest.raises(OhraError, match="a grasp model is a shipped name .*, a folder or a .pt file, got int"):
+        load_grasp_model(3)

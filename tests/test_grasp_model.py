@@ -315,11 +315,69 @@ def test_the_shipped_leap_model_conditions_on_raw_parameters_and_takes_any_hand(
         load_grasp_model().sample("leap_2211", "builtin:box", 1)
     out = tmp_path / "g.npz"
     assert main(["grasp", "sample", "--hand", "leap_2211", "--object", "builtin:box", "-n", "3", "--seed", "0", "-o", str(out)]) == 0
-    assert "using the shipped 'leap' model" in capsys.readouterr().err
+    assert "used the shipped 'leap' model" in capsys.readouterr().err
     with np.load(out) as z:
         np.testing.assert_array_equal(z["grasps"], leap.sample("leap_2211", "builtin:box", 3, seed=0))
     assert main(["grasp", "sample", "--hand", "barrett_hand", "--object", "builtin:box", "-n", "2", "-o", str(out)]) == 0
     assert "note" not in capsys.readouterr().err  # a base-form hand keeps the default model
+
+
+def test_the_automatic_leap_model_is_the_shipped_one_and_its_note_never_precedes_an_error(tmp_path, capsys, monkeypatch):
+    """A folder named ``leap`` where the user works does not stand in for the shipped model the CLI picks by
+    itself; an invalid hand file is its own error, not a reason to switch models; the note comes after the
+    work, so an error stays one line."""
+    from ohra.cli.main import main
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "leap").mkdir()
+    out = tmp_path / "g.npz"
+    assert main(["grasp", "sample", "--hand", "leap_2211", "--object", "builtin:box", "-n", "2", "-o", str(out)]) == 0
+    assert out.is_file()
+    capsys.readouterr()
+    (tmp_path / "empty.json").write_text("{}")
+    (tmp_path / "hand.urdf").write_text("<robot name='x'/>")
+    for hand, named in (("empty.json", "cannot tell the form"), ("hand.urdf", "a URDF is not a hand")):
+        assert main(["grasp", "sample", "--hand", hand, "--object", "builtin:box", "-n", "2", "-o", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and named in err and "note" not in err, err
+    assert main(["grasp", "sample", "--hand", "leap_2211", "--object", "builtin:nosuch", "-n", "2", "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "nosuch" in err
+
+
+@pytest.mark.parametrize("seed", [-1, 1.5, "a", True])
+def test_a_seed_numpy_cannot_take_is_a_grasp_error_naming_it(seed):
+    from ohra.learn.grasp.config import GraspConfigError, GraspTrainConfig
+
+    with pytest.raises(GraspError, match="seed must be a whole number >= 0"):
+        load_grasp_model("leap").sample("leap_2211", "builtin:box", 1, seed=seed)
+    with pytest.raises(GraspConfigError, match="seed must be a whole number >= 0"):
+        GraspTrainConfig(seed=seed)
+    assert load_grasp_model("leap").sample("leap_2211", "builtin:box", 1, seed=np.int64(3)).shape == (1, 31)
+
+
+@pytest.mark.parametrize("refine", [0, 0.0, "no", 1])
+def test_refine_takes_true_false_none_or_settings_only(refine):
+    with pytest.raises(GraspError, match="refine must be True, False, None or a RefineSettings"):
+        load_grasp_model("leap").sample("leap_2211", "builtin:box", 1, refine=refine)
+
+
+def test_refine_numpy_false_is_off_and_numpy_true_is_on():
+    leap = load_grasp_model("leap")
+    plain = leap.sample("leap_2211", "builtin:box", 3, seed=2)
+    refined = leap.sample("leap_2211", "builtin:box", 3, seed=2, refine=True)
+    assert not np.array_equal(plain, refined)
+    np.testing.assert_array_equal(leap.sample("leap_2211", "builtin:box", 3, seed=2, refine=np.False_), plain)
+    np.testing.assert_array_equal(leap.sample("leap_2211", "builtin:box", 3, seed=2, refine=np.True_), refined)
+
+
+def test_grasp_training_options_are_named_one_by_one():
+    from ohra.learn.grasp.config import GraspConfigError, GraspTrainConfig
+
+    with pytest.raises(GraspConfigError, match=r"^lr must be positive, got 0"):
+        GraspTrainConfig(lr=0.0)
+    with pytest.raises(GraspConfigError, match=r"^condition_noise must be >= 0, got -0.1"):
+        GraspTrainConfig(condition_noise=-0.1)
 
 
 def test_lazy_exports():

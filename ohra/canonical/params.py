@@ -333,7 +333,14 @@ def _read_json_object(source: str | Path) -> tuple[dict[str, Any], str]:
         p = Path(source)
         if not p.is_file():
             raise ParamsError(f"params file not found: {p}")
-        text, where = p.read_text(), str(p)
+        if p.suffix.lower() in (".urdf", ".xacro", ".xml"):
+            raise ParamsError(f"{p}: a URDF is not a hand ohra can use directly: describe it in a spec YAML and parse "
+                              "it (ohra hand parse SPEC.yaml -o params.json; README: Add your own hand), then give "
+                              "the spec or the params JSON")
+        try:
+            text, where = p.read_text(), str(p)
+        except UnicodeDecodeError:
+            raise ParamsError(f"{p}: not a params JSON file (not text)") from None
     else:
         text, where = str(source), "<json text>"
     try:

@@ -143,29 +143,42 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
 
 def _load(model: str | None, hands: Sequence[str] = ()):
-    """The model ``--model`` names; without one, the shipped ``default`` model, or the shipped ``leap``
-    model when none of ``hands`` has a base form (the default model's VAE condition reads base-form hands
-    only: LEAP variants and extended-only hands), with a note on stderr."""
+    """(model, note): the model ``--model`` names; without one, the shipped ``default`` model, or the
+    shipped ``leap`` model when none of ``hands`` has a base form (the default model's VAE condition reads
+    base-form hands only: LEAP variants and extended-only hands), with a note for stderr, which the command
+    prints once its work is done (an error stays the one line on stderr)."""
     _torch()
     from ohra.errors import ParamsError
     from ohra.learn.grasp.condition import resolve_hand
-    from ohra.learn.grasp.model import load_grasp_model
+    from ohra.learn.grasp.model import default_model_dir, load_grasp_model
 
     chosen = load_grasp_model(model)
     if model is not None or not hands:
-        return chosen
+        return chosen, None
     unusable = []
     for h in hands:
+        params = resolve_hand(h)  # an unknown or malformed hand is its own error, not a reason to switch models
         try:
-            chosen.condition.vector(resolve_hand(h))
+            chosen.condition.vector(params)
         except ParamsError:
             unusable.append(h)
     if unusable and len(unusable) == len(hands):
-        print(f"ohra: note: the default grasp model (VAE condition) reads base-form hands only, and "
-              f"{', '.join(unusable)} {'has' if len(unusable) == 1 else 'have'} none: using the shipped 'leap' model "
-              "(raw-parameter condition, trained on 66 LEAP variants; --model leap)", file=sys.stderr)
-        return load_grasp_model("leap")
-    return chosen  # a mix: evaluate_model names the hands the default model cannot condition on
+        note = (f"ohra: note: the default grasp model (VAE condition) reads base-form hands only, and "
+                f"{', '.join(unusable)} {'has' if len(unusable) == 1 else 'have'} none: used the shipped 'leap' model "
+                "(raw-parameter condition, trained on 66 LEAP variants; --model leap)")
+        # by its folder: a folder named 'leap' where the user runs ohra must not stand in for the shipped model
+        return load_grasp_model(default_model_dir("leap")), note
+    return chosen, None  # a mix: evaluate_model names the hands the default model cannot condition on
+
+
+def _output(path: str, suffix: str) -> Path:
+    """``-o`` checked before any work: the file type it must have, not a folder."""
+    out = Path(path)
+    if out.suffix != suffix:
+        raise OhraError(f"-o must end in {suffix}, got {out}")
+    if out.is_dir():
+        raise OhraError(f"-o {out} is a folder; give a {suffix} file path")
+    return out
 
 
 def _cmd_sample(args: argparse.Namespace) -> int:
@@ -174,15 +187,15 @@ def _cmd_sample(args: argparse.Namespace) -> int:
     from ohra.learn.grasp.model import resolve_object
     from ohra.objects.resolve import warn_if_ungraspable
 
-    model = _load(args.model, [args.hand])
+    out = _output(args.output, ".npz")
+    model, note = _load(args.model, [args.hand])
     obj = resolve_object(args.object, scale=args.scale)
     warn_if_ungraspable(obj)
     timing: dict = {}
     g = model.sample(args.hand, obj, args.n, seed=args.seed, timing=timing, refine=args.refine, centre=args.centre)
-    out = Path(args.output)
-    if out.suffix != ".npz":
-        raise OhraError(f"-o must end in .npz, got {out}")
     atomic_write_npz(out, {"grasps": g.astype(np.float64)})
+    if note:
+        print(note, file=sys.stderr)
     extra = f", refinement {1e3 * timing['refine_seconds'] / len(g):.1f} ms per grasp" if args.refine else ""
     print(f"wrote {len(g)} grasps of {args.hand} on {args.object} to {out} ({1e3 * timing['seconds'] / len(g):.2f} ms per grasp{extra})")
     return 0
@@ -193,7 +206,9 @@ def _cmd_eval(args: argparse.Namespace) -> int:
 
     if args.workers < 1:
         raise OhraError(f"--workers must be >= 1, got {args.workers}")
-    model = _load(args.model, args.hands)
+    if args.output:
+        _output(args.output, ".json")
+    model, note = _load(args.model, args.hands)
     from ohra.sim import Protocol
 
     from ohra.objects.model import resolve_objects
@@ -216,6 +231,8 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         print(f"{h}: {100 * r['success_rate']:.1f} % of {r['n']} grasps{(' (original URDF, canonical collision shapes)' if args.collisions == 'canonical' else ' (original URDF)') if args.original else ''}"
               f"{' (canonical, original finger masses)' if args.inertials == 'original' and not args.original else ''}"
               f"{f' (model told {args.condition_hand})' if args.condition_hand else ''}")
+    if note:
+        print(note, file=sys.stderr)
     if args.output:
         print(f"report: {args.output}", file=sys.stderr)
     return 0

@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any, TypeVar
 
-from ohra.errors import OhraError, reject_unknown
+from ohra.errors import OhraError, reject_unknown, require_seed
 
 ENCODERS = ("pointnet", "dgcnn")
 CONDITIONS = ("vae", "params")
@@ -134,10 +134,12 @@ class GraspTrainConfig(_JSONSettings):
         for name in ("rotated_copies", "objects_per_step", "max_per_pair"):
             if int(getattr(self, name)) < 0:
                 raise GraspConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
-        if not (self.lr > 0 and self.lr_min >= 0 and self.point_noise >= 0 and self.joint_loss_weight >= 0
-                and self.condition_noise >= 0):
-            raise GraspConfigError("lr must be positive; lr_min, point_noise, joint_loss_weight and condition_noise "
-                                   "non-negative")
+        if not self.lr > 0:
+            raise GraspConfigError(f"lr must be positive, got {self.lr}")
+        for name in ("lr_min", "point_noise", "joint_loss_weight", "condition_noise"):
+            if not getattr(self, name) >= 0:
+                raise GraspConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
+        require_seed(self.seed, GraspConfigError)
 
 
 

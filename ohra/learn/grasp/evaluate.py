@@ -35,7 +35,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ohra.errors import DatasetError, GraspError, ParamsError
+from ohra.errors import DatasetError, GraspError, ParamsError, require_seed
 from ohra.learn.grasp.condition import HandLike, hand_key, resolve_hand
 from ohra.learn.grasp.model import GraspModel, ObjectLike, resolve_object
 from ohra.learn.grasp.refine import RefineSettings, as_refine_settings
@@ -176,7 +176,8 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
             (:func:`hand_label`: its name or path, or for params their content hash) and the mesh hash.
         original: replay the grasps on the hand's original URDF through its action map.
         workers: simulation processes per pair (:meth:`ohra.sim.GraspEvaluator.evaluate`).
-        protocol: a :class:`ohra.sim.Protocol`; None for the default.
+        protocol: a :class:`ohra.sim.Protocol` or a preset name (``"reference"``, ``"strict"``,
+            ``"isaac-step"``, ``"isaac-drive"``); None for the default.
         progress: show the simulation's progress bar.
         allow_seen: also evaluate objects the model was trained on.
         inertials: ``"capsule"`` (template finger masses) or ``"original"`` (the original URDF's finger
@@ -198,7 +199,8 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
         (n,), timings [s] and diversity; ``meta`` holds the settings and the model's metadata.
 
     Raises:
-        GraspError: ``n`` not a positive integer; no hands or no objects; an unknown ``inertials`` or
+        GraspError: ``n`` not a positive integer; ``seed`` not a whole number >= 0; ``protocol`` neither a
+            Protocol nor a preset name; a hand or object given twice; no hands or no objects; an unknown ``inertials`` or
             ``collisions``; ``collisions="canonical"`` without ``original``; ``original`` or
             ``inertials="original"`` with a hand that is not a registered name; ``workers`` not an
             integer >= 1.
@@ -215,6 +217,8 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
 
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
         raise GraspError(f"n must be a positive integer, got {n!r}")
+    seed = require_seed(seed, GraspError)
+    protocol = _as_protocol(protocol)
     # one hand or object given by itself (a name is a sequence of letters, not of hands)
     hands = [hands] if isinstance(hands, (str, Path)) or not isinstance(hands, Sequence) else list(hands)
     objects = [objects] if isinstance(objects, (str, Path)) or not isinstance(objects, Sequence) else list(objects)
@@ -229,6 +233,9 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
     if collisions != "own" and not original:
         raise GraspError("collisions='canonical' replays on the original URDF's hybrid: it needs original=True")
     objs = [resolve_object(o) for o in objects]
+    twice = sorted({o.name for o in objs if sum(p.mesh_hash == o.mesh_hash for p in objs) > 1})
+    if twice:  # its grasps would be counted twice in every pooled rate
+        raise GraspError(f"object(s) {twice} given more than once")
     from ohra.objects.resolve import warn_if_ungraspable
 
     for obj in objs:
@@ -251,9 +258,12 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
         except ParamsError as exc:
             who = hand if condition_hand is None else condition_hand
             raise ParamsError(f"hand {str(who) if isinstance(who, (str, Path)) else type(who).__name__!r}: {exc}") from None
-        resolved.append((hand_label(hand, params), params))
+        resolved.append((hand_label(hand, params), params, _couplings(hand)))
+    twice = sorted({name for name, *_ in resolved if sum(r[0] == name for r in resolved) > 1})
+    if twice:
+        raise GraspError(f"hand(s) {twice} given more than once")
     pairs = []
-    for name, params in resolved:
+    for name, params, couplings in resolved:
         movable = np.asarray(params.movable_joints)
         hybrid = None
         if original and collisions == "canonical":  # one fit per hand, shared by its objects
@@ -268,7 +278,9 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
             if hybrid is not None:
                 sim_hand = hybrid
             else:
-                sim_hand = SimHand.registered_original(name) if original else SimHand.from_params(params, name=str(name))
+                # a coupled hand (Inspire) drives its coupled joints with their drivers, as ohra eval and synthesis do
+                sim_hand = (SimHand.registered_original(name) if original
+                            else SimHand.from_params(params, name=str(name), couplings=couplings))
             if inertials == "original" and not original:
                 sim_hand = sim_hand.with_finger_masses(original_finger_masses(name))
             t0 = time.perf_counter()
@@ -287,6 +299,29 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
             "model": str(model.path),
             "model_meta": model.meta, "protocol": protocol.__dict__ if protocol is not None else "default"}
     return GraspEvalReport(pairs, meta)
+
+
+def _as_protocol(protocol: Any):
+    """A :class:`~ohra.sim.Protocol`, a preset name (``"reference"``, ``"strict"``, ...) or None (the default)."""
+    from ohra.sim import Protocol
+
+    if protocol is None or isinstance(protocol, Protocol):
+        return protocol
+    if isinstance(protocol, str):
+        try:
+            return Protocol.preset(protocol)
+        except ValueError as exc:
+            raise GraspError(str(exc)) from None
+    raise GraspError(f"protocol must be an ohra.sim.Protocol, a preset name or None, got {type(protocol).__name__}")
+
+
+def _couplings(hand: Any) -> tuple:
+    """The couplings of a hand given by name or file (registered, spec or params JSON); none for params."""
+    if not isinstance(hand, (str, Path)):
+        return ()
+    from ohra.hands import get_couplings
+
+    return get_couplings(hand)
 
 
 __all__ = ["COLLISIONS", "evaluate_model", "GraspEvalReport", "PairResult", "diversity", "hand_label", "pair_seed",

@@ -28,7 +28,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from ohra.errors import CheckpointError, GraspError, ObjectWarning, user_stacklevel
+from ohra.errors import CheckpointError, GraspError, ObjectWarning, require_seed, user_stacklevel
 from ohra.learn.grasp.condition import HandCondition, HandLike, resolve_hand
 from ohra.learn.grasp.config import GraspModelConfig
 from ohra.learn.grasp.diffusion import DDIMScheduler, Denoiser
@@ -205,8 +205,8 @@ class GraspModel:
             joint angles [rad] within ``hand``'s limits (absent joints 0).
 
         Raises:
-            GraspError: ``n`` is not a positive integer; ``rotations`` of the wrong shape, non-finite,
-                or not rotations.
+            GraspError: ``n`` is not a positive integer; ``seed`` not a whole number >= 0; ``rotations``
+                of the wrong shape, non-finite, or not rotations.
             ObjectError: ``obj`` cannot be resolved to one object.
             HandNotFoundError: an unknown hand name or a missing params file.
             ParamsError: ``hand`` (or ``condition_hand``) of another type, or without a base form for a
@@ -215,6 +215,7 @@ class GraspModel:
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
             raise GraspError(f"n must be a positive integer, got {n!r}")
         n = int(n)
+        seed = require_seed(seed, GraspError)
         params = resolve_hand(hand)
         obj = resolve_object(obj)
         offset = object_offset(obj)
@@ -326,11 +327,14 @@ def load_grasp_model(path: str | Path | None = None) -> GraspModel:
         training metadata ``meta``.
 
     Raises:
-        CheckpointError: the shipped model is missing; no model file there; a corrupt, foreign or
+        CheckpointError: ``path`` of another type; the shipped model is missing; no model file there; a corrupt, foreign or
             other-version file; weights or hand condition that do not fit the stored config.
     """
     from ohra.learn.train_vae import load_torch_file
 
+    if path is not None and not isinstance(path, (str, Path)):
+        raise CheckpointError(f"a grasp model is a shipped name ({', '.join(SHIPPED_MODELS)}), a folder or a .pt file, "
+                              f"got {type(path).__name__}")
     shipped = path is None or (isinstance(path, str) and path in SHIPPED_MODELS and not Path(path).exists())
     p = default_model_dir(path or "default") if shipped else Path(path)
     if shipped and not (p / "model.pt").is_file():

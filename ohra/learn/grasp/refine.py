@@ -46,10 +46,18 @@ class RefineSettings:
 
 
 def as_refine_settings(refine: "bool | RefineSettings | None") -> RefineSettings | None:
-    """The settings a ``refine=`` argument asks for: None when off (False/None), the defaults for True."""
-    if refine is None or refine is False:
+    """The settings a ``refine=`` argument asks for: None when off (False/None), the defaults for True.
+
+    Raises:
+        GraspError: anything else (a number, a string: ``refine=0`` or ``"no"`` must not switch it on).
+    """
+    if isinstance(refine, RefineSettings):
+        return refine
+    if refine is None or (isinstance(refine, (bool, np.bool_)) and not refine):
         return None
-    return refine if isinstance(refine, RefineSettings) else RefineSettings()
+    if isinstance(refine, (bool, np.bool_)):
+        return RefineSettings()
+    raise GraspError(f"refine must be True, False, None or a RefineSettings, got {refine!r}")
 
 
 @dataclass
