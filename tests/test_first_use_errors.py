@@ -110,3 +110,43 @@ def test_load_grasp_model_names_what_it_takes():
 
     with pytest.raises(OhraError, match="a grasp model is a shipped name .*, a folder or a .pt file, got int"):
         load_grasp_model(3)
+
+
+def test_a_scale_given_for_a_built_in_or_procedural_shape_is_said_to_change_nothing():
+    from ohra.errors import ObjectWarning
+    from ohra.objects.resolve import resolve_objects
+
+    with pytest.warns(ObjectWarning, match=r"scale 0.001 applies to objects read from files; procedural:box:7 keeps its own size"):
+        (box,) = resolve_objects("procedural:box:7", scale=0.001)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert resolve_objects("procedural:box:7")[0].mesh_hash == box.mesh_hash  # same shape, no warning without a scale
+        resolve_objects("procedural:box:7", scale=1.0)
+
+
+def test_the_object_point_the_evaluator_warns_about_can_be_set_on_the_command_line(tmp_path, monkeypatch):
+    """The off-origin warning advises Protocol(object_point='com'); both evaluation commands can set it."""
+    import numpy as np
+
+    import ohra.learn.grasp.evaluate as grasp_eval
+    import ohra.sim
+    from ohra.cli.main import main
+
+    class Seen(Exception):
+        pass
+
+    def spy_evaluator(hand, obj, protocol=None):
+        raise Seen(protocol.object_point)
+
+    monkeypatch.setattr(ohra.sim, "GraspEvaluator", spy_evaluator)
+    np.save(tmp_path / "g.npy", np.zeros((1, 31)))
+    for point in ("com", "frame"):
+        with pytest.raises(Seen, match=f"^{point}$"):
+            main(["eval", str(tmp_path / "g.npy"), "--hand", "leap_3303", "--object", "builtin:box", "--object-point", point])
+
+    def spy_model_eval(model, hands, objs, **kw):
+        raise Seen(kw["protocol"].object_point)
+
+    monkeypatch.setattr(grasp_eval, "evaluate_model", spy_model_eval)
+    with pytest.raises(Seen, match="^com$"):
+        main(["grasp", "eval", "--hands", "leap_2211", "--objects", "builtin:box", "-n", "1", "--object-point", "com"])

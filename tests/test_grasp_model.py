@@ -215,6 +215,8 @@ def test_bad_inputs_raise_ohra_errors(vae_model, capsule):
             vae_model.sample("barrett_hand", capsule, n)
     with pytest.raises(GraspError, match=r"expected shape \(3, 3, 3\)"):
         vae_model.sample("barrett_hand", capsule, 3, rotations=np.eye(3)[None].repeat(2, 0))
+    with pytest.raises(GraspError, match=r"expected shape \(2, 3, 3\) or \(2, 6\), got \(3, 6\)"):  # as passed
+        vae_model.sample("barrett_hand", capsule, 2, rotations=np.tile([1, 0, 0, 0, 1, 0.0], (3, 1)))
     with pytest.raises(GraspError, match=r"rotations\[1\] is not a rotation"):
         vae_model.sample("barrett_hand", capsule, 2, rotations=np.stack([np.eye(3), 2 * np.eye(3)]))
     with pytest.raises(GraspError, match=r"rotations\[0\] is not a rotation"):
@@ -285,6 +287,10 @@ def test_bad_checkpoints_raise(tmp_path, vae_model):
     payload["hand_dim"] = 99
     torch.save(payload, tmp_path / "model.pt")
     with pytest.raises(CheckpointError, match="incompatible grasp model"):
+        load_grasp_model(tmp_path)
+    torch.save({"format": "ohra-vae-model", "version": 1}, tmp_path / "model.pt")  # another ohra file
+    with pytest.raises(CheckpointError, match=r"expected a grasp model \('ohra-grasp-model' or 'ohra-grasp-checkpoint'\), "
+                                              r"got 'ohra-vae-model'"):
         load_grasp_model(tmp_path)
 
 

@@ -131,8 +131,10 @@ def test_bad_data_raise(tmp_path, dataset):
         TrainingData.load(tmp_path, tiny_train_config())
     with pytest.raises(DatasetError, match="no_such_hand"):
         TrainingData.load(dataset, tiny_train_config(hands=("barrett_hand", "no_such_hand")))
-    with pytest.raises(DatasetError, match="no training grasps left"):
+    with pytest.raises(DatasetError, match=r"no training grasps left after holding out the test objects \['box'"):
         TrainingData.load(dataset, tiny_train_config(test_objects=("sphere", "box", "cylinder", "capsule")))
+    with pytest.raises(DatasetError, match=r"after holding out the test objects \['capsule'\] and the test hands \["):
+        TrainingData.load(dataset, tiny_train_config(test_hands=("allegro_hand_left", "barrett_hand", "shadow_hand_right")))
 
 
 def test_batches_are_robot_balanced_and_deterministic(tmp_path):

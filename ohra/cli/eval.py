@@ -50,6 +50,10 @@ def register(subparsers) -> None:
                    help="canonical form the grasps were made for (default: the hand's natural form); with --original it "
                         "picks the action map that carries them to the original joints")
     p.add_argument("--no-early-exit", action="store_true", help="simulate every grasp to the end")
+    p.add_argument("--object-point", choices=("frame", "com"), default="frame",
+                   help="the point the fingers close toward and whose displacement is measured: the mesh frame's origin "
+                        "(default, the reference's) or the object's centre of mass (outcomes then do not depend on "
+                        "where the mesh's origin lies)")
     p.add_argument("--limit", type=int, default=None, help="evaluate only the first N grasps")
     p.add_argument("--render", metavar="PNG", default=None, help="write a contact sheet of the grasps (first 16)")
     p.add_argument("--meshcat", metavar="HTML", default=None, help="write a meshcat scene of the first grasp as static HTML")
@@ -127,6 +131,7 @@ def run(args: argparse.Namespace) -> int:
         protocol = replace(protocol, position_gain=protocol.dt * ISAAC_DRIVE["stiffness"] / ISAAC_DRIVE["damping"], velocity_gain=1.0)
     if args.no_early_exit:
         protocol = replace(protocol, early_exit=False)
+    protocol = replace(protocol, object_point=args.object_point)
     hand = eval_hand(args.hand, args.original, args.form, args.inertials)
     ev = GraspEvaluator(hand, obj, protocol)
     g, out_of_limits = ev.check(grasps)  # validates before any simulation or output

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -39,8 +40,10 @@ def register(sub: Any) -> None:
                   "default: 'default', or 'leap' when no hand has a base form")
     p = g.add_parser("sample", help="sample grasps of a hand on an object -> .npz (key 'grasps', (N, 31))")
     p.add_argument("--hand", required=True, help="registered hand, leap_XXXX, hand spec YAML, or params JSON file")
-    p.add_argument("--object", required=True, help="mesh (.obj/.stl/.ply), object URDF or folder, or builtin:NAME")
-    p.add_argument("--scale", type=float, default=None, help="multiply the coordinates of object files (0.001 for millimetre meshes)")
+    p.add_argument("--object", required=True, help="mesh (.obj/.stl/.ply/.off/.glb), object URDF or folder, builtin:NAME "
+                   "or procedural:FAMILY:SEED")
+    p.add_argument("--scale", type=float, default=None, help="multiply the coordinates of object files (0.001 for "
+                   "millimetre meshes; built-in and procedural shapes keep their size)")
     p.add_argument("-n", type=int, default=100, help="number of grasps (default 100)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--model", help=model_help)
@@ -52,8 +55,10 @@ def register(sub: Any) -> None:
     p = g.add_parser("eval", help="sample N grasps per (hand, unseen object) and run the six-direction test")
     p.add_argument("--hands", nargs="+", required=True,
                    help="hands to evaluate: registered hands, leap_XXXX, hand spec YAMLs or params JSON files")
-    p.add_argument("--objects", nargs="+", required=True, help="builtin:NAME, mesh files or folders")
-    p.add_argument("--scale", type=float, default=None, help="multiply the coordinates of object files (0.001 for millimetre meshes)")
+    p.add_argument("--objects", nargs="+", required=True, help="builtin:NAME, procedural:FAMILY:SEED, mesh files "
+                   "(.obj/.stl/.ply/.off/.glb), object URDFs or folders")
+    p.add_argument("--scale", type=float, default=None, help="multiply the coordinates of object files (0.001 for "
+                   "millimetre meshes; built-in and procedural shapes keep their size)")
     p.add_argument("-n", type=int, default=100, help="grasps per (hand, object) (default 100)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--model", help=model_help)
@@ -71,6 +76,9 @@ def register(sub: Any) -> None:
     p.add_argument("--workers", type=int, default=1, help="simulation processes (default 1)")
     p.add_argument("--protocol", default="reference", choices=("reference", "strict", "isaac-step", "isaac-drive"),
                    help="six-direction test preset (default reference; use the one the training data was filtered with)")
+    p.add_argument("--object-point", choices=("frame", "com"), default="frame",
+                   help="the point the fingers close toward and whose displacement is measured: the mesh frame's origin "
+                        "(default, the reference's) or the object's centre of mass")
     p.add_argument("--allow-seen", action="store_true", help="also evaluate objects the model was trained on")
     p.add_argument("-o", "--output", help="write the JSON report here")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -216,7 +224,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     objs = resolve_objects(args.objects, scale=args.scale)
     rep = evaluate_model(model, args.hands, objs, n=args.n, seed=args.seed, original=args.original,
                          workers=args.workers, progress=not args.quiet, allow_seen=args.allow_seen,
-                         protocol=Protocol.preset(args.protocol), inertials=args.inertials,
+                         protocol=replace(Protocol.preset(args.protocol), object_point=args.object_point), inertials=args.inertials,
                          condition_hand=args.condition_hand, refine=args.refine, collisions=args.collisions, centre=args.centre)
     if args.output:
         from ohra.data.dataset import atomic_write_json

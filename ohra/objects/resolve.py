@@ -23,6 +23,15 @@ def resolve_objects(spec: list[str] | str | None, scale: float | None = None) ->
     if scale is not None and not (isinstance(scale, (int, float)) and math.isfinite(scale) and scale > 0):
         raise ObjectError(f"scale must be a number > 0, got {scale!r}")
     specs = [spec] if isinstance(spec, str) else list(spec or ["builtin"])
+    sized = [s for s in specs if s == "builtin" or s.startswith(("builtin:", "procedural:"))]
+    if scale is not None and scale != 1.0 and sized:
+        import warnings
+
+        from ohra.errors import ObjectWarning, user_stacklevel
+
+        warnings.warn(f"scale {scale:g} applies to objects read from files; {', '.join(sized)} keep{'s' if len(sized) == 1 else ''} "
+                      "its own size (built-in and procedural shapes are made in metres)", ObjectWarning,
+                      stacklevel=user_stacklevel())
     out: list[ObjectModel] = []
     for s in specs:
         if s == "builtin":

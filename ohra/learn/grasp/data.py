@@ -241,7 +241,8 @@ class TrainingData:
             h_idx.append(np.full(len(g), hands.index(h)))
             o_idx.append(np.full(len(g), obj_keys.index(key)))
         if not rows:
-            raise DatasetError("no training grasps left after holding out the test objects")
+            held_out = [f"test objects {sorted(test_names)}"] * bool(test_names) + [f"test hands {list(cfg.test_hands)}"] * bool(cfg.test_hands)
+            raise DatasetError(f"no training grasps left after holding out the {' and the '.join(held_out) or 'empty shards'}")
         check_disjoint({o.name: o.mesh_hash for o in objs}, test)
         leaked = sorted(h for h in hands if h in test_hand_keys or hand_keys[h] in test_hand_keys.values())
         if leaked:  # unreachable by construction; the check states the guarantee

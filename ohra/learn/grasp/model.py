@@ -107,6 +107,7 @@ def as_rotations(rotations: Any, n: int) -> np.ndarray:
         r = np.asarray(rotations, dtype=float)
     except (TypeError, ValueError):
         raise GraspError(f"rotations: expected numbers, got {type(rotations).__name__}") from None
+    given = r.shape  # named in the error as the caller passed it, not as converted below
     if r.ndim == 2 and r.shape == (3, 3) and n == 1:
         r = r[None]
     if r.ndim == 2 and r.shape[1] == 6:
@@ -116,7 +117,7 @@ def as_rotations(rotations: Any, n: int) -> np.ndarray:
             raise GraspError("rotations contain NaN or infinity")
         r = rot6d_to_matrix(r)
     if r.ndim != 3 or r.shape[1:] != (3, 3) or len(r) != n:
-        raise GraspError(f"rotations: expected shape ({n}, 3, 3) or ({n}, 6), got {r.shape}")
+        raise GraspError(f"rotations: expected shape ({n}, 3, 3) or ({n}, 6), got {given}")
     if not np.all(np.isfinite(r)):
         raise GraspError("rotations contain NaN or infinity")
     err = np.abs(np.einsum("nji,njk->nik", r, r) - np.eye(3)).max(axis=(1, 2))
@@ -349,8 +350,15 @@ def load_grasp_model(path: str | Path | None = None) -> GraspModel:
         raise CheckpointError(f"no grasp model at {p} (expected model.pt or checkpoints/last.pt)")
     try:
         obj = load_torch_file(f, MODEL_FORMAT)
-    except CheckpointError:
-        obj = load_torch_file(f, CHECKPOINT_FORMAT)
+    except CheckpointError as first:
+        try:
+            obj = load_torch_file(f, CHECKPOINT_FORMAT)
+        except CheckpointError as second:
+            if "expected an" not in str(second):  # corrupt, other version: that message says it all
+                raise
+            # neither a model nor a checkpoint: name both grasp formats, not only the last one tried
+            raise CheckpointError(str(first).replace(f"an {MODEL_FORMAT!r} file",
+                                                     f"a grasp model ({MODEL_FORMAT!r} or {CHECKPOINT_FORMAT!r})")) from None
     return model_from_payload(obj, str(f))
 
 
