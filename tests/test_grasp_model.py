@@ -326,6 +326,12 @@ def test_the_shipped_leap_model_conditions_on_raw_parameters_and_takes_any_hand(
         np.testing.assert_array_equal(z["grasps"], leap.sample("leap_2211", "builtin:box", 3, seed=0))
     assert main(["grasp", "sample", "--hand", "barrett_hand", "--object", "builtin:box", "-n", "2", "-o", str(out)]) == 0
     assert "note" not in capsys.readouterr().err  # a base-form hand keeps the default model
+    # the wrong-condition study's sampling from the shell: leap_3033's joints, leap_3333's condition
+    assert main(["grasp", "sample", "--hand", "leap_3033", "--condition-hand", "leap_3333", "--object", "builtin:box",
+                 "-n", "3", "--seed", "0", "-o", str(out)]) == 0
+    with np.load(out) as z:
+        np.testing.assert_array_equal(z["grasps"], leap.sample("leap_3033", "builtin:box", 3, seed=0, condition_hand="leap_3333"))
+        assert not np.array_equal(z["grasps"], leap.sample("leap_3033", "builtin:box", 3, seed=0))
 
 
 def test_the_automatic_leap_model_is_the_shipped_one_and_its_note_never_precedes_an_error(tmp_path, capsys, monkeypatch):

@@ -464,3 +464,9 @@ def test_a_dataset_made_on_another_machine_finds_its_mesh_under_this_object_root
     shutil.rmtree(tmp_path / "objects")
     with pytest.raises(DatasetError, match="cannot load training object 'Ball'"):
         load_dataset_object(tmp_path, "Ball", info, {})
+
+
+def test_a_vae_condition_on_hands_without_a_base_form_names_the_hand_and_the_training_option(tmp_path):
+    root = write_dataset(tmp_path / "d", hands=("barrett_hand", "leap_2211"), objects=("box", "capsule"))
+    with pytest.raises(GraspConfigError, match=r"training hand 'leap_2211' cannot be vae-conditioned .*--condition params"):
+        train_grasp(root, tiny_model_config(condition="vae"), tiny_train_config(steps=1), progress=False)

@@ -3,7 +3,7 @@
     ohra train grasp --data DIR [DIR ...] [--hands H ...] [--test-objects O ...] --condition vae|params
                      [--encoder pointnet|dgcnn] [--steps N] [--batch-size B] [--seed S] [--threads T]
                      -o RUN [--resume]
-    ohra grasp sample --hand H --object O [-n 100] [--seed S] [--refine] [--centre] [--model RUN] -o grasps.npz
+    ohra grasp sample --hand H --object O [-n 100] [--seed S] [--refine] [--centre] [--condition-hand H] [--model RUN] -o grasps.npz
     ohra grasp eval --hands H ... --objects O ... [-n 100] [--seed S] [--original [--collisions canonical] | --inertials original] [--condition-hand H] [--refine] [--centre] [--model RUN] [-o report.json]
 
 Plugged into :mod:`ohra.cli.main` by ``register(subparsers)`` (adds the ``grasp`` group and
@@ -49,6 +49,8 @@ def register(sub: Any) -> None:
     p.add_argument("--model", help=model_help)
     p.add_argument("--refine", action="store_true", help=REFINE_HELP)
     p.add_argument("--centre", action="store_true", help=CENTRE_HELP)
+    p.add_argument("--condition-hand", help="condition the model on this hand instead (paper Table 9); the joints stay "
+                   "within --hand's limits")
     p.add_argument("-o", "--output", required=True, help="output .npz")
     p.set_defaults(func=_cmd_sample)
 
@@ -200,7 +202,8 @@ def _cmd_sample(args: argparse.Namespace) -> int:
     obj = resolve_object(args.object, scale=args.scale)
     warn_if_ungraspable(obj)
     timing: dict = {}
-    g = model.sample(args.hand, obj, args.n, seed=args.seed, timing=timing, refine=args.refine, centre=args.centre)
+    g = model.sample(args.hand, obj, args.n, seed=args.seed, timing=timing, refine=args.refine, centre=args.centre,
+                     condition_hand=args.condition_hand)
     atomic_write_npz(out, {"grasps": g.astype(np.float64)})
     if note:
         print(note, file=sys.stderr)

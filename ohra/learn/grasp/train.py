@@ -27,9 +27,9 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 import torch
 
-from ohra.errors import CheckpointError
+from ohra.errors import CheckpointError, ParamsError
 from ohra.learn.grasp.condition import HandCondition
-from ohra.learn.grasp.config import GraspModelConfig, GraspTrainConfig, RunSpec
+from ohra.learn.grasp.config import GraspConfigError, GraspModelConfig, GraspTrainConfig, RunSpec
 from ohra.learn.grasp.data import TrainingData, make_batch
 from ohra.learn.grasp.model import CHECKPOINT_FORMAT, GraspModel, GraspNet
 from ohra.io import folder_lock, write_text
@@ -53,7 +53,14 @@ def learning_rate(cfg: GraspTrainConfig, step: int) -> float:
 
 
 def _tables(cond: HandCondition, data: TrainingData) -> tuple[torch.Tensor, torch.Tensor]:
-    hand = torch.from_numpy(np.stack([cond.vector(p) for p in data.params]).astype(np.float32))
+    rows = []
+    for name, p in zip(data.hands, data.params):
+        try:
+            rows.append(cond.vector(p))
+        except ParamsError as exc:  # the condition's sampling advice does not fit training: name the hand and the option
+            raise GraspConfigError(f"training hand {name!r} cannot be {cond.kind}-conditioned ({str(exc).split(';')[0]}); "
+                                   "train with condition='params' (--condition params) or hold the hand out") from None
+    hand = torch.from_numpy(np.stack(rows).astype(np.float32))
     present = torch.from_numpy(np.stack([p.present_joints for p in data.params]))
     return hand, present
 
