@@ -150,3 +150,12 @@ def test_the_object_point_the_evaluator_warns_about_can_be_set_on_the_command_li
     monkeypatch.setattr(grasp_eval, "evaluate_model", spy_model_eval)
     with pytest.raises(Seen, match="^com$"):
         main(["grasp", "eval", "--hands", "leap_2211", "--objects", "builtin:box", "-n", "1", "--object-point", "com"])
+
+
+def test_an_upper_case_object_prefix_names_the_lower_case_one():
+    from ohra.objects.resolve import resolve_objects
+
+    with pytest.raises(ObjectError, match=r"not found: BUILTIN:box \(the builtin object: builtin:box\)"):
+        resolve_objects("BUILTIN:box")
+    with pytest.raises(ObjectError, match=r"\(the procedural object: procedural:box:7\)"):
+        resolve_objects("Procedural:box:7")

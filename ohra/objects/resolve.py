@@ -80,6 +80,9 @@ def parse_procedural(spec: str) -> ObjectModel:
 def _from_path(p: Path, scale: float | None) -> list[ObjectModel]:
     if not p.exists():
         hint = f" (the built-in object: builtin:{p.name})" if str(p) in builtin_object_names() else ""
+        head, sep, rest = str(p).partition(":")
+        if sep and head.lower() in ("builtin", "procedural") and head != head.lower():  # the prefixes are lower case
+            hint = f" (the {head.lower()} object: {head.lower()}:{rest})"
         raise ObjectError(f"object file or folder not found: {p}{hint}")
     if p.is_dir() and not any(p.glob("*.obj")) and not any(p.glob("*.urdf")):
         subs = sorted(d for d in p.iterdir() if d.is_dir())
