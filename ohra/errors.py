@@ -56,6 +56,10 @@ class DatasetError(OhraError, ValueError):
     """A grasp dataset is malformed or does not match its manifest."""
 
 
+class OutputPathError(OhraError, OSError):
+    """An output path cannot be written: it is a folder, or one of its parent components is a file."""
+
+
 class FolderInUseError(OhraError, RuntimeError):
     """Another process is writing the same run or dataset folder (it holds the folder's lock)."""
 

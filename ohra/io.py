@@ -33,6 +33,28 @@ def umask_mode() -> int:
     return 0o666 & ~mask
 
 
+def check_output(path: str | Path, folder: bool = False) -> Path:
+    """``path`` if a file (``folder=True``: a folder) can be written there, checked before any work is done:
+    not an existing folder (a file) and no parent component that is a file.
+
+    Raises:
+        OutputPathError: naming the path as given (not a temporary file beside it).
+    """
+    from ohra.errors import OutputPathError
+
+    path = Path(path)
+    if folder and path.exists() and not path.is_dir():
+        raise OutputPathError(f"{path} is a file; give a folder for this output")
+    if not folder and path.is_dir():
+        raise OutputPathError(f"{path} is a folder; give a file path for this output")
+    for parent in path.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise OutputPathError(f"{path}: {parent} is a file, not a folder")
+            break
+    return path
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | Path, suffix: str = ".tmp") -> Iterator[Path]:
     """A temporary path beside ``path`` to write to; on a clean exit it replaces ``path``.
@@ -41,7 +63,7 @@ def atomic_path(path: str | Path, suffix: str = ".tmp") -> Iterator[Path]:
     ``suffix`` lets such writers infer the format from the name (e.g. ``".png"``). Parent folders are
     created. On an exception the temporary file is removed and ``path`` is left as it was.
     """
-    path = Path(path)
+    path = check_output(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp_name = tempfile.mkstemp(dir=str(path.parent), prefix=f".{path.name}.", suffix=suffix)
     os.close(fd)

@@ -160,3 +160,13 @@ def test_the_studies_cache_key_ignores_packing_but_sees_a_changed_pair(ds):
     m["hands"]["leap_2200"]["shards"]["box"]["sha256"] = "0" * 16  # a recomputed pair
     (ds / "manifest.json").write_text(json.dumps(m))
     assert data_fingerprint([str(ds)]) != before
+
+
+def test_ohra_eval_of_a_pack_file_refuses_it_rather_than_mix_the_objects(ds, capsys):
+    from ohra.cli.main import main
+
+    pack(ds)
+    (pack_file,) = (ds / "leap_2200").glob("pack-*.npz")
+    assert main(["eval", str(pack_file), "--hand", "leap_2200", "--object", "builtin:box"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "is a packed dataset file" in err and "--unpack" in err

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 
@@ -10,6 +11,7 @@ import pytest
 from ohra.data.build import build, format_summary, summary
 from ohra.data.dataset import GraspDataset
 from ohra.data.recipe import Recipe, RecipeError
+from ohra.errors import DatasetError
 
 TINY = """
 name: tiny
@@ -58,6 +60,9 @@ def test_a_hand_file_is_found_beside_the_recipe_like_an_object_file(tmp_path, mo
     ({"hands": ["leap_3333"], "objects": [{"glob": "/nonexistent/*.obj"}]}, "matches nothing"),
     ({"hands": ["leap_3333"], "objects": ["builtin"], "cap": 0}, "'cap' must be an integer >= 1"),
     ({"hands": ["leap_3333"], "objects": ["builtin"], "protocol": {"preset": "reference", "frction": 1}}, "protocol/robustness"),
+    ({"hands": ["leap_3333"], "objects": [{"procedural": "box", "count": -1}]}, r"objects\[0\]: 'count' must be an integer >= 1"),
+    ({"hands": ["leap_3333"], "objects": [{"procedural": "box", "seed": -5}]}, r"objects\[0\]: 'seed' must be an integer >= 0"),
+    ({"hands": ["leap_3333"], "objects": ["builtin"], "name": "../../escape"}, "'name' is a folder name under out/"),
 ])
 def test_bad_recipes_name_the_problem(recipe, message):
     with pytest.raises(RecipeError, match=message):
@@ -96,10 +101,14 @@ def test_a_recipe_builds_resumes_and_summarises(tmp_path):
 
 
 def test_data_commands_report_bad_input_in_one_line(tmp_path):
+    (tmp_path / "binary.yaml").write_bytes(b"\xff\xfe\x00PK")
+    with pytest.raises(RecipeError, match="not a text file"):
+        Recipe.load(tmp_path / "binary.yaml")
     bad = tmp_path / "bad.yaml"
     bad.write_text("hands: [leap_3333]\nobjects: [builtin]\ncolour: red\n")
     for args, msg in [(["build", str(bad)], "unknown key(s) colour"), (["info", str(tmp_path)], "no manifest.json"),
-                      (["build", str(tmp_path / "none.yaml")], "recipe not found")]:
+                      (["build", str(tmp_path / "none.yaml")], "recipe not found"),
+                      (["build", str(tmp_path)], "is a folder; give the recipe's YAML file")]:
         proc = _data(*args)
         lines = [l for l in proc.stderr.splitlines() if l.strip()]
         assert proc.returncode == 2 and len(lines) == 1 and msg in lines[0], proc.stderr
@@ -150,3 +159,27 @@ def test_info_over_several_folders_adds_up_per_hand(tmp_path):
     assert proc.returncode == 0, proc.stderr
     total_table = proc.stdout.split("2 folders")[1]
     assert [ln.split()[5] for ln in total_table.splitlines() if ln.startswith(("a ", "b ", "total"))] == ["6", "5", "11"]
+
+
+def test_dataset_arguments_a_new_user_gets_wrong_are_named_or_read_as_meant(tmp_path, capsys):
+    """A lone name is one hand / object; a folder given twice counts once; a negative cap is refused; a
+    manifest file in place of its folder is named."""
+    from ohra.cli.data import main as data_main
+
+    path = tmp_path / "tiny.yaml"
+    path.write_text(TINY)
+    build(path, tmp_path / "ds", progress=False)
+    ds = tmp_path / "ds"
+    one = GraspDataset(ds)
+    assert GraspDataset(ds, hands="leap_2200").pairs == one.pairs
+    assert GraspDataset(ds, objects="box").pairs == [("leap_2200", "box")]  # the object 'box', not every name holding it
+    assert len(GraspDataset([ds, tmp_path / "." / "ds"]).grasps()) == len(one.grasps())
+    for bad in (-1, 0, 2.5, True):
+        with pytest.raises(DatasetError, match="max_per_pair must be a whole number >= 1 or None"):
+            GraspDataset(ds, max_per_pair=bad)
+    with pytest.raises(DatasetError, match="manifest.json is a file; give the dataset's folder"):
+        GraspDataset(ds / "manifest.json")
+    capsys.readouterr()
+    assert data_main(["info", str(ds), str(tmp_path / "." / "ds") + "/", "--json"]) == 0
+    out = capsys.readouterr()
+    assert json.loads(out.out)["total"]["pairs"] == 3 and "given twice, counted once" in out.err

@@ -159,3 +159,21 @@ def test_an_upper_case_object_prefix_names_the_lower_case_one():
         resolve_objects("BUILTIN:box")
     with pytest.raises(ObjectError, match=r"\(the procedural object: procedural:box:7\)"):
         resolve_objects("Procedural:box:7")
+
+
+def test_ohra_eval_checks_every_output_and_option_before_writing_anything(tmp_path, capsys):
+    import numpy as np
+
+    from ohra.cli.main import main
+
+    np.save(tmp_path / "g.npy", np.zeros((2, 31)))
+    (tmp_path / "adir").mkdir()
+    base = ["eval", str(tmp_path / "g.npy"), "--hand", "leap_3303", "--object", "builtin:box"]
+    for extra, named in ((["-o", str(tmp_path / "r.json"), "--render", str(tmp_path / "adir")], "adir is a folder"),
+                         (["-o", str(tmp_path / "r.json"), "--meshcat", str(tmp_path / "adir")], "adir is a folder"),
+                         (["--limit", "0"], "--limit must be >= 1, got 0"),
+                         (["--original", "--inertials", "original"], "give one of them")):
+        assert main(base + extra) == 2, extra
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and named in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["adir", "g.npy"]  # no report, no temporary file

@@ -187,3 +187,18 @@ def test_the_cli_refuses_a_dataset_another_build_is_writing(held, tmp_path):
     lines = [l for l in proc.stderr.splitlines() if l.strip()]
     assert proc.returncode == 2 and len(lines) == 1 and "is writing this dataset" in lines[0], proc.stderr
     assert not (folder / "manifest.json").exists()
+
+
+def test_an_output_path_that_is_a_folder_or_under_a_file_is_named_as_given(tmp_path):
+    from ohra.errors import OutputPathError
+    from ohra.io import check_output, write_text
+
+    (tmp_path / "afile").write_text("x")
+    with pytest.raises(OutputPathError, match=r"afile/out.json: .*afile is a file, not a folder"):
+        write_text(tmp_path / "afile" / "out.json", "{}")
+    with pytest.raises(OutputPathError, match=r"is a folder; give a file path"):
+        write_text(tmp_path, "{}")
+    with pytest.raises(OutputPathError, match=r"afile is a file; give a folder"):
+        check_output(tmp_path / "afile", folder=True)
+    assert check_output(tmp_path / "new" / "deeper" / "x.json") == tmp_path / "new" / "deeper" / "x.json"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"]  # nothing was created by the checks

@@ -332,11 +332,22 @@ def test_cli_bad_input_is_one_line_and_exit_2(vae, tmp_path, capsys):
     wrong_form = tmp_path / "ext.json"
     wrong_form.write_text(json.dumps(d))
     cases.append((["vae", "encode", str(wrong_form)], "base"))
+    (tmp_path / "empty.npy").write_bytes(b"")
+    (tmp_path / "afile").write_text("x")
+    z = ",".join(["0.1"] * vae.latent_dim)
+    cases += [(["vae", "decode", str(tmp_path / "empty.npy")], "cannot read a latent"),
+              (["vae", "decode", "0.1,,0.2"], "an empty field"),
+              (["vae", "interpolate", "barrett_hand", "dex3_right", "-n", "2", "-o", str(tmp_path / "afile")], "afile is a file"),
+              (["vae", "decode", z, "-o", str(tmp_path / "ok.json"), "--urdf", str(tmp_path)], "is a folder"),
+              (["train", "vae", "--samples", "64", "--batch-size", "32", "--heldout", "8", "--epochs", "1", "-o", str(tmp_path / "afile")], "afile is a file"),
+              (["train", "vae", "--samples", "64", "--batch-size", "32", "--epochs", "1", "--seed", "-1", "-o", str(tmp_path / "r")],
+               "seed must be a whole number >= 0")]
     for argv, msg in cases:
         rc = cli_main(argv)
         err = capsys.readouterr().err
         assert rc == 2, argv
         assert msg in err and "Traceback" not in err and err.count("\n") == 1, (argv, err)
+    assert not (tmp_path / "ok.json").exists() and not (tmp_path / "r").exists()  # nothing written by a failed command
 
 
 def test_cli_train_small_run_and_resume(tmp_path, capsys):
@@ -347,7 +358,9 @@ def test_cli_train_small_run_and_resume(tmp_path, capsys):
     assert "held-out (128 hands)" in capsys.readouterr().out
     assert cli_main(args) == 2 and "--resume" in capsys.readouterr().err
     assert cli_main(args + ["--resume"]) == 0  # a finished run resumes to itself
-    assert json.loads((out / "metrics.json").read_text())["steps"] == 2
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["steps"] == 2
+    assert m["train_seconds_this_run"] == 0.0  # resumed to itself: nothing trained in this run
     assert load_vae(out).latent_dim == TrainConfig().latent_dim
     # the default cosine learning rate depends on the run's length: it cannot be extended
     args[args.index("--epochs") + 1] = "2"

@@ -48,7 +48,9 @@ def test_procedural_objects_on_the_command_line():
     (o,) = resolve_objects(["procedural:capsule:4"])
     assert o.name == "capsule-4"
     for bad, msg in [("procedural:teapot:1", "unknown procedural family"), ("procedural:box", "expected procedural:FAMILY:SEED"),
-                     ("procedural:box:x", "expected procedural:FAMILY:SEED")]:
+                     ("procedural:box:x", "expected procedural:FAMILY:SEED"),
+                     ("procedural:box:-1", "expected procedural:FAMILY:SEED"),
+                     ("procedural:box:4294967303", r"a procedural seed is a whole number in \[0, 2\*\*32\)")]:
         with pytest.raises(ObjectError, match=msg):
             resolve_objects([bad])
 
@@ -73,3 +75,13 @@ def test_superquadric_powers_go_through_the_c_library_not_numpys_simd_kernels(mo
         calls = itertools.count()
         monkeypatch.setattr(proc, "_pow", lambda v, p: (lambda r, i: np.nextafter(r, np.inf) if i == planted else r)(real(v, p), next(calls)))
         assert not np.array_equal(proc.superquadric_mesh(*args).vertices, want), planted
+
+
+@pytest.mark.parametrize("seed", [-1, 2**32, 2.7, "2", True])
+def test_a_seed_the_shape_stream_cannot_hold_is_refused_not_aliased(seed):
+    """The stream keeps 32 bits of the seed: 2**32 + 7 would be box-7's shape under another name."""
+    from ohra.objects.model import ObjectModel
+
+    with pytest.raises(ObjectError, match=r"a procedural seed is a whole number in \[0, 2\*\*32\)"):
+        ObjectModel.procedural("box", seed)
+    assert ObjectModel.procedural("box", 2**32 - 1).name == f"box-{2**32 - 1}"

@@ -43,8 +43,21 @@ def test_perturbations_have_the_stated_sizes_stay_in_limits_and_are_seeded():
 
 
 def test_bad_robustness_settings_are_refused():
-    with pytest.raises(ValueError, match="trials must be >= 0"):
+    from ohra.errors import OhraError
+
+    with pytest.raises(OhraError, match="trials must be >= 0"):  # an ohra error: the CLI gives one line, exit 2
         RobustnessSettings(trials=-1)
+
+
+@pytest.mark.parametrize("extra, named", [(["--robust-trials", "-1"], "trials must be >= 0"),
+                                          (["--seed", "-1"], "seed must be a whole number >= 0")])
+def test_bad_synthesis_options_are_one_line_and_exit_2(tmp_path, capsys, extra, named):
+    from ohra.cli.synth import main  # what python -m ohra.synth runs
+
+    argv = ["--hand", "leap_2211", "--objects", "procedural:box:7", "--grasps-per-object", "1", "-o", str(tmp_path / "o")]
+    assert main(argv + extra) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and named in err and not (tmp_path / "o").exists()
 
 
 def test_stored_grasps_replay_to_the_same_verdicts(tmp_path):

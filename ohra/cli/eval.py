@@ -99,6 +99,10 @@ def load_grasp_file(path: str | Path, key: str | None = None) -> np.ndarray:
         return data
     with data:
         names = list(data.keys())
+        if any(n.endswith(".rows") for n in names):  # ohra.data.pack's per-hand file: every object's grasps in a row
+            raise GraspError(f"{path} is a packed dataset file (every object's grasps of a hand, one after another): "
+                             "evaluate one (hand, object) pair, e.g. `ohra data pack --unpack DIR` to restore the "
+                             "shards, or GraspDataset(DIR, objects=[...]).grasps()")
         if key is None:
             key = "grasps" if "grasps" in names else (names[0] if len(names) == 1 else None)
         if key is None or key not in names:
@@ -114,9 +118,21 @@ def run(args: argparse.Namespace) -> int:
 
     if args.workers < 1:
         raise GraspError(f"--workers must be >= 1, got {args.workers}")
+    if args.limit is not None and args.limit < 1:
+        raise GraspError(f"--limit must be >= 1, got {args.limit}")
+    if args.original and args.inertials != "capsule":
+        raise GraspError("--inertials original gives the canonical hand the original finger masses; --original "
+                         "already simulates the original URDF with its own: give one of them")
+    if args.meshcat and args.original:
+        raise GraspError("--meshcat draws canonical hands only; drop --original")
+    from ohra.io import check_output
+
+    for out in (args.output, args.render, args.meshcat):  # all checked before anything is simulated or written
+        if out:
+            check_output(out)
     grasps = load_grasp_file(args.grasps, args.key)
     if args.limit is not None:
-        grasps = grasps[: max(0, args.limit)]
+        grasps = grasps[: args.limit]
     objs = resolve_objects(args.object, scale=args.scale)
     if len(objs) != 1:
         raise ObjectError(f"--object must name one object, {args.object!r} names {len(objs)}")
@@ -136,7 +152,7 @@ def run(args: argparse.Namespace) -> int:
     ev = GraspEvaluator(hand, obj, protocol)
     g, out_of_limits = ev.check(grasps)  # validates before any simulation or output
     if out_of_limits.any():
-        print(f"warning: {int(out_of_limits.sum())} grasp(s) have joints outside the limits; clamped", file=sys.stderr)
+        print(f"ohra: warning: {int(out_of_limits.sum())} grasp(s) have joints outside the limits; clamped", file=sys.stderr)
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # already reported above

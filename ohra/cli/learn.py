@@ -134,21 +134,29 @@ def _read_latent(text: str) -> np.ndarray:
             raise OhraError(f"latent file not found: {p}")
         try:
             data = np.load(p) if p.suffix == ".npy" else json.loads(p.read_text())
-        except (ValueError, OSError) as exc:
-            raise OhraError(f"{p}: cannot read a latent ({exc})") from None
+        except (ValueError, OSError, EOFError) as exc:  # EOFError: an empty .npy
+            raise OhraError(f"{p}: cannot read a latent ({exc or type(exc).__name__})") from None
         if isinstance(data, dict):
             data = data.get("z", data.get("mu"))
         try:
             return np.asarray(data, dtype=float)
         except (TypeError, ValueError):
             raise OhraError(f"{p}: expected a list of numbers") from None
+    fields = text.replace(" ", "").split(",")
+    if "" in fields[:-1] or (len(fields) > 1 and fields[0] == ""):  # "0.1,,0.2": a number left out, not a shorter latent
+        raise OhraError(f"latent: an empty field in {text!r}")
     try:
-        return np.array([float(x) for x in text.replace(" ", "").split(",") if x != ""])
+        return np.array([float(x) for x in fields if x != ""])
     except ValueError:
         raise OhraError(f"latent: expected comma-separated numbers, got {text!r}") from None
 
 
 def _cmd_decode(args: argparse.Namespace) -> int:
+    from ohra.io import check_output
+
+    for out in (args.output, args.urdf):  # both checked before either is written
+        if out:
+            check_output(out)
     vae = _load(args.model)
     z = _read_latent(args.latent)
     params = vae.decode(z)
@@ -170,6 +178,9 @@ def _cmd_decode(args: argparse.Namespace) -> int:
 def _cmd_interpolate(args: argparse.Namespace) -> int:
     if args.steps < 2:
         raise OhraError(f"-n must be at least 2, got {args.steps}")
+    from ohra.io import check_output
+
+    check_output(args.output, folder=True)
     vae = _load(args.model)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

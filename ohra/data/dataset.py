@@ -88,14 +88,20 @@ class GraspDataset:
             raise DatasetError(f"split must be 'train', 'test' or None, got {split!r}")
         if which not in ("pre", "post"):
             raise DatasetError(f"which must be 'pre' or 'post', got {which!r}")
-        self.roots = [Path(path)] if not isinstance(path, (list, tuple)) else [Path(p) for p in path]
+        if max_per_pair is not None and (isinstance(max_per_pair, bool) or not isinstance(max_per_pair, (int, np.integer))
+                                         or max_per_pair < 1):
+            raise DatasetError(f"max_per_pair must be a whole number >= 1 or None (no cap), got {max_per_pair!r}")
+        # one name by itself is one hand / object, not a sequence of letters
+        hands = [hands] if isinstance(hands, str) else hands
+        objects = [objects] if isinstance(objects, str) else objects
+        roots = [Path(path)] if not isinstance(path, (list, tuple)) else [Path(p) for p in path]
+        # a directory given twice (d, ./d/) would count every grasp twice
+        self.roots = [r for i, r in enumerate(roots) if r.resolve() not in {q.resolve() for q in roots[:i]}]
         self.which = which
         self.entries: list[tuple[Path, str, str, dict]] = []
         seen_hands: set[str] = set()
         for root in self.roots:
-            manifest = read_manifest(root / "manifest.json")
-            if manifest is None:
-                raise DatasetError(f"{root}: no manifest.json (not an ohra grasp dataset)")
+            manifest = require_manifest(root)
             fmt = manifest.get("format", "ohra-grasps/1")
             if split and split not in manifest.get("split", {}):
                 raise DatasetError(f"{root}: the manifest records no object split (build the dataset from a recipe)")
@@ -196,6 +202,9 @@ class GraspDataset:
 
 def require_manifest(root: str | Path) -> dict:
     """The manifest of the dataset directory ``root``; :class:`DatasetError` if it has none."""
+    if Path(root).is_file():
+        raise DatasetError(f"{root} is a file; give the dataset's folder" + (" (the folder holding it)"
+                                                                           if Path(root).name == "manifest.json" else ""))
     manifest = read_manifest(Path(root) / "manifest.json")
     if manifest is None:
         raise DatasetError(f"{root}: no manifest.json (not an ohra grasp dataset)")

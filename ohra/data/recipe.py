@@ -80,6 +80,15 @@ class Recipe:
                 raise RecipeError(f"{where}: '{k}' must be an integer >= {0 if k == 'seed' else 1}, got {d[k]!r}")
         if d.get("cap") is not None and (not isinstance(d["cap"], int) or d["cap"] < 1):
             raise RecipeError(f"{where}: 'cap' must be an integer >= 1 or null, got {d['cap']!r}")
+        if "name" in d and (not isinstance(d["name"], str) or not d["name"] or any(c in d["name"] for c in "/\\")
+                            or d["name"] in (".", "..")):
+            raise RecipeError(f"{where}: 'name' is a folder name under out/ (no '/' or '..'), got {d['name']!r}")
+        for i, o in enumerate(d["objects"]):
+            if isinstance(o, dict) and "procedural" in o:
+                for k, least in (("count", 1), ("seed", 0)):
+                    v = o.get(k, least)
+                    if not isinstance(v, int) or isinstance(v, bool) or v < least:
+                        raise RecipeError(f"{where}: objects[{i}]: '{k}' must be an integer >= {least}, got {v!r}")
         src = Path(source) if source else None
         return cls(name=str(d.get("name") or (src.stem if src else "dataset")), hands=d["hands"], objects=d["objects"],
                    seed=d.get("seed", 0), grasps_per_pair=d.get("grasps_per_pair", 8), cap=d.get("cap"),
@@ -89,10 +98,14 @@ class Recipe:
     @classmethod
     def load(cls, path: str | Path) -> "Recipe":
         path = Path(path)
+        if path.is_dir():
+            raise RecipeError(f"{path} is a folder; give the recipe's YAML file")
         if not path.is_file():
             raise RecipeError(f"recipe not found: {path}")
         try:
             d = yaml.safe_load(path.read_text())
+        except UnicodeDecodeError:
+            raise RecipeError(f"{path}: not a text file (a recipe is YAML)") from None
         except yaml.YAMLError as exc:
             raise RecipeError(f"{path}: not valid YAML ({str(exc).splitlines()[0]})") from None
         return cls.from_dict(d, path)

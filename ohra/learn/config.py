@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
-from ohra.errors import ParamsError, reject_unknown
+from ohra.errors import ParamsError, reject_unknown, require_seed
 
 # What a configuration written before a key existed meant (the paper's reference setup).
 LEGACY_DEFAULTS: dict[str, Any] = {
@@ -50,6 +50,7 @@ class TrainConfig:
     def __post_init__(self) -> None:
         if self.lr_schedule not in LR_SCHEDULES:
             raise ParamsError(f"TrainConfig: lr_schedule must be one of {LR_SCHEDULES}, got {self.lr_schedule!r}")
+        require_seed(self.seed, ParamsError, "TrainConfig: seed")
 
     @classmethod
     def reference(cls, **changes: Any) -> "TrainConfig":

@@ -253,9 +253,9 @@ class Interpolation:
 
     def write(self, out_dir: str | Path, stem: str = "interp") -> list[Path]:
         """Write ``<stem>_<i>.urdf`` and ``<stem>_<i>.json`` (params) for every step; returns the URDF paths."""
-        from ohra.io import write_text
+        from ohra.io import check_output, write_text
 
-        out = Path(out_dir)
+        out = check_output(out_dir, folder=True)
         paths = []
         for i, (p, text) in enumerate(zip(self.params, self.urdfs)):
             path = out / f"{stem}_{i:02d}.urdf"

@@ -30,7 +30,7 @@ import numpy as np
 import torch
 
 from ohra.errors import CheckpointError
-from ohra.io import atomic_write, write_text
+from ohra.io import atomic_write, check_output, write_text
 from ohra.learn.config import TrainConfig
 from ohra.learn.encoding import Standardizer
 from ohra.learn.encodings import DEFAULT_ENCODING, get_encoding
@@ -270,6 +270,8 @@ def train(config: TrainConfig = TrainConfig(), run_dir: str | Path | None = None
     if cfg.samples < cfg.batch_size:
         raise CheckpointError(f"samples ({cfg.samples}) must be at least one batch ({cfg.batch_size})")
     run = Path(run_dir) if run_dir is not None else None
+    if run is not None:
+        check_output(run, folder=True)  # before the minutes of training, not at the first write
     ckpt_path = run / "checkpoints" / "last.pt" if run is not None else None
     t_start = time.perf_counter()
     with torch_settings(cfg.threads):
@@ -288,6 +290,7 @@ def train(config: TrainConfig = TrainConfig(), run_dir: str | Path | None = None
                 raise CheckpointError("resume needs a run directory")
             epoch, step, history = _resume_into(ckpt_path, cfg, digest, model, opt, gens)
         elapsed_before = float(history[-1]["elapsed_s"]) if history else 0.0
+        done_before = len(history)
         if run is not None:
             write_text(run / "config.json", json.dumps(cfg.to_dict(), indent=2) + "\n")
 
@@ -306,7 +309,9 @@ def train(config: TrainConfig = TrainConfig(), run_dir: str | Path | None = None
             if on_epoch is not None:
                 on_epoch(done, losses)
         bar.close()
-        metrics = _final_metrics(model, std, cfg, step, history, time.perf_counter() - t_run)
+        # the epochs' own time, as train_seconds_total counts it (not the last checkpoint's save after them)
+        this_run = float(history[-1]["elapsed_s"]) - elapsed_before if len(history) > done_before else 0.0
+        metrics = _final_metrics(model, std, cfg, step, history, this_run)
         metrics["wall_seconds"] = time.perf_counter() - t_start
     if run is not None:
         atomic_save(model_payload(model, std), run / "model.pt")

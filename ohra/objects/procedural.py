@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import numbers
 from typing import Mapping
 
 import numpy as np
@@ -32,6 +33,12 @@ from ohra.errors import ObjectError
 FAMILIES = ("superquadric", "box", "cylinder", "capsule", "ellipsoid")
 EXTENT_M = (0.03, 0.20)  # every full extent of a procedural object [m]
 EXPONENTS = (0.25, 1.75)  # superquadric shape exponents
+
+
+def _check_seed(seed) -> int:
+    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or not 0 <= int(seed) < 2**32:
+        raise ObjectError(f"a procedural seed is a whole number in [0, 2**32), got {seed!r}")
+    return int(seed)
 
 
 def _rng(family: str, seed: int) -> np.random.Generator:
@@ -92,7 +99,13 @@ def procedural_parts(family: str, seed: int) -> tuple[trimesh.Trimesh, list[dict
 
 
 def make_procedural(cls, family: str, seed: int, density: float):
-    """The :class:`~ohra.objects.model.ObjectModel` of ``family`` and ``seed`` (see the module doc)."""
+    """The :class:`~ohra.objects.model.ObjectModel` of ``family`` and ``seed`` (see the module doc).
+
+    Raises:
+        ObjectError: ``seed`` not a whole number in [0, 2**32) (the stream keeps 32 bits: a larger or
+            negative seed would alias another one's shape under its own name).
+    """
+    seed = _check_seed(seed)
     mesh, prims, params = procedural_parts(family, int(seed))
     obj = cls(mesh, f"{family}-{int(seed)}", density, None, None if prims is None else [mesh.convex_hull],
               repair=False, primitives=prims)
@@ -101,8 +114,17 @@ def make_procedural(cls, family: str, seed: int, density: float):
 
 
 def procedural_objects(family: str, count: int, seed: int = 0, density: float | None = None) -> list:
-    """``count`` objects of ``family`` with seeds ``seed .. seed + count - 1``."""
+    """``count`` objects of ``family`` with seeds ``seed .. seed + count - 1``.
+
+    Raises:
+        ObjectError: ``count`` not a whole number >= 1; a seed outside [0, 2**32).
+    """
     from ohra.objects.model import DEFAULT_DENSITY, ObjectModel
+
+    if isinstance(count, bool) or not isinstance(count, numbers.Integral) or count < 1:
+        raise ObjectError(f"procedural {family}: count must be a whole number >= 1, got {count!r}")
+    _check_seed(seed + count - 1 if isinstance(seed, numbers.Integral) and not isinstance(seed, bool) else seed)
+    _check_seed(seed)
 
     return [ObjectModel.procedural(family, s, density or DEFAULT_DENSITY) for s in range(int(seed), int(seed) + int(count))]
 

@@ -72,8 +72,8 @@ def resolve_object(obj: "ObjectModel | str | Path", scale: float | None = None) 
 def parse_procedural(spec: str) -> ObjectModel:
     """``procedural:FAMILY:SEED`` -> :meth:`ObjectModel.procedural`."""
     parts = spec.split(":")
-    if len(parts) != 3 or not parts[2].lstrip("-").isdigit():
-        raise ObjectError(f"procedural object spec {spec!r}: expected procedural:FAMILY:SEED (SEED an integer)")
+    if len(parts) != 3 or not parts[2].isdigit():
+        raise ObjectError(f"procedural object spec {spec!r}: expected procedural:FAMILY:SEED (SEED a whole number >= 0)")
     return ObjectModel.procedural(parts[1], int(parts[2]))
 
 

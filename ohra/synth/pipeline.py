@@ -36,7 +36,7 @@ from ohra.canonical.params import BaseParams, ExtendedParams
 from ohra.data.backends import run_tasks
 from ohra.data.dataset import atomic_write_bytes, npz_bytes, shard_name
 from ohra.data.manifest import ManifestWriter, hand_entry, object_keys, open_manifest, shard_complete
-from ohra.errors import ObjectError, OhraError
+from ohra.errors import ObjectError, OhraError, require_seed
 from ohra.io import folder_lock
 from ohra.objects.model import ObjectModel
 from ohra.objects.resolve import GRASPABLE_EXTENT_M, size_problem
@@ -85,6 +85,7 @@ class SynthSettings:
             raise OhraError(f"grasps per object must be >= 1, got {self.grasps_per_object}")
         if self.cap is not None and int(self.cap) < 1:
             raise OhraError(f"cap must be >= 1 (or None), got {self.cap}")
+        require_seed(self.seed, OhraError)  # a recipe's seed is held to the same (ohra data build refused -1, synth ran it)
 
     def to_dict(self) -> dict:
         d = json.loads(json.dumps(asdict(self), default=str))

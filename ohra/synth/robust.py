@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ohra.errors import GraspError
 from ohra.rotations import grasp_to_pose, matrix_to_rot6d
 from ohra.transforms import axis_angle_to_matrix
 
@@ -37,10 +38,10 @@ class RobustnessSettings:
 
     def __post_init__(self) -> None:
         if int(self.trials) < 0:
-            raise ValueError(f"RobustnessSettings.trials must be >= 0, got {self.trials}")
+            raise GraspError(f"RobustnessSettings.trials must be >= 0, got {self.trials}")
         for name in ("translation_m", "rotation_rad", "joints_rad"):
             if getattr(self, name) < 0:
-                raise ValueError(f"RobustnessSettings.{name} must be >= 0, got {getattr(self, name)}")
+                raise GraspError(f"RobustnessSettings.{name} must be >= 0, got {getattr(self, name)}")
 
 
 def as_stored(grasps: np.ndarray, lower: np.ndarray | None = None, upper: np.ndarray | None = None) -> np.ndarray:
