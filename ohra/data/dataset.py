@@ -5,7 +5,8 @@ A dataset is a directory with ``manifest.json`` and one ``.npz`` shard per (hand
 ``[t, rot6d, q22]`` vectors exactly as the simulator evaluated them (the *pre-test* grasps, which
 passed the six-direction test and its robustness trials), and ``grasps_post`` the same grasps
 after the nominal test (hand pose relative to the settled object, settled joints: what the
-reference datasets store). :class:`GraspDataset` returns the pre-test grasps unless asked for
+reference datasets store; the settled joints can lie outside the hand's limits, which PyBullet
+holds as soft constraints, by up to ~0.3 rad in the committed datasets). :class:`GraspDataset` returns the pre-test grasps unless asked for
 ``which="post"``. Format 1 shards hold only post-test ``grasps``.
 
 Shards are byte-deterministic (fixed zip timestamps), so the same seed gives the same bytes on
