@@ -367,3 +367,20 @@ def test_cli_train_small_run_and_resume(tmp_path, capsys):
     assert cli_main(args + ["--resume"]) == 2
     err = capsys.readouterr().err
     assert "epochs=1" in err and err.count("\n") == 1
+
+
+def test_vae_api_counts_and_hands_of_the_wrong_type_are_named(vae):
+    from ohra.errors import ParamsError
+    from ohra.learn.encoding import LatentError
+    from ohra.learn.sampler import sample_params
+
+    with pytest.raises(LatentError, match="a whole number of at least 2 steps, got 2.5"):
+        vae.interpolate("barrett_hand", "dex3_right", n=2.5)
+    for n in (2.5, -1, True):
+        with pytest.raises(ParamsError, match="number of samples must be a whole number >= 0"):
+            sample_params(n, seed=0)
+    with pytest.raises(ParamsError, match="sampler seed must be a whole number >= 0"):
+        sample_params(1, seed=-1)
+    for bad in (5, None):
+        with pytest.raises(ParamsError, match="encode: expected a hand .* got"):
+            vae.encode(bad)

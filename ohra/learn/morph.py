@@ -112,6 +112,9 @@ class VAEBundle:
             ParamsError: extended params with no base form; an empty sequence.
         """
         single = isinstance(hands, (str, Path, BaseParams, ExtendedParams))
+        if not single and not isinstance(hands, Sequence):
+            raise ParamsError(f"encode: expected a hand (name, file or params) or a sequence of them, got "
+                              f"{type(hands).__name__}")
         items = [hands] if single else list(hands)
         if not items:
             raise ParamsError("encode: no hands given (expected a hand or a non-empty sequence of hands)")
@@ -205,8 +208,8 @@ class VAEBundle:
             LatentError: ``n < 2`` or an unknown ``spacing``.
             HandNotFoundError, ParamsError: an end hand cannot be encoded (see :meth:`encode`).
         """
-        if int(n) < 2:
-            raise LatentError(f"interpolation needs at least 2 steps, got {n}")
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 2:
+            raise LatentError(f"interpolation needs a whole number of at least 2 steps, got {n!r}")
         if spacing not in SPACINGS:
             raise LatentError(f"interpolation spacing must be one of {SPACINGS}, got {spacing!r}")
         n = int(n)

@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ohra.errors import ParamsError
+from ohra.errors import ParamsError, require_seed
 from ohra.canonical.params import BaseParams
 
 # Slices of the flat (82,) base vector (canonical key order, reference §3.1).
@@ -277,10 +277,10 @@ def _redraw_touching_thumbs(rng: np.random.Generator, out: np.ndarray, c: Sample
 def _start(n: int, seed: int) -> tuple[int, np.random.Generator, np.ndarray]:
     """The checked sample count, the seeded generator and its first draw, the handedness (n,) (True:
     right hand, probability 1/2)."""
-    if int(n) < 0:
-        raise ParamsError(f"number of samples must be >= 0, got {n}")
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
+        raise ParamsError(f"number of samples must be a whole number >= 0, got {n!r}")
     n = int(n)
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(require_seed(seed, ParamsError, "sampler seed"))
     return n, rng, rng.random(n) < 0.5
 
 
