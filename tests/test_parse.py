@@ -199,3 +199,15 @@ def test_load_original_names_the_expected_path(monkeypatch, tmp_path):
     monkeypatch.setenv("OHRA_HANDS_ROOT", str(tmp_path / "nowhere"))
     with pytest.raises(AssetsNotFoundError, match="nowhere/shadow_hand/shadow_hand_right.urdf"):
         registry.load_original("shadow_hand_right")
+
+
+def test_a_hand_missing_many_meshes_warns_once(hands_dir):
+    """Inspire's visual meshes are absent from the shared data: one line, not one per link."""
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        orig = registry.load_original("inspire_hand_left")
+    missing = [w for w in caught if issubclass(w.category, MissingMeshWarning)]
+    assert len(orig.missing_meshes) > 1 and len(missing) == 1
+    assert f"{len(orig.missing_meshes)} mesh file(s) not found" in str(missing[0].message)

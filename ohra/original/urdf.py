@@ -259,6 +259,7 @@ def _collect_geometry(root_elem: ET.Element, urdf_dir: Path, where: str) -> tupl
     from the tree (in place) with a warning naming the file."""
     geoms: list[Geometry] = []
     missing: list[str] = []
+    gone: list[str] = []
     for le in root_elem.findall("link"):
         lname = le.get("name")
         for tag in ("visual", "collision"):
@@ -283,17 +284,18 @@ def _collect_geometry(root_elem: ET.Element, urdf_dir: Path, where: str) -> tupl
                     fn = shape.get("filename") or ""
                     p = resolve_mesh_path(fn, urdf_dir)
                     if not p.is_file():
-                        warnings.warn(
-                            f"{where}: mesh file {p} not found (link {lname!r} {tag}); geometry skipped",
-                            MissingMeshWarning,
-                            stacklevel=user_stacklevel(),
-                        )
                         missing.append(str(p))
+                        gone.append(f"{p.name} (link {lname!r} {tag})")
                         le.remove(ge)
                         continue
                     shape.set("filename", str(p))  # absolute: the cleaned text loads from anywhere
                     scale = tuple(_floats(shape.get("scale"), 3, 1.0, gw + " mesh scale"))
                     geoms.append(Geometry(lname, tag, "mesh", T, (), str(p), scale))  # type: ignore[arg-type]
+    if gone:  # one warning per URDF, not one per link (a hand without its visual meshes gave 13 lines per run)
+        folder = Path(missing[0]).parent
+        shown = ", ".join(gone[:4]) + (f" and {len(gone) - 4} more" if len(gone) > 4 else "")
+        warnings.warn(f"{where}: {len(gone)} mesh file(s) not found (in {folder}): {shown}; geometry skipped",
+                      MissingMeshWarning, stacklevel=user_stacklevel())
     return geoms, missing
 
 
