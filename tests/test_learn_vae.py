@@ -223,8 +223,14 @@ def test_encode_is_deterministic_and_decode_of_any_latent_is_valid_and_plausible
     V = vae.decode_vectors(zs)
     assert not geo.knuckles_inside_palm(V).any() and not geo.thumb_into_palm(V).any()
     assert (geo.finger_clearance(V) >= 0).all()
-    hands = vae.decode(zs)
+    with pytest.warns(UserWarning, match=r"latent component inf lies far outside the VAE's prior"):
+        hands = vae.decode(zs)
     assert len(hands) == len(zs)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        vae.decode(zs[:200])  # draws from the prior: no warning
+    with pytest.warns(UserWarning, match="8.5 lies far outside"):
+        vae.decode(np.full(d, -8.5))
     for h in hands[-6:] + hands[:3]:
         HandModel.from_params(h)  # renders and loads
     with pytest.raises(LatentError, match=rf"\({d},\)"):

@@ -15,6 +15,7 @@ latent path bent to shorten the fingertips' way, or along the straight line
 from __future__ import annotations
 
 import json
+import warnings
 from dataclasses import dataclass, field
 from functools import lru_cache
 from importlib import resources
@@ -24,7 +25,7 @@ from typing import Any, Sequence, Union
 import numpy as np
 import torch
 
-from ohra.errors import CheckpointError, ParamsError
+from ohra.errors import CheckpointError, ParamsError, user_stacklevel
 from ohra.canonical.params import BaseParams, ExtendedParams
 from ohra.canonical.urdfgen import render
 from ohra.learn.encoding import LatentError, Standardizer, as_base
@@ -32,6 +33,8 @@ from ohra.learn.encodings import Encoding, get_encoding
 from ohra.learn.latent_path import ARC_DENSITY, arc_length_alphas, geodesic_latents, tip_moves  # noqa: F401 (re-exported)
 from ohra.learn.train_vae import CHECKPOINT_FORMAT, MODEL_FORMAT, load_torch_file
 from ohra.learn.vae import MorphologyVAE, VAEConfig
+
+FAR_LATENT = 8.0  # |z| beyond this many prior standard deviations: decode warns that the hand is extrapolated
 
 HandLike = Union[str, Path, BaseParams, ExtendedParams]
 DEFAULT_MODEL = "vae_default"
@@ -175,6 +178,12 @@ class VAEBundle:
             LatentError: ``z`` is not numeric, not of shape (latent_dim,) or (N, latent_dim), or holds NaN.
             ParamsError: malformed ``limits`` (shape, non-finite, a lower above its upper).
         """
+        zz, _ = self.check_latent(z)
+        far = float(np.abs(zz).max()) if zz.size else 0.0
+        if far > FAR_LATENT:
+            warnings.warn(f"latent component {far:.3g} lies far outside the VAE's prior (a unit Gaussian; beyond "
+                          f"{FAR_LATENT:g}): the decoded hand is valid but need not resemble any hand it learned",
+                          UserWarning, stacklevel=user_stacklevel())
         v = self.decode_vectors(z, limits)
         if v.ndim == 1:
             return BaseParams.from_vector(v)
