@@ -1,7 +1,7 @@
 """Table 3 analogue: rotation policies trained on the canonical vs the original URDF, same budget and seed.
 
 Evaluates each policy (Steps-to-Fall, Cumulative Rotation) over the same seeded episodes and draws
-their training curves. Default: the policies shipped in ``ohra/learn/models/rotate_*`` (each an
+their training curves. Default: the four Table 3 policies shipped in ``ohra/learn/models/rotate_*`` (each an
 export of a run trained with ``ohra rotate train``; the budget is read from its progress.csv).
 
     python benchmarks/rotation_table3.py [--episodes 20] [--runs LABEL=DIR ...] [--no-transfer]
@@ -38,7 +38,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--episodes", type=int, default=20)
     ap.add_argument("--seed", type=int, default=1000)
-    ap.add_argument("--runs", nargs="*", metavar="LABEL=DIR", help="default: the shipped rotate_* policies")
+    ap.add_argument("--runs", nargs="*", metavar="LABEL=DIR", help="default: the four shipped Table 3 policies")
     ap.add_argument("--name", default="rotation_table3",
                     help="results name: benchmarks/results/NAME.{json,md} and NAME_curves*.png (default: the shipped "
                          "table, whose curves are rotation_curves*.png)")
@@ -148,11 +148,16 @@ def starting_grip(pol) -> dict:
             "pressed_fraction": float((gap.max(axis=1) > PRESSED).mean())}
 
 
+# the Table 3 pairs: same settings per hand, canonical vs original (other shipped policies, such as the LEAP
+# policy fine-tuned with a drop penalty, change the reward and are evaluated with --runs)
+TABLE3 = ("rotate_leap_canonical", "rotate_leap_original", "rotate_shadow_canonical", "rotate_shadow_original")
+
+
 def _shipped() -> dict[str, Path]:
     from importlib import resources
 
     root = Path(str(resources.files("ohra.learn").joinpath("models")))
-    return {p.parent.name.replace("rotate_", ""): p.parent for p in sorted(root.glob("rotate_*/policy.pth"))}
+    return {name.replace("rotate_", ""): root / name for name in TABLE3 if (root / name / "policy.pth").is_file()}
 
 
 if __name__ == "__main__":
