@@ -23,3 +23,6 @@ def test_rotation_notebook_executes(tmp_path, hands_dir):
     assert "canonical / original rotation: 0.70" in texts[8]
     assert "hybrid (original URDF, canonical shapes): 1.22 rad over 2 seeds (1.22, 1.21): original-like" in texts[8]
     assert "canonical, original finger masses: 1.02 rad over 2 seeds (1.14, 0.90): canonical-like" in texts[8]
+    # the >= 2 pi target: the shipped LEAP policy fine-tuned with a drop penalty keeps the cube and turns it > 2 pi
+    assert "drop penalty -25; budget 3578k + 1994k steps, 170 + 60 min" in texts[9]
+    assert texts[9].count("episode: 400 steps") == 2 and "(1.2" in texts[9]
