@@ -30,8 +30,9 @@ def _budget_text(budget: dict) -> str:
     src = budget.get("init_from")
     if not src:
         return f"{budget['steps'] / 1e3:.0f}k steps, {budget['minutes']:.0f} min"
-    return (f"{src['steps'] / 1e3:.0f}k + {budget['steps'] / 1e3:.0f}k steps, "
-            f"{src['minutes']:.0f} + {budget['minutes']:.0f} min")
+    steps = "?" if src.get("steps") is None else f"{src['steps'] / 1e3:.0f}k"  # a source that recorded no budget
+    minutes = "?" if src.get("minutes") is None else f"{src['minutes']:.0f}"
+    return f"{steps} + {budget['steps'] / 1e3:.0f}k steps, {minutes} + {budget['minutes']:.0f} min"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -63,7 +64,8 @@ def main(argv: list[str] | None = None) -> int:
                   "envs": pol.ppo.n_envs, "seed": pol.ppo.seed}
         init = read_config(d).get("init_from")  # a run started from another's policy: state both budgets
         if init:
-            budget["init_from"] = {"run": init["run"], "steps": init["timesteps"], "minutes": init["wall_s"] / 60.0}
+            budget["init_from"] = {"run": init["run"], "steps": init.get("timesteps"),
+                                   "minutes": None if init.get("wall_s") is None else init["wall_s"] / 60.0}
         s = res.summary()
         cfg = pol.env_cfg
         hybrid = cfg.collisions == "canonical"  # the original URDF with the canonical collision shapes

@@ -174,12 +174,18 @@ def test_dataset_arguments_a_new_user_gets_wrong_are_named_or_read_as_meant(tmp_
     assert GraspDataset(ds, hands="leap_2200").pairs == one.pairs
     assert GraspDataset(ds, objects="box").pairs == [("leap_2200", "box")]  # the object 'box', not every name holding it
     assert len(GraspDataset([ds, tmp_path / "." / "ds"]).grasps()) == len(one.grasps())
-    for bad in (-1, 0, 2.5, True):
-        with pytest.raises(DatasetError, match="max_per_pair must be a whole number >= 1 or None"):
+    for bad in (-1, 2.5, True):
+        with pytest.raises(DatasetError, match=r"max_per_pair must be a whole number >= 0 \(0 or None: no cap\)"):
             GraspDataset(ds, max_per_pair=bad)
+    assert len(GraspDataset(ds, max_per_pair=0).grasps()) == len(one.grasps())  # 0 is no cap, as in training
     with pytest.raises(DatasetError, match="manifest.json is a file; give the dataset's folder"):
         GraspDataset(ds / "manifest.json")
     capsys.readouterr()
     assert data_main(["info", str(ds), str(tmp_path / "." / "ds") + "/", "--json"]) == 0
     out = capsys.readouterr()
     assert json.loads(out.out)["total"]["pairs"] == 3 and "given twice, counted once" in out.err
+
+
+def test_a_recipe_name_may_be_a_number_or_empty():
+    assert Recipe.from_dict({"hands": ["leap_3333"], "objects": ["builtin"], "name": 2024}, "r.yaml").name == "2024"
+    assert Recipe.from_dict({"hands": ["leap_3333"], "objects": ["builtin"], "name": None}, "r.yaml").name == "r"

@@ -355,6 +355,29 @@ def test_the_automatic_leap_model_is_the_shipped_one_and_its_note_never_precedes
     assert main(["grasp", "sample", "--hand", "leap_2211", "--object", "builtin:nosuch", "-n", "2", "-o", str(out)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "nosuch" in err
+    # an output under a file is refused before any sampling or simulation (no model is even loaded)
+    import ohra.cli.grasp as grasp_cli
+
+    monkeypatch.setattr(grasp_cli, "_load", lambda *a, **k: pytest.fail("loaded a model before checking -o"))
+    for argv in (["grasp", "sample", "--hand", "leap_2211", "--object", "builtin:box", "-o", str(tmp_path / "empty.json" / "g.npz")],
+                 ["grasp", "eval", "--hands", "leap_2211", "--objects", "builtin:box", "-o", str(tmp_path / "empty.json" / "r.json")]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "empty.json is a file, not a folder" in err
+
+
+def test_the_automatic_model_is_chosen_for_the_hand_the_model_is_conditioned_on(tmp_path, capsys):
+    """``--condition-hand``: the model must read that hand (a LEAP condition needs the leap model), whatever
+    the hand whose joints are sampled."""
+    from ohra.cli.main import main
+
+    out = tmp_path / "g.npz"
+    assert main(["grasp", "sample", "--hand", "barrett_hand", "--condition-hand", "leap_3333", "--object", "builtin:box",
+                 "-n", "2", "-o", str(out)]) == 0
+    assert "used the shipped 'leap' model" in capsys.readouterr().err
+    with np.load(out) as z:
+        np.testing.assert_array_equal(z["grasps"], load_grasp_model("leap").sample("barrett_hand", "builtin:box", 2,
+                                                                                   condition_hand="leap_3333"))
 
 
 @pytest.mark.parametrize("seed", [-1, 1.5, "a", True])

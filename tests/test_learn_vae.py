@@ -390,3 +390,7 @@ def test_vae_api_counts_and_hands_of_the_wrong_type_are_named(vae):
     for bad in (5, None):
         with pytest.raises(ParamsError, match="encode: expected a hand .* got"):
             vae.encode(bad)
+    names = ["shadow_hand_right", "allegro_hand_right"]
+    mu, _ = vae.encode(names)
+    for iterable in (np.array(names), (n for n in names), dict.fromkeys(names).keys()):  # any iterable of hands
+        np.testing.assert_array_equal(vae.encode(iterable)[0], mu)

@@ -85,3 +85,10 @@ def test_a_seed_the_shape_stream_cannot_hold_is_refused_not_aliased(seed):
     with pytest.raises(ObjectError, match=r"a procedural seed is a whole number in \[0, 2\*\*32\)"):
         ObjectModel.procedural("box", seed)
     assert ObjectModel.procedural("box", 2**32 - 1).name == f"box-{2**32 - 1}"
+
+
+def test_a_seed_range_past_the_largest_seed_names_the_range():
+    from ohra.objects.procedural import procedural_objects
+
+    with pytest.raises(ObjectError, match=r"seeds 4294967295 .. 4294967296 pass 2\*\*32 - 1"):
+        procedural_objects("box", 2, seed=2**32 - 1)

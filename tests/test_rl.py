@@ -420,11 +420,11 @@ def test_a_run_started_from_another_gets_its_weights_and_statistics_and_records_
 
     monkeypatch.setattr(rl_train, "_load_init", spy)
     train_rotation(fine, ppo, tmp_path / "fine", init_from=src)
-    theirs = sb3.PPO.load(src / "model.zip", device="cpu").policy.state_dict()
+    theirs = sb3.PPO.load(src / "checkpoints" / "last.zip", device="cpu").policy.state_dict()
     assert captured["start"].keys() == theirs.keys()
     assert all(torch.equal(captured["start"][k], theirs[k]) for k in theirs)
     rec = json.loads((tmp_path / "fine" / "config.json").read_text())["init_from"]
-    assert rec["run"] == str(src) and rec["file"] == "model.zip" and rec["timesteps"] == 24
+    assert rec["run"] == str(src) and rec["file"] == "checkpoints/last.zip" and rec["timesteps"] == 24
     assert rec["env_changes"] == {"weights": {"source": env_cfg.weights.as_dict(), "now": fine.weights.as_dict()}}
     assert load_run(tmp_path / "fine")[0].weights.fall == -25.0
 
@@ -483,8 +483,26 @@ def test_a_run_started_from_another_of_another_size_is_refused(raw_obs_run, tmp_
     monkeypatch.setenv("OHRA_CACHE_DIR", str(cache))
     env_cfg, ppo = load_run(src)
     other = env_cfg.with_overrides(urdf="original")  # the original LEAP acts in its 16 own joints, not 22
-    with pytest.raises(RLConfigError, match="do not fit this run's spaces"):
+    with pytest.raises(RLConfigError, match="do not fit this run's spaces.*size mismatch"):
         train_rotation(other, ppo, tmp_path / "o", init_from=src)
+    assert sorted(p.name for p in (tmp_path / "o").iterdir() if p.name != ".ohra.lock") == []  # no half-made run
+
+
+def test_a_run_started_from_another_takes_its_newest_policy_and_that_policys_budget(raw_obs_run, tmp_path):
+    """A run resumed and interrupted keeps an older model.zip beside a newer checkpoint: start from the checkpoint."""
+    import shutil
+
+    from ohra.learn.rl.train import init_source
+
+    src, _, _ = raw_obs_run
+    copy = tmp_path / "src"
+    shutil.copytree(src, copy)
+    (copy / "checkpoints" / "last.json").write_text('{"timesteps": 48, "wall_s": 9.0}')  # a newer checkpoint
+    zip_path, stats, budget = init_source(copy)
+    assert zip_path == copy / "checkpoints" / "last.zip" and budget == {"timesteps": 48, "wall_s": 9.0}
+    shutil.rmtree(copy / "checkpoints")
+    zip_path, _, budget = init_source(copy)
+    assert zip_path == copy / "model.zip" and budget == {"timesteps": None, "wall_s": None}  # unknown, not another's
 
 
 def test_a_run_started_from_an_exported_policy_gets_its_weights_and_observation_statistics(normalised_run, tmp_path,

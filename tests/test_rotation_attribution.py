@@ -92,3 +92,5 @@ def test_table3_states_both_budgets_of_a_run_started_from_another():
     assert rotation_table3._budget_text(own) == "1688k steps, 120 min"
     fine = {"steps": 2_200_000, "minutes": 60.0, "init_from": {"run": "src", "steps": 3_578_340, "minutes": 170.0}}
     assert rotation_table3._budget_text(fine) == "3578k + 2200k steps, 170 + 60 min"
+    unknown = {**fine, "init_from": {"run": "src", "steps": None, "minutes": None}}  # a source with no budget file
+    assert rotation_table3._budget_text(unknown) == "? + 2200k steps, ? + 60 min"

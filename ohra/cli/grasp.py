@@ -183,12 +183,12 @@ def _load(model: str | None, hands: Sequence[str] = ()):
 
 def _output(path: str, suffix: str) -> Path:
     """``-o`` checked before any work: the file type it must have, not a folder."""
+    from ohra.io import check_output
+
     out = Path(path)
     if out.suffix != suffix:
         raise OhraError(f"-o must end in {suffix}, got {out}")
-    if out.is_dir():
-        raise OhraError(f"-o {out} is a folder; give a {suffix} file path")
-    return out
+    return check_output(out)  # not a folder, no parent that is a file
 
 
 def _cmd_sample(args: argparse.Namespace) -> int:
@@ -198,7 +198,8 @@ def _cmd_sample(args: argparse.Namespace) -> int:
     from ohra.objects.resolve import warn_if_ungraspable
 
     out = _output(args.output, ".npz")
-    model, note = _load(args.model, [args.hand])
+    # the model must read the hand it is conditioned on
+    model, note = _load(args.model, [args.condition_hand or args.hand])
     obj = resolve_object(args.object, scale=args.scale)
     warn_if_ungraspable(obj)
     timing: dict = {}
@@ -219,7 +220,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         raise OhraError(f"--workers must be >= 1, got {args.workers}")
     if args.output:
         _output(args.output, ".json")
-    model, note = _load(args.model, args.hands)
+    model, note = _load(args.model, [args.condition_hand] if args.condition_hand else args.hands)
     from ohra.sim import Protocol
 
     from ohra.objects.model import resolve_objects

@@ -73,7 +73,7 @@ class GraspDataset:
     Args:
         path: a dataset directory or a list of them.
         hands, objects: keep only these hand names / object names or manifest keys.
-        max_per_pair: at most this many grasps per (hand, object) pair.
+        max_per_pair: at most this many grasps per (hand, object) pair (0 or None: no cap, as in training).
         which: ``"pre"`` (default): the grasps exactly as evaluated, which passed the test and
             its robustness trials; ``"post"``: the same grasps after the nominal test.
         split: ``"train"`` or ``"test"``: only objects of that side of the recipe's split.
@@ -90,8 +90,8 @@ class GraspDataset:
         if which not in ("pre", "post"):
             raise DatasetError(f"which must be 'pre' or 'post', got {which!r}")
         if max_per_pair is not None and (isinstance(max_per_pair, bool) or not isinstance(max_per_pair, (int, np.integer))
-                                         or max_per_pair < 1):
-            raise DatasetError(f"max_per_pair must be a whole number >= 1 or None (no cap), got {max_per_pair!r}")
+                                         or max_per_pair < 0):
+            raise DatasetError(f"max_per_pair must be a whole number >= 0 (0 or None: no cap), got {max_per_pair!r}")
         # one name by itself is one hand / object, not a sequence of letters
         hands = [hands] if isinstance(hands, str) else hands
         objects = [objects] if isinstance(objects, str) else objects

@@ -80,8 +80,8 @@ class Recipe:
                 raise RecipeError(f"{where}: '{k}' must be an integer >= {0 if k == 'seed' else 1}, got {d[k]!r}")
         if d.get("cap") is not None and (not isinstance(d["cap"], int) or d["cap"] < 1):
             raise RecipeError(f"{where}: 'cap' must be an integer >= 1 or null, got {d['cap']!r}")
-        if "name" in d and (not isinstance(d["name"], str) or not d["name"] or any(c in d["name"] for c in "/\\")
-                            or d["name"] in (".", "..")):
+        name = str(d["name"]) if d.get("name") not in (None, "") else None  # a number is a name; empty: the file's stem
+        if name is not None and (any(c in name for c in "/\\") or name in (".", "..")):
             raise RecipeError(f"{where}: 'name' is a folder name under out/ (no '/' or '..'), got {d['name']!r}")
         for i, o in enumerate(d["objects"]):
             if isinstance(o, dict) and "procedural" in o:

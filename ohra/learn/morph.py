@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 from importlib import resources
 from pathlib import Path
+from collections.abc import Iterable
 from typing import Any, Sequence, Union
 
 import numpy as np
@@ -115,7 +116,7 @@ class VAEBundle:
             ParamsError: extended params with no base form; an empty sequence.
         """
         single = isinstance(hands, (str, Path, BaseParams, ExtendedParams))
-        if not single and not isinstance(hands, Sequence):
+        if not single and not isinstance(hands, Iterable):
             raise ParamsError(f"encode: expected a hand (name, file or params) or a sequence of them, got "
                               f"{type(hands).__name__}")
         items = [hands] if single else list(hands)

@@ -123,8 +123,9 @@ def procedural_objects(family: str, count: int, seed: int = 0, density: float | 
 
     if isinstance(count, bool) or not isinstance(count, numbers.Integral) or count < 1:
         raise ObjectError(f"procedural {family}: count must be a whole number >= 1, got {count!r}")
-    _check_seed(seed + count - 1 if isinstance(seed, numbers.Integral) and not isinstance(seed, bool) else seed)
     _check_seed(seed)
+    if seed + count - 1 >= 2**32:
+        raise ObjectError(f"procedural {family}: seeds {seed} .. {seed + count - 1} pass 2**32 - 1, the largest seed")
 
     return [ObjectModel.procedural(family, s, density or DEFAULT_DENSITY) for s in range(int(seed), int(seed) + int(count))]
 

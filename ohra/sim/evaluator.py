@@ -274,7 +274,7 @@ class GraspEvaluator:
         if self.protocol.object_point == "frame" and offset > COM_OFFSET_WARN:
             warnings.warn(f"object {obj.name!r}: its mesh frame's origin lies {100 * offset:.1f} cm from its centre of mass; "
                           "the fingers close toward that origin and the test measures its displacement, so outcomes "
-                          "depend on where the mesh's origin is: centre the mesh, or use Protocol(object_point='com') (--object-point com)", ObjectWarning, stacklevel=user_stacklevel())
+                          "depend on where the mesh's origin is: centre the mesh, or use Protocol(object_point='com') (ohra eval / ohra grasp eval: --object-point com; a recipe: protocol: {object_point: com})", ObjectWarning, stacklevel=user_stacklevel())
 
     @classmethod
     def original(cls, name: str, obj: ObjectModel, protocol: Protocol | None = None, form: str | None = None) -> "GraspEvaluator":

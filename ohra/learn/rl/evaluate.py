@@ -263,6 +263,8 @@ def export_policy(run_dir: str | Path, out_dir: str | Path, which: str = "model"
             (out / name).unlink(missing_ok=True)
     if (run / "checkpoints" / "last.json").is_file():  # steps and wall seconds it was trained for
         shutil.copy(run / "checkpoints" / "last.json", out / "trained.json")
+    elif (run / "trained.json").is_file() and run.resolve() != out.resolve():  # an export of an export
+        shutil.copy(run / "trained.json", out / "trained.json")
     return out
 
 

@@ -15,8 +15,8 @@ Run directory::
 
 ``init_from=RUN`` starts a *new* run (its own steps, budget and settings: a fine-tune, e.g. with
 another reward weight) from another run's trained weights and observation/return statistics;
-``config.json`` records where they came from (``init_from``: run, file, its PPO steps and minutes,
-and the environment settings that differ), so a budget is stated as the source's plus the new run's.
+``config.json`` records where they came from (``init_from``: run, file, its PPO steps ``timesteps`` and
+wall seconds ``wall_s``, and the environment settings that differ), so a budget is stated as the source's plus the new run's.
 """
 
 from __future__ import annotations
@@ -237,20 +237,22 @@ NETWORK_SETTINGS = ("policy", "net_arch", "activation", "lstm_hidden", "lstm_cri
 
 def init_source(src: str | Path) -> tuple[Path, Path, dict]:
     """The policy file, observation-statistics file and budget of the run ``src`` a new run starts from:
-    a training run's final policy (``model.zip`` + ``vecnormalize.pkl``) when it has one, else its last
-    checkpoint; or an exported / shipped policy (``policy.pth`` + ``obs_stats.npz``, budget from
-    ``trained.json``; no optimizer state or return statistics travel with an export).
+    a training run's last checkpoint (the newest policy, which ``checkpoints/last.json`` describes: a run
+    resumed and interrupted keeps an older ``model.zip``), else its final policy (``model.zip`` +
+    ``vecnormalize.pkl``); or an exported / shipped policy (``policy.pth`` + ``obs_stats.npz``, budget
+    from ``trained.json``; no optimizer state or return statistics travel with an export). A budget
+    the source does not record is None.
 
     Raises:
         RLConfigError: ``src`` holds no trained policy.
     """
     src = Path(src)
     last = src / "checkpoints" / "last.json"
-    for zip_path, stats, budget in ((src / "model.zip", src / "vecnormalize.pkl", last),
-                                    (src / "checkpoints" / "last.zip", src / "checkpoints" / "last_vecnormalize.pkl", last),
+    for zip_path, stats, budget in ((src / "checkpoints" / "last.zip", src / "checkpoints" / "last_vecnormalize.pkl", last),
+                                    (src / "model.zip", src / "vecnormalize.pkl", None),
                                     (src / "policy.pth", src / "obs_stats.npz", src / "trained.json")):
         if zip_path.is_file() and stats.is_file():
-            done = json.loads(budget.read_text()) if budget.is_file() else {}
+            done = json.loads(budget.read_text()) if budget is not None and budget.is_file() else {}
             return zip_path, stats, {"timesteps": done.get("timesteps"), "wall_s": done.get("wall_s")}
     raise RLConfigError(f"init_from: {src} holds no trained policy (model.zip or checkpoints/last.zip with its "
                         "observation statistics, or an exported policy.pth with obs_stats.npz)")
@@ -274,6 +276,10 @@ def _load_init(model, venv, zip_path: Path, stats: Path, src: Path) -> None:
 
     fit = (f"init_from {src}: its weights do not fit this run's spaces (same hand, joint space and object kind "
            "needed): ")
+
+    def first_mismatch(exc: Exception) -> str:  # torch's first line only says an error occurred
+        lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
+        return next((ln for ln in lines if "size mismatch" in ln), lines[0] if lines else type(exc).__name__)
     if zip_path.name == "policy.pth":  # an export: weights and observation statistics, no optimizer or returns
         from ohra.learn.rl.evaluate import Policy
 
@@ -281,7 +287,7 @@ def _load_init(model, venv, zip_path: Path, stats: Path, src: Path) -> None:
         try:
             model.policy.load_state_dict(pol._policy.state_dict())
         except RuntimeError as exc:
-            raise RLConfigError(fit + str(exc).splitlines()[0]) from None
+            raise RLConfigError(fit + first_mismatch(exc)) from None
         if pol._mean is not None and "obs_rms" in venv.__dict__:
             if pol._mean.shape != venv.obs_rms.mean.shape:
                 raise RLConfigError(fit + f"observation size {pol._mean.shape[0]}, this run {venv.obs_rms.mean.shape[0]}")
@@ -294,7 +300,7 @@ def _load_init(model, venv, zip_path: Path, stats: Path, src: Path) -> None:
     try:
         model.set_parameters(str(zip_path), exact_match=True, device="cpu")
     except (RuntimeError, ValueError) as exc:  # torch's size mismatch: another hand, space or observation layout
-        raise RLConfigError(fit + str(exc).splitlines()[0]) from None
+        raise RLConfigError(fit + first_mismatch(exc)) from None
     with open(stats, "rb") as fh:
         theirs = pickle.load(fh).__dict__  # an unpickled VecNormalize has no venv: read its fields, not attributes
     mine = venv.__dict__
@@ -383,7 +389,13 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
             venv = VecNormalize(venv, norm_obs=ppo.normalize_obs, norm_reward=ppo.normalize_reward, gamma=ppo.gamma)
             model = _new_model(cls, venv, ppo, verbose, tb_dir)
             if init:
-                _load_init(model, venv, init[1], init[2], init[0])
+                try:
+                    _load_init(model, venv, init[1], init[2], init[0])
+                except RLConfigError:  # leave no workers and no half-made run behind
+                    venv.close()
+                    for name in ("config.json", "progress.csv"):
+                        (run_dir / name).unlink(missing_ok=True)
+                    raise
         try:
             cb = _callback(run_dir, ppo, wall_before)
             remaining = max(0, ppo.total_steps - model.num_timesteps)
