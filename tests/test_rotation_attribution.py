@@ -94,3 +94,19 @@ def test_table3_states_both_budgets_of_a_run_started_from_another():
     assert rotation_table3._budget_text(fine) == "3578k + 2200k steps, 170 + 60 min"
     unknown = {**fine, "init_from": {"run": "src", "steps": None, "minutes": None}}  # a source with no budget file
     assert rotation_table3._budget_text(unknown) == "? + 2200k steps, ? + 60 min"
+
+
+def test_the_returns_table_splits_an_evaluation_into_its_reward_terms():
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    try:
+        import rotation_returns
+    finally:
+        sys.path.pop(0)
+    from ohra.learn.rl.evaluate import EvalResult
+    from ohra.sim.rotation.rewards import TERMS
+
+    returns = {t: [0.0, 0.0] for t in TERMS} | {"rotation": [10.0, 20.0], "work": [-100.0, -200.0]}
+    res = EvalResult("r", 2, 0, [400, 200], [1.0, 2.0], [None, "fell"], 400, returns)
+    text, data = rotation_returns.row("gait", res)
+    assert text.startswith("| gait | 1.50 +- 0.50 | 300.0 | -135.0 | +15.0 |") and "| -150.0 |" in text
+    assert data["returns"]["total"] == -135.0 and data["summary"]["survived"] == 0.5
