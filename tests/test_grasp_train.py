@@ -411,7 +411,12 @@ def test_cli_train_sample_and_errors(cli, dataset, tmp_path, capsys):
     args = ["train", "grasp", "--data", str(dataset), "--test-objects", "capsule", "--steps", "2", "--batch-size", "8",
             "-o", str(run), "--quiet"]
     assert cli(args) == 0
-    assert "trained 2 steps" in capsys.readouterr().out
+    captured = capsys.readouterr()
+    assert "trained 2 steps" in captured.out and "note" not in captured.err  # capsule is in the data: held out
+    typo = ["train", "grasp", "--data", str(dataset), "--test-objects", "capsule", "capsuel", "--steps", "1",
+            "--batch-size", "8", "-o", str(tmp_path / "typo"), "--quiet"]
+    assert cli(typo) == 0
+    assert "test object(s) capsuel are in none of the datasets" in capsys.readouterr().err
     assert cli(args) == 2  # already a run there
     assert "--resume" in capsys.readouterr().err
     out = tmp_path / "g.npz"

@@ -148,6 +148,10 @@ def _cmd_train(args: argparse.Namespace) -> int:
     print(f"trained {m['steps']} steps in {m['train_seconds_total']:.1f} s on {m['data']['grasps']} grasps "
           f"({', '.join(f'{h} {c}' for h, c in m['data']['per_hand'].items())}); "
           f"final loss diffusion {f.get('diffusion', float('nan')):.4f}, joints {f.get('joints', float('nan')):.4f}")
+    absent = sorted(k for k, h in m["data"].get("test_objects", {}).items() if not h)
+    if absent:  # held out by name but in no dataset: an evaluation object absent by design, or a typo
+        print(f"ohra: note: test object(s) {', '.join(absent)} are in none of the datasets (nothing to hold out; "
+              "check the spelling if they should be)", file=sys.stderr)
     print(f"model: {out / 'model.pt'}  metrics: {out / 'metrics.json'}")
     return 0
 
