@@ -44,19 +44,33 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=1000)
     ap.add_argument("--name", default="rotation_returns")
     args = ap.parse_args(argv)
-    from ohra.learn.rl.evaluate import Policy, evaluate_policy
+    from ohra.errors import OhraError
+
+    try:
+        return _run(args)
+    except OhraError as exc:  # a bad run, setting or name: one line, as the CLI
+        print(f"rotation_returns: error: {exc}", file=sys.stderr)
+        return 2
+
+
+def _run(args: argparse.Namespace) -> int:
+    from ohra.errors import OhraError
+    from ohra.learn.rl.evaluate import Policy, evaluate_policy, policy_dir
     from ohra.sim.rotation.rewards import TERMS
 
     changes = {}
     for item in args.set:
-        key, _, value = item.partition("=")
-        changes[key] = json.loads(value)
+        key, sep, value = item.partition("=")
+        try:
+            changes[key] = json.loads(value)
+        except json.JSONDecodeError:
+            raise OhraError(f"--set {item!r}: expected KEY=JSON") from None
     head = ("| policy, environment | Cumulative Rotation [rad] | Steps-to-Fall | return | " + " | ".join(TERMS) + " |\n|"
             + "---|" * (4 + len(TERMS)))
     rows, data = [head], {"episodes": args.episodes, "seed": args.seed, "changes": changes, "runs": {}}
     for item in args.runs:
         label, _, path = item.partition("=")
-        pol = Policy(path, which=args.which)
+        pol = Policy(policy_dir(path), which=args.which)  # a run, an export or a shipped name
         other = pol.env_cfg.with_overrides(**changes)
         own = evaluate_policy(pol, pol.env_cfg, args.episodes, args.seed, grasps=pol.grasps)
         moved = evaluate_policy(pol, other, args.episodes, args.seed)

@@ -241,3 +241,26 @@ def test_help_defaults_are_the_configs():
     from ohra.sim.rotation.config import RotationConfig
 
     assert HELP_DEFAULTS == {k: getattr(RotationConfig(), k) for k in HELP_DEFAULTS}
+
+
+@pytest.mark.parametrize("weights, problem", [('weights={"fall": NaN}', "must be finite numbers"),
+                                              ("weights=null", "are a mapping of term to weight"),
+                                              ("weights={fall: -25}", "are a mapping of term to weight")])
+def test_reward_weights_that_are_not_a_mapping_of_finite_numbers_are_one_line(tmp_path, capsys, monkeypatch, weights,
+                                                                              problem):
+    pytest.importorskip("stable_baselines3", reason="ohra rotate train needs stable-baselines3")
+    import ohra.learn.rl.train as rl_train
+
+    monkeypatch.setattr(rl_train, "train_rotation", lambda *a, **k: pytest.fail("bad weights reached training"))
+    assert main(["train", "--set", weights, "-o", str(tmp_path / "r")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and problem in err and not (tmp_path / "r").exists()
+
+
+def test_steps_zero_is_refused_not_read_as_the_default(tmp_path, capsys, monkeypatch):
+    pytest.importorskip("stable_baselines3", reason="ohra rotate train needs stable-baselines3")
+    import ohra.learn.rl.train as rl_train
+
+    monkeypatch.setattr(rl_train, "train_rotation", lambda *a, **k: pytest.fail("--steps 0 reached training"))
+    assert main(["train", "--steps", "0", "-o", str(tmp_path / "r")]) == 2
+    assert "total_steps" in capsys.readouterr().err and not (tmp_path / "r").exists()

@@ -84,11 +84,12 @@ def _train_args(p: argparse.ArgumentParser) -> None:
     _env_args(p)
     p.add_argument("--steps", type=int, help=f"total env steps (default {d.total_steps}; on --resume: the run's)")
     p.add_argument("--minutes", type=float, help="wall-clock budget over all sessions (stops and saves)")
-    p.add_argument("--seed", type=int, help=f"default {d.seed}")
-    p.add_argument("--envs", type=int, help=f"subprocess environments (default {d.n_envs})")
-    p.add_argument("--n-steps", type=int, help=f"steps per env per rollout (default {d.n_steps})")
-    p.add_argument("--batch-size", type=int, help=f"default {d.batch_size}")
-    p.add_argument("--checkpoint-every", type=int, help=f"steps between checkpoints (default {d.checkpoint_every})")
+    src = "; with --init-from: the source's"
+    p.add_argument("--seed", type=int, help=f"default {d.seed}{src}")
+    p.add_argument("--envs", type=int, help=f"subprocess environments (default {d.n_envs}{src})")
+    p.add_argument("--n-steps", type=int, help=f"steps per env per rollout (default {d.n_steps}{src})")
+    p.add_argument("--batch-size", type=int, help=f"default {d.batch_size}{src}")
+    p.add_argument("--checkpoint-every", type=int, help=f"steps between checkpoints (default {d.checkpoint_every}{src})")
     p.add_argument("--policy", choices=("mlp", "lstm"), help=f"policy network: MLP {'-'.join(map(str, d.net_arch))} "
                    f"(default) or a recurrent one, an LSTM of {d.lstm_hidden} units before it (sb3-contrib RecurrentPPO)")
     p.add_argument("--ppo", action="append", default=[], metavar="KEY=JSON",
@@ -177,12 +178,12 @@ def _cmd_train(args: argparse.Namespace) -> int:
         args.init_from = str(policy_dir(args.init_from))  # a run, an export, or a shipped policy by name
         env_cfg, ppo = load_run(args.init_from)
         env_cfg = env_cfg.with_overrides(**_given_env(args))
-        base = {"total_steps": args.steps or PPOSettings().total_steps, "max_minutes": args.minutes, **_given_ppo(args),
+        base = {"total_steps": PPOSettings().total_steps if args.steps is None else args.steps, "max_minutes": args.minutes, **_given_ppo(args),
                 **({"policy": args.policy} if args.policy else {})}
         ppo = PPOSettings.from_dict({**ppo.to_dict(), **base, **extra}, "command line (--ppo)")
     else:
         env_cfg = _env_config(args)
-        base = {"total_steps": args.steps or PPOSettings().total_steps, "max_minutes": args.minutes, **_given_ppo(args),
+        base = {"total_steps": PPOSettings().total_steps if args.steps is None else args.steps, "max_minutes": args.minutes, **_given_ppo(args),
                 **({"policy": args.policy} if args.policy else {})}
         ppo = PPOSettings.from_dict({**base, **extra}, "command line (--ppo)")
     path = train_rotation(env_cfg, ppo, out, resume=args.resume, verbose=0, tensorboard=args.tensorboard,

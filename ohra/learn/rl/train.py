@@ -267,15 +267,19 @@ def _init_record(src: Path, zip_path: Path, budget: dict, env_cfg: RotationConfi
         raise RLConfigError(f"init_from {src}: the network must be the source run's ({'; '.join(diff)})")
     a, b = _plain(theirs_env.to_dict()), _plain(env_cfg.to_dict())
     changes = {k: {"source": a.get(k), "now": b[k]} for k in b if a.get(k) != b[k]}
-    return {"run": str(src), "file": str(zip_path.relative_to(src)), **budget, "env_changes": changes}
+    rec = {"run": str(src), "file": str(zip_path.relative_to(src)), **budget, "env_changes": changes}
+    before = read_config(src).get("init_from")  # the source was itself started from another run: keep the chain
+    if before:
+        rec["source_init_from"] = before
+    return rec
 
 
 def _load_init(model, venv, zip_path: Path, stats: Path, src: Path) -> None:
     """Copy the source's weights into ``model`` and its observation/return statistics into ``venv``."""
     import pickle
 
-    fit = (f"init_from {src}: its weights do not fit this run's spaces (same hand, joint space and object kind "
-           "needed): ")
+    fit = (f"init_from {src}: its weights do not fit this run's spaces (the same observation and action sizes are "
+           "needed: the hand's joint space): ")
 
     def first_mismatch(exc: Exception) -> str:  # torch's first line only says an error occurred
         lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
@@ -361,6 +365,7 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
         if src.resolve() == run_dir.resolve():
             raise RLConfigError(f"init_from {src}: the new run needs its own folder")
         init = (src, zip_path, stats, _init_record(src, zip_path, budget, env_cfg, ppo))
+    created = not run_dir.exists()
     _check_start(run_dir, last, resume)  # before the minutes of starting-state generation ...
     tb_dir = str(run_dir / "tensorboard") if tensorboard else None
     if tensorboard:
@@ -395,6 +400,10 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
                     venv.close()
                     for name in ("config.json", "progress.csv"):
                         (run_dir / name).unlink(missing_ok=True)
+                    if created:
+                        import shutil
+
+                        shutil.rmtree(run_dir, ignore_errors=True)  # a folder this call made holds only its lock
                     raise
         try:
             cb = _callback(run_dir, ppo, wall_before)

@@ -18,6 +18,7 @@ N m (the canonical URDF's effort); see :mod:`ohra.sim.rotation.scene` for why no
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any, Mapping
@@ -250,8 +251,11 @@ class RotationConfig:
 def _weights(w: Any, source: str) -> RewardWeights:
     if isinstance(w, RewardWeights):
         return w
+    if not isinstance(w, Mapping):
+        raise RotationConfigError(f"{source}: reward weights are a mapping of term to weight, e.g. {{\"fall\": -25}} "
+                                  f"(JSON on the command line), got {w!r}")
     reject_unknown(w, (f.name for f in fields(RewardWeights)), RotationConfigError, source, "reward term(s)")
-    bad = {k: v for k, v in w.items() if isinstance(v, bool) or not isinstance(v, (int, float))}
+    bad = {k: v for k, v in w.items() if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)}
     if bad:
-        raise RotationConfigError(f"{source}: reward weights must be numbers, got {bad}")
+        raise RotationConfigError(f"{source}: reward weights must be finite numbers, got {bad}")
     return replace(RewardWeights(), **{k: float(v) for k, v in w.items()})
