@@ -75,9 +75,9 @@ def _pack(args: argparse.Namespace) -> int:
 
 def _info(args: argparse.Namespace) -> int:
     from ohra.data.build import combined_summary, format_summary, summary
+    from ohra.data.dataset import unique_dirs
 
-    # a folder given twice (d and ./d/) would count every total twice
-    dirs = [d for i, d in enumerate(args.dir) if Path(d).resolve() not in {Path(e).resolve() for e in args.dir[:i]}]
+    dirs = [str(d) for d in unique_dirs(args.dir)]
     if len(dirs) < len(args.dir):
         print(f"ohra: note: {len(args.dir) - len(dirs)} folder(s) given twice, counted once", file=sys.stderr)
     args.dir = dirs

@@ -28,18 +28,18 @@ HELP_DEFAULTS = {"hand": "leap_hand_right", "urdf": "canonical", "object": "cube
 
 
 def _env_args(p: argparse.ArgumentParser) -> None:
-    d = argparse.Namespace(**HELP_DEFAULTS)
-    p.add_argument("--hand", help=f"registered hand, leap_XXXX or params JSON (default {d.hand})")
-    p.add_argument("--urdf", choices=("canonical", "original"), help=f"default {d.urdf}")
+    d = HELP_DEFAULTS
+    p.add_argument("--hand", help=f"registered hand, leap_XXXX or params JSON (default {d['hand']})")
+    p.add_argument("--urdf", choices=("canonical", "original"), help=f"default {d['urdf']}")
     p.add_argument("--inertials", choices=("capsule", "original"),
                    help="canonical URDF: finger masses of the template's capsules (default) or of the original URDF")
     p.add_argument("--form", choices=("base", "extended"), help="canonical form (default: extended when registered)")
     p.add_argument("--space", choices=("canonical", "native"), help="joint space of actions (default: by --urdf)")
-    p.add_argument("--object", help=f"cube, sphere, cylinder (default {d.object}), builtin:NAME, "
+    p.add_argument("--object", help=f"cube, sphere, cylinder (default {d['object']}), builtin:NAME, "
                    "procedural:FAMILY:SEED, or a mesh/URDF file or one-object folder")
     p.add_argument("--object-size", type=float, metavar="M",
                    help="cube side / sphere, cylinder diameter (default: the palm radius); a mesh file's largest extent")
-    p.add_argument("--grasps", type=int, help=f"cached starting states (default {d.grasp_count})")
+    p.add_argument("--grasps", type=int, help=f"cached starting states (default {d['grasp_count']})")
     p.add_argument("--set", action="append", default=[], metavar="KEY=JSON",
                    help="any other RotationConfig field, e.g. --set sim_dt=0.0166 (repeatable)")
 
@@ -172,20 +172,20 @@ def _cmd_train(args: argparse.Namespace) -> int:
         env_cfg, ppo = load_run(out)
         _same_as_run(args, env_cfg, ppo, out)
         ppo = with_budget(ppo, args.steps, args.minutes)
-    elif args.init_from:
-        from ohra.learn.rl.evaluate import policy_dir
-
-        args.init_from = str(policy_dir(args.init_from))  # a run, an export, or a shipped policy by name
-        env_cfg, ppo = load_run(args.init_from)
-        env_cfg = env_cfg.with_overrides(**_given_env(args))
-        base = {"total_steps": PPOSettings().total_steps if args.steps is None else args.steps, "max_minutes": args.minutes, **_given_ppo(args),
-                **({"policy": args.policy} if args.policy else {})}
-        ppo = PPOSettings.from_dict({**ppo.to_dict(), **base, **extra}, "command line (--ppo)")
     else:
-        env_cfg = _env_config(args)
-        base = {"total_steps": PPOSettings().total_steps if args.steps is None else args.steps, "max_minutes": args.minutes, **_given_ppo(args),
-                **({"policy": args.policy} if args.policy else {})}
-        ppo = PPOSettings.from_dict({**base, **extra}, "command line (--ppo)")
+        # a new run's own budget and the PPO options given; the rest from the source (--init-from) or the defaults
+        given = {"total_steps": PPOSettings().total_steps if args.steps is None else args.steps, "max_minutes": args.minutes,
+                 **_given_ppo(args), **({"policy": args.policy} if args.policy else {}), **extra}
+        if args.init_from:
+            from ohra.learn.rl.evaluate import policy_dir
+
+            args.init_from = str(policy_dir(args.init_from))  # a run, an export, or a shipped policy by name
+            env_cfg, ppo = load_run(args.init_from)
+            env_cfg = env_cfg.with_overrides(**_given_env(args))
+            given = {**ppo.to_dict(), **given}
+        else:
+            env_cfg = _env_config(args)
+        ppo = PPOSettings.from_dict(given, "command line (--ppo)")
     path = train_rotation(env_cfg, ppo, out, resume=args.resume, verbose=0, tensorboard=args.tensorboard,
                           init_from=args.init_from)
     print(f"wrote {path}")

@@ -95,9 +95,7 @@ class GraspDataset:
         # one name by itself is one hand / object, not a sequence of letters
         hands = [hands] if isinstance(hands, str) else hands
         objects = [objects] if isinstance(objects, str) else objects
-        roots = [Path(path)] if not isinstance(path, (list, tuple)) else [Path(p) for p in path]
-        # a directory given twice (d, ./d/) would count every grasp twice
-        self.roots = [r for i, r in enumerate(roots) if r.resolve() not in {q.resolve() for q in roots[:i]}]
+        self.roots = unique_dirs([path] if not isinstance(path, (list, tuple)) else path)
         self.which = which
         self.entries: list[tuple[Path, str, str, dict]] = []
         seen_hands: set[str] = set()
@@ -199,6 +197,17 @@ class GraspDataset:
         hands = len({h for _, h, _, _ in self.entries})
         cap = f", max_per_pair={self.max_per_pair}" if self.max_per_pair else ""
         return f"GraspDataset([{roots}]: {hands} hands, {len(self.entries)} pairs, {len(self)} grasps, which={self.which!r}{cap})"
+
+
+def unique_dirs(paths) -> list[Path]:
+    """``paths`` as Paths, each folder once (``d`` and ``./d/`` are one folder: given twice, every grasp or total
+    would count twice), in the order given."""
+    seen, out = set(), []
+    for p in map(Path, paths):
+        if p.resolve() not in seen:
+            seen.add(p.resolve())
+            out.append(p)
+    return out
 
 
 def require_manifest(root: str | Path) -> dict:

@@ -90,7 +90,7 @@ class Recipe:
                     if not isinstance(v, int) or isinstance(v, bool) or v < least:
                         raise RecipeError(f"{where}: objects[{i}]: '{k}' must be an integer >= {least}, got {v!r}")
         src = Path(source) if source else None
-        return cls(name=str(d.get("name") or (src.stem if src else "dataset")), hands=d["hands"], objects=d["objects"],
+        return cls(name=name or (src.stem if src else "dataset"), hands=d["hands"], objects=d["objects"],
                    seed=d.get("seed", 0), grasps_per_pair=d.get("grasps_per_pair", 8), cap=d.get("cap"),
                    split=d.get("split") or {}, protocol=d.get("protocol", "reference"), robustness=d.get("robustness") or {},
                    filter=bool(d.get("filter", True)), source=src)

@@ -29,6 +29,7 @@ import json
 import time
 import warnings
 import zlib
+from collections import Counter
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
@@ -233,7 +234,8 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
     if collisions != "own" and not original:
         raise GraspError("collisions='canonical' replays on the original URDF's hybrid: it needs original=True")
     objs = [resolve_object(o) for o in objects]
-    twice = sorted({o.name for o in objs if sum(p.mesh_hash == o.mesh_hash for p in objs) > 1})
+    hashes = Counter(o.mesh_hash for o in objs)
+    twice = sorted({o.name for o in objs if hashes[o.mesh_hash] > 1})
     if twice:  # its grasps would be counted twice in every pooled rate
         raise GraspError(f"object(s) {twice} given more than once")
     from ohra.objects.resolve import warn_if_ungraspable
@@ -259,7 +261,7 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
             who = hand if condition_hand is None else condition_hand
             raise ParamsError(f"hand {str(who) if isinstance(who, (str, Path)) else type(who).__name__!r}: {exc}") from None
         resolved.append((hand_label(hand, params), params, _couplings(hand)))
-    twice = sorted({name for name, *_ in resolved if sum(r[0] == name for r in resolved) > 1})
+    twice = sorted(name for name, k in Counter(name for name, *_ in resolved).items() if k > 1)
     if twice:
         raise GraspError(f"hand(s) {twice} given more than once")
     pairs = []

@@ -356,7 +356,7 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
 
     run_dir = Path(run_dir)
     last = run_dir / "checkpoints" / "last.zip"
-    init = None
+    record = None  # what config.json says about init_from
     if init_from is not None:
         if resume:
             raise RLConfigError("init_from starts a new run; a resumed run continues from its own checkpoint")
@@ -364,7 +364,7 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
         zip_path, stats, budget = init_source(src)
         if src.resolve() == run_dir.resolve():
             raise RLConfigError(f"init_from {src}: the new run needs its own folder")
-        init = (src, zip_path, stats, _init_record(src, zip_path, budget, env_cfg, ppo))
+        record = _init_record(src, zip_path, budget, env_cfg, ppo)
     created = not run_dir.exists()
     _check_start(run_dir, last, resume)  # before the minutes of starting-state generation ...
     tb_dir = str(run_dir / "tensorboard") if tensorboard else None
@@ -379,7 +379,7 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
         else:
             # a run stopped before its first checkpoint left only its config and a few progress rows
             (run_dir / "progress.csv").unlink(missing_ok=True)
-            _write_config(run_dir, env_cfg, ppo, init_from=init[3] if init else None)
+            _write_config(run_dir, env_cfg, ppo, init_from=record)
         set_random_seed(ppo.seed)
         venv = _vec_env(env_cfg, ppo)
         cls = ppo_class(ppo.policy)
@@ -393,9 +393,9 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
         else:
             venv = VecNormalize(venv, norm_obs=ppo.normalize_obs, norm_reward=ppo.normalize_reward, gamma=ppo.gamma)
             model = _new_model(cls, venv, ppo, verbose, tb_dir)
-            if init:
+            if record is not None:
                 try:
-                    _load_init(model, venv, init[1], init[2], init[0])
+                    _load_init(model, venv, zip_path, stats, src)
                 except RLConfigError:  # leave no workers and no half-made run behind
                     venv.close()
                     for name in ("config.json", "progress.csv"):
