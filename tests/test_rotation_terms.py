@@ -51,6 +51,23 @@ def test_total_is_the_weighted_sum_and_a_zero_weight_removes_a_term():
     assert Rw.total(terms, replace(w, fall=-25.0)) == pytest.approx(expected - 25.0)
 
 
+@pytest.mark.parametrize("weights, warned", [({"fall": 25.0}, True), ({"work": 0.001}, True), ({"fall": -25.0}, False),
+                                             ({"work": 0.0}, False), ({"rotation": -1.0}, False)])
+def test_a_penalty_weight_that_pays_a_reward_is_said_not_refused(weights, warned):
+    import warnings
+
+    from ohra.sim.rotation.config import RotationConfig, RotationConfigWarning
+
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        cfg = RotationConfig(weights=weights)
+    ours = [w for w in seen if issubclass(w.category, RotationConfigWarning)]
+    assert len(ours) == int(warned)  # turning about -z (rotation < 0) is a task, not a slip
+    assert cfg.weights.as_dict()[next(iter(weights))] == next(iter(weights.values()))
+    if warned:
+        assert next(iter(weights)) in str(ours[0].message)
+
+
 @pytest.mark.parametrize("drop, fell", [(0.029, False), (0.031, True)])
 def test_fell_on_both_sides_of_the_height_threshold(drop, fell):
     assert T.fell(np.array([0.0, 0.0, -drop]), np.zeros(3), 0.03) is fell

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any, Mapping
 
@@ -30,6 +31,10 @@ from ohra.errors import OhraError, reject_unknown
 
 class RotationConfigError(OhraError, ValueError):
     """A rotation setting is unknown or out of range."""
+
+
+class RotationConfigWarning(UserWarning):
+    """A rotation setting that is allowed but probably not meant (e.g. a penalty weight that pays a reward)."""
 
 
 URDF_KINDS = ("canonical", "original")
@@ -258,4 +263,10 @@ def _weights(w: Any, source: str) -> RewardWeights:
     bad = {k: v for k, v in w.items() if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)}
     if bad:
         raise RotationConfigError(f"{source}: reward weights must be finite numbers, got {bad}")
+    # A penalty term is >= 0, so a positive weight pays for drift, torque, a drop...: allowed (an experiment may
+    # want it), but said, since a sign slip (fall = 25 for -25) would otherwise train silently for an hour.
+    paid = {k: v for k, v in w.items() if k != "rotation" and v > 0}
+    if paid:
+        warnings.warn(f"{source}: positive penalty weight(s) {paid} reward what they name (penalty weights are "
+                      f"<= 0; a drop penalty is e.g. {{\"fall\": -25}})", RotationConfigWarning, stacklevel=3)
     return replace(RewardWeights(), **{k: float(v) for k, v in w.items()})
