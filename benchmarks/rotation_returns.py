@@ -3,8 +3,9 @@
 Evaluates each policy (a run or an export, deterministic actions, seeded episodes) in its own environment and in
 that environment with some settings changed (``--set KEY=JSON``, e.g. ``collisions='"own"'`` runs a policy
 trained on the hybrid LEAP on the original URDF with its own link shapes), next to holding still (zero actions)
-in the changed environment. The question it answers: does the reward rank the policy's turning gait above
-holding still on that body? If not, PPO on that body is right to converge to holding.
+in the changed environment: what the gait earns and pays, term by term, on each body. (An episode return against
+holding still does not say what PPO will learn: on the hybrid LEAP, where PPO learned the gait, holding still
+ranks above it too; see runs/rotation/README.md.)
 
     python benchmarks/rotation_returns.py --runs hybrid=runs/rotation/leap_hybrid_settled_s0 \\
         --set 'collisions="own"' --which last --name rotation_leap_hybrid_on_original
@@ -14,7 +15,6 @@ holding still on that body? If not, PPO on that body is right to converge to hol
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -54,17 +54,12 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from ohra.cli.rotate import _key_values  # the CLI's own --set reading (a value that is not JSON stays a string)
     from ohra.errors import OhraError
     from ohra.learn.rl.evaluate import Policy, evaluate_policy, policy_dir
     from ohra.sim.rotation.rewards import TERMS
 
-    changes = {}
-    for item in args.set:
-        key, sep, value = item.partition("=")
-        try:
-            changes[key] = json.loads(value)
-        except json.JSONDecodeError:
-            raise OhraError(f"--set {item!r}: expected KEY=JSON") from None
+    changes = _key_values(args.set, "--set", OhraError)
     head = ("| policy, environment | Cumulative Rotation [rad] | Steps-to-Fall | return | " + " | ".join(TERMS) + " |\n|"
             + "---|" * (4 + len(TERMS)))
     rows, data = [head], {"episodes": args.episodes, "seed": args.seed, "changes": changes, "runs": {}}

@@ -71,6 +71,14 @@ class RewardWeights:
     # 0.43 rad/s but drops it in every episode (runs/rotation/README.md)
     fall: float = 0.0
 
+    def __post_init__(self) -> None:
+        # A penalty term is >= 0, so a positive weight pays for drift, torque, a drop...: allowed (an experiment may
+        # want it), but said, since a sign slip (fall = 25 for -25) would otherwise train silently for an hour.
+        paid = {k: v for k, v in asdict(self).items() if k != "rotation" and v > 0}
+        if paid:
+            warnings.warn(f"reward weights: positive penalty weight(s) {paid} reward what they name (penalty weights "
+                          f"are <= 0; a drop penalty is e.g. {{\"fall\": -25}})", RotationConfigWarning, stacklevel=3)
+
     def as_dict(self) -> dict[str, float]:
         return asdict(self)
 
@@ -263,10 +271,4 @@ def _weights(w: Any, source: str) -> RewardWeights:
     bad = {k: v for k, v in w.items() if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)}
     if bad:
         raise RotationConfigError(f"{source}: reward weights must be finite numbers, got {bad}")
-    # A penalty term is >= 0, so a positive weight pays for drift, torque, a drop...: allowed (an experiment may
-    # want it), but said, since a sign slip (fall = 25 for -25) would otherwise train silently for an hour.
-    paid = {k: v for k, v in w.items() if k != "rotation" and v > 0}
-    if paid:
-        warnings.warn(f"{source}: positive penalty weight(s) {paid} reward what they name (penalty weights are "
-                      f"<= 0; a drop penalty is e.g. {{\"fall\": -25}})", RotationConfigWarning, stacklevel=3)
     return replace(RewardWeights(), **{k: float(v) for k, v in w.items()})
