@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import os
 import sys
 import warnings
 from pathlib import Path
@@ -109,28 +108,11 @@ def _one_line_warnings(previous):
 _PACKAGE = Path(__file__).resolve().parents[1]
 
 
-def _import_pybullet_quietly() -> None:
-    """Import PyBullet with its ``pybullet build time: ...`` line (written to fd 2 on import) discarded, so that
-    an error stays the one line on stderr. Done once, after parsing: ``ohra --help`` does not pay the import."""
-    if "pybullet" in sys.modules:
-        return
-    sys.stderr.flush()
-    saved = os.dup(2)
-    try:
-        with open(os.devnull, "w") as null:
-            os.dup2(null.fileno(), 2)
-            try:
-                import pybullet  # noqa: F401
-            except ImportError:  # reported where a command needs it
-                pass
-    finally:
-        os.dup2(saved, 2)
-        os.close(saved)
-
-
 def execute(args: argparse.Namespace) -> int:
     """Run the command parsed into ``args`` (its ``func``); user errors become one stderr line and exit 2."""
-    _import_pybullet_quietly()
+    from ohra.sim.pybullet_import import import_pybullet
+
+    import_pybullet()  # done once, after parsing: `ohra --help` does not pay the import
     shown = warnings.showwarning
     warnings.showwarning = _one_line_warnings(shown)
     try:

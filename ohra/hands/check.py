@@ -8,9 +8,8 @@ from typing import Iterable
 
 import numpy as np
 import pinocchio as pin
-import pybullet as pb
 
-from ohra.sim.bullet import captured_c_output, load_urdf_text
+from ohra.sim.bullet import captured_c_output, load_urdf_text, pb  # via ohra.sim: imported without its build line
 from ohra.canonical.urdfgen import render
 from ohra.hands import get_hand
 

@@ -1,5 +1,9 @@
 """PyBullet simulation: the six-direction grasp evaluator (canonical and original hands)."""
 
+from ohra.sim.pybullet_import import import_pybullet
+
+import_pybullet()  # first, so that no submodule's `import pybullet` prints the build-time line
+
 from ohra.sim.controller import closes_positive, squeeze_targets
 from ohra.sim.evaluator import PHASES, EvalReport, GraspEvaluator, GraspResult, evaluate_grasps, run_grasp
 from ohra.sim.hands import SimHand
