@@ -3,41 +3,20 @@ simulator hand with its joint table."""
 
 from __future__ import annotations
 
-import contextlib
 import math
 import os
 import tempfile
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Iterator
+from typing import TYPE_CHECKING
 
 import pybullet as pb
 
+from ohra.sim.pybullet_import import captured_c_output  # noqa: F401  (re-exported: ohra.sim.bullet.captured_c_output)
+
 if TYPE_CHECKING:
     from ohra.sim.hands import SimHand
-
-
-@contextlib.contextmanager
-def captured_c_output() -> Iterator[list[str]]:
-    """Capture text written to the process's stdout/stderr file descriptors (PyBullet's warnings).
-
-    Yields a list that holds the captured text once the block exits.
-    """
-    out: list[str] = []
-    with tempfile.TemporaryFile(mode="w+b") as tmp:
-        saved = [os.dup(1), os.dup(2)]
-        try:
-            os.dup2(tmp.fileno(), 1)
-            os.dup2(tmp.fileno(), 2)
-            yield out
-        finally:
-            os.dup2(saved[0], 1)
-            os.dup2(saved[1], 2)
-            for fd in saved:
-                os.close(fd)
-            tmp.seek(0)
-            out.append(tmp.read().decode("utf-8", "replace"))
 
 
 def load_urdf_text(text: str, client: int, **kwargs) -> int:
