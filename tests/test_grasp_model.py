@@ -326,6 +326,10 @@ def test_the_shipped_leap_model_conditions_on_raw_parameters_and_takes_any_hand(
         np.testing.assert_array_equal(z["grasps"], leap.sample("leap_2211", "builtin:box", 3, seed=0))
     assert main(["grasp", "sample", "--hand", "barrett_hand", "--object", "builtin:box", "-n", "2", "-o", str(out)]) == 0
     assert "note" not in capsys.readouterr().err  # a base-form hand keeps the default model
+    # a hand with fewer than two fingers still samples, and is told its grasps cannot hold anything
+    for hand, fingers in (("leap_0003", 1), ("leap_0033", 2)):
+        assert main(["grasp", "sample", "--hand", hand, "--object", "builtin:box", "-n", "2", "-o", str(out)]) == 0
+        assert ("1 finger(s): its grasps cannot hold" in capsys.readouterr().err) == (fingers < 2)
     # the wrong-condition study's sampling from the shell: leap_3033's joints, leap_3333's condition
     assert main(["grasp", "sample", "--hand", "leap_3033", "--condition-hand", "leap_3333", "--object", "builtin:box",
                  "-n", "3", "--seed", "0", "-o", str(out)]) == 0

@@ -212,6 +212,12 @@ def _cmd_sample(args: argparse.Namespace) -> int:
     atomic_write_npz(out, {"grasps": g.astype(np.float64)})
     if note:
         print(note, file=sys.stderr)
+    from ohra.learn.grasp.condition import resolve_hand
+
+    fingers = resolve_hand(args.hand).num_fingers
+    if fingers < 2:  # sampling is defined for any hand, but one finger or none closes on nothing
+        print(f"ohra: note: {args.hand} has {fingers} finger(s): its grasps cannot hold an object "
+              "(grasp synthesis refuses such hands)", file=sys.stderr)
     extra = f", refinement {1e3 * timing['refine_seconds'] / len(g):.1f} ms per grasp" if args.refine else ""
     print(f"wrote {len(g)} grasps of {args.hand} on {args.object} to {out} ({1e3 * timing['seconds'] / len(g):.2f} ms per grasp{extra})")
     return 0
