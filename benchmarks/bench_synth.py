@@ -105,7 +105,7 @@ def _table(rows: list[dict], args, n_ycb: int, n_proc: int, mem: float, load: tu
         f"verified = passed the six-direction PyBullet test ({args.protocol} protocol) **and** its robustness trials "
         f"({SynthSettings().robustness.trials} perturbed re-tests: palm 1 mm / 10 mrad, joints 10 mrad). "
         f"Machine load average during the run: {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} on {os.cpu_count()} cores "
-        "(shared with other helpers' jobs: wall-clock per-core rates are lower than on an idle machine, so the rate that counts "
+        "(shared with other jobs: wall-clock per-core rates are lower than on an idle machine, so the rate that counts "
         "is verified grasps per CPU-second of the shard tasks, what one idle core would give; solve/sim seconds are wall).",
         "",
         "| hand | objects | backend | workers | solves | converged | sim pass | verified | converged→verified | wall [s] | "
