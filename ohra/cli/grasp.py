@@ -198,23 +198,23 @@ def _output(path: str, suffix: str) -> Path:
 def _cmd_sample(args: argparse.Namespace) -> int:
     from ohra.data.dataset import atomic_write_npz
 
+    from ohra.learn.grasp.condition import resolve_hand
     from ohra.learn.grasp.model import resolve_object
     from ohra.objects.resolve import warn_if_ungraspable
 
     out = _output(args.output, ".npz")
+    params = resolve_hand(args.hand)  # once: a params JSON is read here, not again by the model
     # the model must read the hand it is conditioned on
     model, note = _load(args.model, [args.condition_hand or args.hand])
     obj = resolve_object(args.object, scale=args.scale)
     warn_if_ungraspable(obj)
     timing: dict = {}
-    g = model.sample(args.hand, obj, args.n, seed=args.seed, timing=timing, refine=args.refine, centre=args.centre,
+    g = model.sample(params, obj, args.n, seed=args.seed, timing=timing, refine=args.refine, centre=args.centre,
                      condition_hand=args.condition_hand)
     atomic_write_npz(out, {"grasps": g.astype(np.float64)})
     if note:
         print(note, file=sys.stderr)
-    from ohra.learn.grasp.condition import resolve_hand
-
-    fingers = resolve_hand(args.hand).num_fingers
+    fingers = params.num_fingers
     if fingers < 2:  # sampling is defined for any hand, but one finger or none closes on nothing
         print(f"ohra: note: {args.hand} has {fingers} finger(s): its grasps cannot hold an object "
               "(grasp synthesis refuses such hands)", file=sys.stderr)
