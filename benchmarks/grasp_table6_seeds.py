@@ -9,7 +9,7 @@ one per model and hand, so an interrupted run keeps the hands it finished), and
 writes per hand each seed's unified and specific success and the pooled difference with its standard
 error (two independent samples of grasps per model).
 
-    python benchmarks/grasp_table6_seeds.py --data datasets/grasp_unified_s* [--seeds 0 1] [--workers 2]
+    python benchmarks/grasp_table6_seeds.py --data datasets/grasp_unified_s{0..22} [--seeds 0 1] [--workers 2]
     -> benchmarks/results/grasp_table6_seeds.{json,md}
 """
 
