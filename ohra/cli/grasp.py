@@ -17,12 +17,15 @@ import argparse
 import sys
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, Sequence
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
 from ohra.cli.main import subcommand_group
 from ohra.errors import OhraError
+
+if TYPE_CHECKING:
+    from ohra.hands import Params
 
 
 CENTRE_HELP = ("sample on the object centred on its bounding box, grasps moved back into its mesh frame (for a mesh "
@@ -156,11 +159,12 @@ def _cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
-def _load(model: str | None, hands: Sequence[str] = ()):
+def _load(model: str | None, hands: Sequence[str] = (), resolved: Mapping[str, Params] | None = None):
     """(model, note): the model ``--model`` names; without one, the shipped ``default`` model, or the
     shipped ``leap`` model when none of ``hands`` has a base form (the default model's VAE condition reads
     base-form hands only: LEAP variants and extended-only hands), with a note for stderr, which the command
-    prints once its work is done (an error stays the one line on stderr)."""
+    prints once its work is done (an error stays the one line on stderr). ``resolved``: params the caller
+    already read, by hand spec (a params JSON is then not read again)."""
     _torch()
     from ohra.errors import ParamsError
     from ohra.learn.grasp.condition import resolve_hand
@@ -171,7 +175,8 @@ def _load(model: str | None, hands: Sequence[str] = ()):
         return chosen, None
     unusable = []
     for h in hands:
-        params = resolve_hand(h)  # an unknown or malformed hand is its own error, not a reason to switch models
+        # an unknown or malformed hand is its own error, not a reason to switch models
+        params = resolved[h] if resolved and h in resolved else resolve_hand(h)
         try:
             chosen.condition.vector(params)
         except ParamsError:
@@ -201,11 +206,12 @@ def _cmd_sample(args: argparse.Namespace) -> int:
     from ohra.learn.grasp.condition import resolve_hand
     from ohra.learn.grasp.model import resolve_object
     from ohra.objects.resolve import warn_if_ungraspable
+    from ohra.synth import MIN_GRASP_FINGERS
 
     out = _output(args.output, ".npz")
     params = resolve_hand(args.hand)  # once: a params JSON is read here, not again by the model
     # the model must read the hand it is conditioned on
-    model, note = _load(args.model, [args.condition_hand or args.hand])
+    model, note = _load(args.model, [args.condition_hand or args.hand], resolved={args.hand: params})
     obj = resolve_object(args.object, scale=args.scale)
     warn_if_ungraspable(obj)
     timing: dict = {}
@@ -215,7 +221,7 @@ def _cmd_sample(args: argparse.Namespace) -> int:
     if note:
         print(note, file=sys.stderr)
     fingers = params.num_fingers
-    if fingers < 2:  # sampling is defined for any hand, but one finger or none closes on nothing
+    if fingers < MIN_GRASP_FINGERS:  # sampling is defined for any hand; their grasps hold nothing
         print(f"ohra: note: {args.hand} has {fingers} finger(s): its grasps cannot hold an object "
               "(grasp synthesis refuses such hands)", file=sys.stderr)
     extra = f", refinement {1e3 * timing['refine_seconds'] / len(g):.1f} ms per grasp" if args.refine else ""

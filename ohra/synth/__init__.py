@@ -9,6 +9,10 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
+MIN_GRASP_FINGERS = 2
+"""Fewest fingers a hand needs for synthesis (one finger or none closes on nothing); here, not in
+``pipeline``, so that code that only checks a hand does not load CasADi and PyBullet."""
+
 _LAZY = {"GraspNLP": "ohra.synth.nlp", "NLPSettings": "ohra.synth.nlp", "SynthSettings": "ohra.synth.pipeline",
          "synthesize": "ohra.synth.pipeline", "synthesize_shard": "ohra.synth.pipeline"}
 

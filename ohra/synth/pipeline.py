@@ -38,6 +38,7 @@ from ohra.data.dataset import atomic_write_bytes, npz_bytes, shard_name
 from ohra.data.manifest import ManifestWriter, hand_entry, object_keys, open_manifest, shard_complete
 from ohra.errors import ObjectError, OhraError, require_seed
 from ohra.io import folder_lock
+from ohra.synth import MIN_GRASP_FINGERS
 from ohra.objects.model import ObjectModel
 from ohra.objects.resolve import GRASPABLE_EXTENT_M, size_problem
 from ohra.rotations import grasp_to_pose
@@ -127,7 +128,7 @@ def check_hand_for_synthesis(name: str, params: Params) -> None:
     if not isinstance(name, str) or name in ("", ".", "..") or "/" in name or "\\" in name:
         raise OhraError(f"hand name {name!r} cannot name a dataset folder: use a plain name without '/' "
                         "(a spec YAML's hand is named by its 'name:' key)")
-    if params.num_fingers < 2:
+    if params.num_fingers < MIN_GRASP_FINGERS:
         raise OhraError(f"hand {name!r} has {params.num_fingers} finger(s); grasp synthesis needs at least two")
 
 
