@@ -25,18 +25,17 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
-from typing import Iterable, Sequence, Union
+from typing import Iterable, Sequence
 
 import coal
 import numpy as np
 import pinocchio as pin
 
 from ohra.errors import OhraError
-from ohra.canonical.params import FINGERS, JOINT_NAMES, BaseParams, ExtendedParams, load_params, require_params
+from ohra.canonical.params import FINGERS, JOINT_NAMES, BaseParams, ExtendedParams, Params, load_params, require_params
 from ohra.canonical.urdfgen import palm_geometry, render
 from ohra.transforms import axis_angle_to_matrix
 
-Params = Union[BaseParams, ExtendedParams]
 SEGMENTS = ("proximal", "middle", "distal")
 
 

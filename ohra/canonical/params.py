@@ -68,7 +68,6 @@ AXIS_UNIT_TOL = 1e-3
 # (ohra.synth.nlp.NLPSettings.finger_gap) and the parser keeps a fitted hand's fingers that far apart at rest
 FINGER_GAP = 0.001
 
-Form = Union["BaseParams", "ExtendedParams"]
 
 
 def _split(values: np.ndarray, counts: tuple[int, ...]) -> list[Any]:
@@ -130,7 +129,7 @@ def _as_float(d: Mapping[str, Any], key: str) -> float:
 class _Checker:
     """Collects the flat index of each key so that errors can name key and index."""
 
-    def __init__(self, params: "Form"):
+    def __init__(self, params: "Params"):
         self.params = params
 
     def finite(self, key: str, arr: np.ndarray) -> None:
@@ -651,6 +650,10 @@ class ExtendedParams(_ParamsMixin):
             joint_lowers=self.joint_lowers.copy(),
             joint_uppers=self.joint_uppers.copy(),
         )
+
+
+# either form of the canonical parameters: the one alias every module annotates with
+Params = Union[BaseParams, ExtendedParams]
 
 
 def _handedness(ys: np.ndarray, present: np.ndarray) -> str:

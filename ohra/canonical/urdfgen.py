@@ -14,12 +14,12 @@ import math
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
-from typing import Any, Union
+from typing import Any
 
 import jinja2
 import numpy as np
 
-from ohra.canonical.params import BaseParams, ExtendedParams, require_params
+from ohra.canonical.params import BaseParams, ExtendedParams, Params, require_params
 from ohra.io import write_text
 from ohra.resources import templates_dir
 from ohra.transforms import inverse_rpy, rpy_to_matrix
@@ -31,7 +31,6 @@ EFFORT = 1.0  # N m, the drive force limit of the reference evaluation protocol
 VELOCITY = 2.0 * math.pi  # rad/s
 MIN_PALM_DEPTH = 0.01  # m, palm thickness of a hand without fingers
 
-Params = Union[BaseParams, ExtendedParams]
 
 
 def fmt(x: float) -> str:

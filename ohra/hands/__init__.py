@@ -8,15 +8,13 @@ JSON file; ``get_couplings(name)`` gives its coupled joints.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Union
 
 from ohra.canonical.couplings import Coupling
-from ohra.canonical.params import BaseParams, ExtendedParams
+from ohra.canonical.params import BaseParams, ExtendedParams, Params
 from ohra.errors import HandNotFoundError
 from ohra.hands.leap.variants import leap_variant, variant_names
 from ohra.hands.resolve import HandRef, resolve_hand
 
-Params = Union[BaseParams, ExtendedParams]
 FORMS = ("base", "extended")
 
 

@@ -19,13 +19,12 @@ import warnings
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
-from typing import Any, Union
+from typing import Any
 
 from ohra.canonical.couplings import Coupling, read_couplings
-from ohra.canonical.params import BaseParams, ExtendedParams, load_params
+from ohra.canonical.params import BaseParams, ExtendedParams, Params, load_params
 from ohra.errors import HandNotFoundError, ParamsError
 
-Params = Union[BaseParams, ExtendedParams]
 SPEC_SUFFIXES = (".yaml", ".yml")
 
 

@@ -21,12 +21,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
-from ohra.canonical.params import EXT_ROW_JOINTS, EXT_ROW_START, FINGER_GAP, FINGER_SLICES, FINGERS, JOINT_INDEX, BaseParams, ExtendedParams
+from ohra.canonical.params import EXT_ROW_JOINTS, EXT_ROW_START, FINGERS, FINGER_GAP, FINGER_SLICES, JOINT_INDEX, BaseParams, ExtendedParams, Params
 from ohra.original.estimate import MIN_CAPSULE_MARGIN
 from ohra.original.keypoints import OriginalKeypoints, canonical_keypoints, ext_arrays_from_base, original_keypoints, sample_original
 from ohra.original.measure import Measurement
 
-Params = BaseParams | ExtendedParams
 DECIMALS = 6  # committed numbers: micrometres / microradians
 JOINT_WEIGHT = 0.5  # joint-position residuals relative to fingertip residuals
 ALONG_AXIS_WEIGHT = 0.2

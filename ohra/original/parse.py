@@ -20,7 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from ohra.canonical.params import FINGER_GAP, BaseParams, ExtendedParams
+from ohra.canonical.params import FINGER_GAP, BaseParams, Params
 from ohra.errors import ParamsError, ParseError, SpecError
 from ohra.canonical.couplings import Coupling, describe
 from ohra.original.action import ActionMap
@@ -31,7 +31,6 @@ from ohra.original.measure import Measurement, ParseWarning, measure
 from ohra.original.spec import HandSpec, load_spec
 from ohra.original.urdf import OriginalHand, load_urdf
 
-Params = BaseParams | ExtendedParams
 
 
 # FINGER_GAP (m, ohra.canonical.params): how far apart synthesis keeps different fingers

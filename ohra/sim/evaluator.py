@@ -26,7 +26,7 @@ import multiprocessing as mp
 import os
 import warnings
 from dataclasses import asdict, dataclass, field
-from typing import Iterable, Sequence, Union
+from typing import Iterable, Sequence
 
 import numpy as np
 import pybullet as pb
@@ -34,14 +34,13 @@ import pybullet as pb
 from ohra.errors import GraspError, ObjectWarning, OhraError, user_stacklevel
 from ohra.objects.model import ObjectModel
 from ohra.objects.resolve import resolve_object
-from ohra.canonical.params import BaseParams, ExtendedParams
+from ohra.canonical.params import BaseParams, ExtendedParams, Params
 from ohra.rotations import check_grasps, grasp_to_pose, pose_to_grasp
 from ohra.sim.controller import closes_positive, squeeze_targets
 from ohra.sim.hands import SimHand
 from ohra.sim.protocol import COM_OFFSET_WARN, DIRECTION_NAMES, DIRECTIONS, Protocol
 from ohra.sim.world import World
 
-Params = Union[BaseParams, ExtendedParams]
 PHASES = ("squeeze",) + DIRECTION_NAMES
 # rad: a joint this close to its limit is not "outside" it. Stored grasps are float32, whose
 # spacing near pi is 2.4e-7 rad; a locked joint (lower == upper, e.g. Allegro's finger twist held at

@@ -17,15 +17,13 @@ from __future__ import annotations
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Union
 
 import numpy as np
 
 from ohra.errors import GraspError
-from ohra.canonical.params import FINGER_SLICES, FINGERS, JOINT_NAMES, BaseParams, ExtendedParams
+from ohra.canonical.params import FINGERS, FINGER_SLICES, JOINT_NAMES, BaseParams, ExtendedParams, Params
 from ohra.transforms import matrix_to_rpy, xyzrpy_to_matrix
 
-Params = Union[BaseParams, ExtendedParams]
 MOVABLE = ("revolute", "continuous", "prismatic")
 
 

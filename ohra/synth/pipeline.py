@@ -26,13 +26,12 @@ import time
 from collections import Counter
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Union
 
 import numpy as np
 
 from ohra import __version__
 from ohra.canonical.kinematics import HandModel
-from ohra.canonical.params import BaseParams, ExtendedParams
+from ohra.canonical.params import Params
 from ohra.data.backends import run_tasks
 from ohra.data.dataset import atomic_write_bytes, npz_bytes, shard_name
 from ohra.data.manifest import ManifestWriter, hand_entry, object_keys, open_manifest, shard_complete
@@ -49,7 +48,6 @@ from ohra.synth.nlp import GraspNLP, NLPSettings, SUCCESS_STATUSES
 from ohra.synth.quality import ferrari_canny
 from ohra.synth.robust import RobustnessSettings, as_stored, perturb
 
-Params = Union[BaseParams, ExtendedParams]
 # solver_status codes in the shards; "Self_Collision" marks a converged solution whose fingers
 # intersect in the exact (Coal) capsule check, which the NLP's sphere samples can miss
 STATUS_CODES = {s: i for i, s in enumerate(SUCCESS_STATUSES + ("Maximum_Iterations_Exceeded", "Infeasible_Problem_Detected",

@@ -25,10 +25,9 @@ from typing import Any, Sequence, Union
 import numpy as np
 import torch
 
-from ohra.canonical.params import BaseParams, ExtendedParams
+from ohra.canonical.params import BaseParams, ExtendedParams, Params
 from ohra.errors import CheckpointError, ParamsError
 
-Params = Union[BaseParams, ExtendedParams]
 HandLike = Union[str, Path, BaseParams, ExtendedParams]
 PARAMS_DIM = 173 + 22 + 1
 
