@@ -26,3 +26,7 @@ def test_grasp_model_notebook_executes(tmp_path):
     assert (tmp_path / "grasp_sheet.png").is_file() and (tmp_path / "grasp_scene.html").is_file()
     # from a checkout the study's committed tables are shown: one line per hand, then the sheet
     assert texts[5].count("hand-specific") == 3 and "<png>" in texts[5]
+    # ... and where the model loses success (stop 44): the three measurements' tables
+    code = [c for c in nb.cells if c.cell_type == "code"]
+    shown = "\n".join(o.get("data", {}).get("text/markdown", "") for o in code[6].outputs)
+    assert "unified-24000" in shown and "seen (training objects)" in shown and "stored rotations" in shown
