@@ -88,18 +88,20 @@ def trained(name: str, data: list[str], hands: list[str], args, condition: str =
 
 def evaluated(model, key: str, hands: list[str], objects: list, original: bool, protocol: Protocol, args,
               inertials: str = "capsule", refine: bool = False, collisions: str = "own", seed: int = 0,
-              tag: str = "") -> dict:
+              tag: str = "", candidates: int = 1) -> dict:
     """One model's evaluation, cached in ``eval_<key><tag><suffix>.json`` under its settings' key (``tag``:
     tells apart evaluations of the same model on other hand subsets)."""
     suffix = tag + (("_original" if original else "") + ("_hybrid" if collisions != "own" else "")
               + ("_origmass" if inertials != "capsule" else "") + ("_refined" if refine else "")
-              + (f"_seed{seed}" if seed else ""))
+              + (f"_seed{seed}" if seed else "") + (f"_k{candidates}" if candidates > 1 else ""))
     path = Path(args.runs) / f"eval_{key}{suffix}.json"
     extra = {"inertials": inertials} if inertials != "capsule" else {}  # the capsule evaluations keep their keys
     if refine:
         extra["refine"] = RefineSettings()
     if collisions != "own":  # the other evaluations keep their keys
         extra["collisions"] = collisions
+    if candidates > 1:  # likewise
+        extra["candidates"] = int(candidates)
     ekey = eval_key(run_key(Path(args.runs) / key), hands=hands, objects=[o.name for o in objects], n=args.n, seed=seed,
                     original=original, protocol=protocol, **extra)
     if (hit := cached(path, ekey)) is not None:
@@ -114,7 +116,8 @@ def evaluated(model, key: str, hands: list[str], objects: list, original: bool, 
     out = {"per_hand": {}, "pairs": [], "success": {}}
     if todo:
         rep = evaluate_model(model, todo, objects, n=args.n, seed=seed, original=original, protocol=protocol,
-                             workers=args.workers, inertials=inertials, refine=refine, collisions=collisions)
+                             workers=args.workers, inertials=inertials, refine=refine, collisions=collisions,
+                             candidates=candidates)
         out = {"per_hand": rep.per_hand(), "pairs": [{"hand": p.hand, "object": p.object, "successes": int(p.success.sum()),
                                                       "n": int(len(p.success))} for p in rep.pairs],
                "success": {p.hand + "/" + p.object: p.success.astype(int).tolist() for p in rep.pairs}}

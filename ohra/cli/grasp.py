@@ -3,8 +3,8 @@
     ohra train grasp --data DIR [DIR ...] [--hands H ...] [--test-objects O ...] --condition vae|params
                      [--encoder pointnet|dgcnn] [--steps N] [--batch-size B] [--seed S] [--threads T]
                      -o RUN [--resume]
-    ohra grasp sample --hand H --object O [-n 100] [--seed S] [--refine] [--centre] [--condition-hand H] [--model RUN] -o grasps.npz
-    ohra grasp eval --hands H ... --objects O ... [-n 100] [--seed S] [--original [--collisions canonical] | --inertials original] [--condition-hand H] [--refine] [--centre] [--model RUN] [-o report.json]
+    ohra grasp sample --hand H --object O [-n 100] [--seed S] [--refine] [--centre] [--candidates K] [--condition-hand H] [--model RUN] -o grasps.npz
+    ohra grasp eval --hands H ... --objects O ... [-n 100] [--seed S] [--original [--collisions canonical] | --inertials original] [--condition-hand H] [--refine] [--centre] [--candidates K] [--model RUN] [-o report.json]
 
 Plugged into :mod:`ohra.cli.main` by ``register(subparsers)`` (adds the ``grasp`` group and
 ``grasp`` under the ``train`` group, creating ``train`` if no other plugin did). torch is imported
@@ -30,6 +30,8 @@ if TYPE_CHECKING:
 
 CENTRE_HELP = ("sample on the object centred on its bounding box, grasps moved back into its mesh frame (for a mesh "
                "whose frame origin lies away from the object, e.g. exported in scene coordinates)")
+CANDIDATES_HELP = ("draw K grasps per wrist rotation and keep the one whose fingers lie nearest the object's surface "
+                   "(default 1: the first draw)")
 REFINE_HELP = ("open the fingers just enough to clear the object after sampling "
                "(ohra.learn.grasp.refine; tens of ms per grasp)")
 
@@ -52,6 +54,7 @@ def register(sub: Any) -> None:
     p.add_argument("--model", help=model_help)
     p.add_argument("--refine", action="store_true", help=REFINE_HELP)
     p.add_argument("--centre", action="store_true", help=CENTRE_HELP)
+    p.add_argument("--candidates", type=int, default=1, help=CANDIDATES_HELP)
     p.add_argument("--condition-hand", help="condition the model on this hand instead (paper Table 9); the joints stay "
                    "within --hand's limits")
     p.add_argument("-o", "--output", required=True, help="output .npz")
@@ -76,6 +79,7 @@ def register(sub: Any) -> None:
                         "its links (the hybrid hand: tells the link shapes' effect from the rest of the URDF's)")
     p.add_argument("--refine", action="store_true", help=REFINE_HELP)
     p.add_argument("--centre", action="store_true", help=CENTRE_HELP)
+    p.add_argument("--candidates", type=int, default=1, help=CANDIDATES_HELP)
     p.add_argument("--condition-hand", help="condition the model on this hand instead (paper Table 9); the grasps run on "
                    "the true hand, within its joint limits")
     p.add_argument("--workers", type=int, default=1, help="simulation processes (default 1)")
@@ -216,7 +220,7 @@ def _cmd_sample(args: argparse.Namespace) -> int:
     warn_if_ungraspable(obj)
     timing: dict = {}
     g = model.sample(params, obj, args.n, seed=args.seed, timing=timing, refine=args.refine, centre=args.centre,
-                     condition_hand=args.condition_hand)
+                     condition_hand=args.condition_hand, candidates=args.candidates)
     atomic_write_npz(out, {"grasps": g.astype(np.float64)})
     if note:
         print(note, file=sys.stderr)
@@ -245,7 +249,8 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     rep = evaluate_model(model, args.hands, objs, n=args.n, seed=args.seed, original=args.original,
                          workers=args.workers, progress=not args.quiet, allow_seen=args.allow_seen,
                          protocol=replace(Protocol.preset(args.protocol), object_point=args.object_point), inertials=args.inertials,
-                         condition_hand=args.condition_hand, refine=args.refine, collisions=args.collisions, centre=args.centre)
+                         condition_hand=args.condition_hand, refine=args.refine, collisions=args.collisions, centre=args.centre,
+                         candidates=args.candidates)
     if args.output:
         from ohra.data.dataset import atomic_write_json
 

@@ -161,7 +161,7 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
                    seed: int = 0, original: bool = False, workers: int = 1, protocol: Any = None,
                    progress: bool = False, allow_seen: bool = False, inertials: str = "capsule",
                    condition_hand: HandLike | None = None, refine: bool | RefineSettings = False,
-                   collisions: str = "own", centre: bool = False) -> GraspEvalReport:
+                   collisions: str = "own", centre: bool = False, candidates: int = 1) -> GraspEvalReport:
     """Sample ``n`` grasps per (hand, object) and run the six-direction test (module docstring).
 
     Every hand and object is checked before the first simulation.
@@ -192,6 +192,8 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
             shapes do from what the rest of it does.
         centre: sample each object centred on its bounding box (:meth:`GraspModel.sample`); the
             grasps and the simulation stay in the mesh frame.
+        candidates: draw this many grasps per wrist rotation and keep the one whose fingers lie nearest
+            the object's surface (:meth:`GraspModel.sample`); 1: the first draw.
 
     Returns:
         :class:`GraspEvalReport`: one :class:`PairResult` per (hand, object), hand-major, labelled by
@@ -276,7 +278,7 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
             s = pair_seed(seed, str(name), obj.mesh_hash)
             timing: dict = {}
             grasps = model.sample(params, obj, int(n), seed=s, timing=timing, condition_hand=condition_hand, refine=refine,
-                                  centre=centre)
+                                  centre=centre, candidates=candidates)
             if hybrid is not None:
                 sim_hand = hybrid
             else:
@@ -297,7 +299,7 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
     ref = None if (rs := as_refine_settings(refine)) is None else asdict(rs)
     meta = {"n_per_pair": int(n), "seed": int(seed), "original": bool(original), "inertials": inertials, "collisions": collisions,
             "condition_hand": cond,
-            "refine": ref, "centre": bool(centre),
+            "refine": ref, "centre": bool(centre), "candidates": int(candidates),
             "model": str(model.path),
             "model_meta": model.meta, "protocol": protocol.__dict__ if protocol is not None else "default"}
     return GraspEvalReport(pairs, meta)

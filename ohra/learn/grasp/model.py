@@ -34,7 +34,7 @@ from ohra.learn.grasp.config import GraspModelConfig
 from ohra.learn.grasp.diffusion import DDIMScheduler, Denoiser
 from ohra.learn.grasp.encoder import make_encoder
 from ohra.learn.grasp.joints import JointNet, clamp_joints
-from ohra.learn.grasp.refine import RefineSettings, as_refine_settings, refine_grasps
+from ohra.learn.grasp.refine import RefineSettings, as_refine_settings, finger_clearance, refine_grasps
 from ohra.objects.model import ObjectModel
 from ohra.objects.resolve import resolve_object  # noqa: F401  (re-exported: ohra.learn.grasp.model.resolve_object)
 
@@ -95,6 +95,15 @@ def object_offset(obj: ObjectModel) -> np.ndarray:
     """(3,) [m] the centre of ``obj``'s mesh bounding box in its mesh frame."""
     b = np.asarray(obj.mesh.bounds, dtype=float)
     return 0.5 * (b[0] + b[1])
+
+
+def nearest_surface(params: Any, obj: ObjectModel, candidates: np.ndarray) -> np.ndarray:
+    """Of grasps (n, k, 31), per row the one whose fingers' smallest signed distance to ``obj``
+    (:func:`~ohra.learn.grasp.refine.finger_clearance`) is nearest zero (n, 31): neither sunk into the
+    object nor hovering off it."""
+    n, k, _ = candidates.shape
+    d = finger_clearance(params, obj, candidates.reshape(n * k, -1)).reshape(n, k)
+    return candidates[np.arange(n), np.abs(d).argmin(axis=1)]
 
 
 def as_rotations(rotations: Any, n: int) -> np.ndarray:
@@ -175,7 +184,7 @@ class GraspModel:
     # -- sampling -------------------------------------------------------------------------------------
     def sample(self, hand: HandLike, obj: ObjectLike, n: int, rotations: Any = None, seed: int = 0,
                timing: dict | None = None, condition_hand: HandLike | None = None,
-               refine: bool | RefineSettings = False, centre: bool = False) -> np.ndarray:
+               refine: bool | RefineSettings = False, centre: bool = False, candidates: int = 1) -> np.ndarray:
         """``n`` grasps of ``hand`` on ``obj`` (see the module docstring).
 
         Args:
@@ -199,6 +208,12 @@ class GraspModel:
                 mesh in scene coordinates (its origin far from the object) gets grasps in the wrong place
                 unless centred. Off by default (the published numbers were sampled without it); a warning
                 names objects farther off than that.
+            candidates: draw this many grasps per wrist rotation (other diffusion noise, the same rotation)
+                and keep the one whose fingers lie nearest the object's surface: the smallest absolute
+                finger-object signed distance (capsule cores sampled as in
+                :func:`~ohra.learn.grasp.refine.refine_grasps`), so neither sunk nor hovering. For a
+                rotation the model's translations spread by ~1 cm, and sunk fingers fail the test
+                (README, *Grasp model*). 1 (default): the first draw, as before the option existed.
 
         Returns:
             (n, 31) float64 grasps ``[t (3), rot6d (6), q (22)]``: ``t`` the palm-frame origin in the
@@ -206,8 +221,8 @@ class GraspModel:
             joint angles [rad] within ``hand``'s limits (absent joints 0).
 
         Raises:
-            GraspError: ``n`` is not a positive integer; ``seed`` not a whole number >= 0; ``rotations``
-                of the wrong shape, non-finite, or not rotations.
+            GraspError: ``n`` or ``candidates`` is not a positive integer; ``seed`` not a whole number >= 0;
+                ``rotations`` of the wrong shape, non-finite, or not rotations.
             ObjectError: ``obj`` cannot be resolved to one object.
             HandNotFoundError: an unknown hand name or a missing params file.
             ParamsError: ``hand`` (or ``condition_hand``) of another type, or without a base form for a
@@ -216,6 +231,9 @@ class GraspModel:
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
             raise GraspError(f"n must be a positive integer, got {n!r}")
         n = int(n)
+        if isinstance(candidates, bool) or not isinstance(candidates, (int, np.integer)) or candidates < 1:
+            raise GraspError(f"candidates must be a positive integer, got {candidates!r}")
+        k = int(candidates)
         seed = require_seed(seed, GraspError)
         params = resolve_hand(hand)
         obj = resolve_object(obj)
@@ -234,6 +252,8 @@ class GraspModel:
         lower = torch.from_numpy(np.asarray(params.joint_lowers, dtype=np.float32))
         upper = torch.from_numpy(np.asarray(params.joint_uppers, dtype=np.float32))
         r6 = np.concatenate([rots[:, :, 0], rots[:, :, 1]], axis=1)
+        if k > 1:  # rotation-major: the candidates of rotation i are rows i*k .. i*k+k-1
+            r6 = np.repeat(r6, k, axis=0)
         gen = torch.Generator().manual_seed(int(rng.integers(2**62)))
         old_threads = torch.get_num_threads()
         if self.threads and self.threads != old_threads:
@@ -246,6 +266,8 @@ class GraspModel:
         # clamp again in float64: a float32 limit can lie a hair outside the float64 one
         q64 = np.clip(q.double().numpy(), params.joint_lowers, params.joint_uppers)
         out = np.concatenate([x.double().numpy() * self.t_scale + shift, r6, q64], axis=1)  # in the mesh frame
+        if k > 1:
+            out = nearest_surface(params, obj, out.reshape(n, k, 31))
         if timing is not None:
             timing["seconds"] = time.perf_counter() - t0
         if (settings := as_refine_settings(refine)) is not None:

@@ -81,6 +81,19 @@ def _penetration(hand, obj, T: np.ndarray, q: np.ndarray, s: RefineSettings) -> 
     return (np.maximum(-s.clearance_m - d, 0.0) ** 2).sum(axis=(1, 2)), d.min(axis=(1, 2))
 
 
+def finger_clearance(hand, obj, grasps: np.ndarray, settings: RefineSettings | None = None) -> np.ndarray:
+    """The smallest signed distance [m] between the finger capsules of ``hand`` (a
+    :class:`~ohra.canonical.kinematics.HandModel` or params) and ``obj`` for grasps (N, 31) in the dataset
+    convention: negative when a finger is sunk into the object. Capsule cores are sampled with
+    ``settings.samples_per_capsule`` points."""
+    from ohra.canonical.kinematics import HandModel
+    from ohra.rotations import grasp_to_pose
+
+    hm = hand if isinstance(hand, HandModel) else HandModel.from_params(hand)
+    T, q = grasp_to_pose(np.asarray(grasps, dtype=float))
+    return _penetration(hm, obj, T, q, settings or RefineSettings())[1]
+
+
 def refine_grasps(hand, obj, grasps: np.ndarray, settings: RefineSettings | None = None) -> RefineResult:
     """Clear the fingers of ``hand`` (a :class:`~ohra.canonical.kinematics.HandModel` or params) out of
     ``obj`` (an :class:`~ohra.objects.model.ObjectModel`) for grasps (N, 31) in the dataset convention
