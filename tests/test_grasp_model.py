@@ -336,6 +336,15 @@ def test_the_shipped_leap_model_conditions_on_raw_parameters_and_takes_any_hand(
     with np.load(out) as z:
         np.testing.assert_array_equal(z["grasps"], leap.sample("leap_3033", "builtin:box", 3, seed=0, condition_hand="leap_3333"))
         assert not np.array_equal(z["grasps"], leap.sample("leap_3033", "builtin:box", 3, seed=0))
+    # best of K draws per rotation from the shell: what the library gives; a bad K is one line, exit 2
+    assert main(["grasp", "sample", "--hand", "leap_2211", "--object", "builtin:box", "-n", "3", "--candidates", "4",
+                 "-o", str(out)]) == 0
+    with np.load(out) as z:
+        np.testing.assert_array_equal(z["grasps"], leap.sample("leap_2211", "builtin:box", 3, seed=0, candidates=4))
+    capsys.readouterr()
+    assert main(["grasp", "sample", "--hand", "leap_2211", "--object", "builtin:box", "--candidates", "0", "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "candidates must be a positive integer" in err
 
 
 def test_the_automatic_leap_model_is_the_shipped_one_and_its_note_never_precedes_an_error(tmp_path, capsys, monkeypatch):

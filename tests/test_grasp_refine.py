@@ -121,3 +121,58 @@ def test_the_model_refines_its_own_samples_on_request(tmp_path):
     rep = evaluate_model(model, ["barrett_hand"], [obj], n=2, refine=True, allow_seen=True)
     assert rep.meta["refine"]["clearance_m"] == RefineSettings().clearance_m
     assert evaluate_model(model, ["barrett_hand"], [obj], n=2, allow_seen=True).meta["refine"] is None
+
+
+def test_nearest_surface_keeps_the_draw_whose_fingers_just_touch():
+    """Of K draws per rotation, the one whose deepest finger point is nearest the surface is kept:
+    not the deepest (sunk), not the farthest (hovering)."""
+    from ohra.learn.grasp.model import nearest_surface
+    from ohra.learn.grasp.refine import finger_clearance
+
+    p = get_hand("allegro_hand_left")
+    hand, obj = HandModel.from_params(p), ObjectModel.builtin("sphere")
+    g = _sunk_grasps(hand, obj, 6, depth=0.004)
+    normal = _rot6d_to_matrix(g[:, 3:9])[:, :, 0]  # palm normal, toward the object
+    # per rotation: the sunk grasp, the palm 4 mm back (about touching), 3 cm back (hovering), 4 mm further in (deeper)
+    offsets = np.array([0.0, -0.004, -0.03, 0.004])
+    cand = np.repeat(g[:, None], len(offsets), axis=1)
+    cand[:, :, :3] += offsets[None, :, None] * normal[:, None, :]
+    d = finger_clearance(p, obj, cand.reshape(-1, 31)).reshape(cand.shape[:2])
+    want = np.abs(d).argmin(axis=1)
+    assert np.all(d[np.arange(len(g)), want] > -0.0035) and np.all(d[:, 2] > 0.01)  # the set-up: one near, one far
+    kept = nearest_surface(p, obj, cand)
+    assert np.array_equal(kept, cand[np.arange(len(g)), want])
+    assert not np.array_equal(kept, cand[:, 0]) and not np.array_equal(kept, cand[:, 2])
+
+
+def _rot6d_to_matrix(r6: np.ndarray) -> np.ndarray:
+    from ohra.rotations import rot6d_to_matrix
+
+    return rot6d_to_matrix(r6)
+
+
+def test_the_model_chooses_among_draws_on_request(tmp_path):
+    """``sample(candidates=K)``: the same wrist rotations, fingers nearer the surface than the first draw's;
+    K=1 is the plain sample; bad K is an ohra error; ``evaluate_model`` records it."""
+    pytest.importorskip("torch")
+    from grasp_fixtures import tiny_model_config, tiny_train_config, write_dataset
+
+    from ohra.learn.grasp.evaluate import evaluate_model
+    from ohra.learn.grasp.refine import finger_clearance
+    from ohra.learn.grasp.train import train_grasp
+
+    model = train_grasp(write_dataset(tmp_path), tiny_model_config(condition="params"), tiny_train_config(),
+                        progress=False).model
+    obj = ObjectModel.builtin("cylinder")
+    raw = model.sample("barrett_hand", obj, 48, seed=2)
+    assert np.array_equal(model.sample("barrett_hand", obj, 48, seed=2, candidates=1), raw)
+    best = model.sample("barrett_hand", obj, 48, seed=2, candidates=6)
+    assert np.allclose(best[:, 3:9], raw[:, 3:9])  # the same rotations
+    p = get_hand("barrett_hand")
+    # the best of 6 draws is at least as near the surface as one other draw 6 times in 7; a single draw, half the time
+    nearer = np.abs(finger_clearance(p, obj, best)) <= np.abs(finger_clearance(p, obj, raw))
+    assert nearer.mean() >= 0.7, nearer.mean()
+    for bad in (0, -1, 2.5, True):
+        with pytest.raises(GraspError, match="candidates"):
+            model.sample("barrett_hand", obj, 2, candidates=bad)
+    assert evaluate_model(model, ["barrett_hand"], [obj], n=2, allow_seen=True, candidates=3).meta["candidates"] == 3
