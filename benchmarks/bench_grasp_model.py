@@ -50,6 +50,11 @@ def time_inference(model: GraspModel, hand: str, obj: ObjectModel, repeat: int =
         t = time.perf_counter()
         model.sample(p, obj, 1, seed=i)
         one.append(time.perf_counter() - t)
+    best_of = []  # candidates=8: eight draws for the one rotation, the nearest-surface one kept
+    for i in range(repeat // 2):
+        t = time.perf_counter()
+        model.sample(p, obj, 1, seed=i, candidates=8)
+        best_of.append(time.perf_counter() - t)
     model._clouds.clear()
     t = time.perf_counter()
     model.sample(p, obj, 1)
@@ -64,6 +69,7 @@ def time_inference(model: GraspModel, hand: str, obj: ObjectModel, repeat: int =
         batched[n] = n / best
     return {"one_grasp_ms_median": 1e3 * float(np.median(one)), "one_grasp_ms_min": 1e3 * float(np.min(one)),
             "one_grasp_ms_p90": 1e3 * float(np.percentile(one, 90)), "cold_first_call_ms": 1e3 * cold,
+            "one_grasp_best_of_8_ms_median": 1e3 * float(np.median(best_of)),
             "grasps_per_s_batch_1000": batched[1000], "grasps_per_s_batch_10000": batched[10000]}
 
 
@@ -133,6 +139,8 @@ def table(res: dict) -> str:
     lines = ["| grasp model, CPU | value | target |", "|---|---|---|",
              f"| one grasp (10-step DDIM, object encoded, {res['threads']} thread): median / min / p90 | "
              f"{inf['one_grasp_ms_median']:.2f} / {inf['one_grasp_ms_min']:.2f} / {inf['one_grasp_ms_p90']:.2f} ms | <= 20 ms (paper 130 ms on a GPU) |",
+             f"| one grasp, best of 8 draws (`candidates=8`: 8 draws, finger clearance of each): median | "
+             f"{inf['one_grasp_best_of_8_ms_median']:.2f} ms | <= 20 ms |",
              f"| first call on a new object (surface sampling + encoding) | {inf['cold_first_call_ms']:.1f} ms | |",
              f"| batched, 1,000 / 10,000 grasps per call | {inf['grasps_per_s_batch_1000']:.0f} / {inf['grasps_per_s_batch_10000']:.0f} grasps/s | >= 1,000 |"]
     for t in thr:
