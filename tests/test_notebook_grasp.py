@@ -30,3 +30,4 @@ def test_grasp_model_notebook_executes(tmp_path):
     code = [c for c in nb.cells if c.cell_type == "code"]
     shown = "\n".join(o.get("data", {}).get("text/markdown", "") for o in code[6].outputs)
     assert "unified-24000" in shown and "seen (training objects)" in shown and "stored rotations" in shown and "best of 8" in shown
+    assert "palm position error" in shown
