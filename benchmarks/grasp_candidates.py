@@ -30,8 +30,6 @@ from _common import natural_sorted, write_results  # noqa: E402
 from grasp_scale_up import baseline  # noqa: E402
 from grasp_study import PAPER, ROOT, data_protocol, eval_objects, evaluated, paired_change, protocol_note  # noqa: E402
 
-import numpy as np  # noqa: E402
-
 from ohra.learn.grasp.model import load_grasp_model  # noqa: E402
 
 
@@ -55,9 +53,7 @@ def main() -> None:
     per_hand = {h: {"k1": base["per_hand"][h]["success_rate"], "k": ev["per_hand"][h]["success_rate"],
                     "change": list(paired_change(base, ev, h)),
                     "sample_ms_per_grasp": ev["per_hand"][h].get("sample_ms_per_grasp")} for h in args.hands}
-    d = np.concatenate([np.asarray(ev["success"][k]) - np.asarray(base["success"][k]) for k in base["success"]
-                        if k.split("/", 1)[0] in args.hands])
-    change, se = 100 * d.mean(), 100 * d.std(ddof=1) / np.sqrt(len(d))
+    change, se = paired_change(base, ev, args.hands)
     reading = "choosing among draws helps" if change > 2 * se else ("it hurts" if change < -2 * se else "no change detectable")
     res = {"hands": args.hands, "k": args.k, "n": args.n, "objects": [o.name for o in objects], "per_hand": per_hand,
            "pooled": [change, se], "reading": reading, "protocol_note": protocol_note(protocol), "seconds": ev.get("seconds")}

@@ -28,12 +28,13 @@ import json
 import sys
 import time
 import warnings
+from functools import partial
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import natural_sorted, write_results  # noqa: E402
 from _study_cache import cached, eval_key, run_key, store  # noqa: E402
-from grasp_scale_up import difference  # noqa: E402
+from grasp_scale_up import difference, pooled  # noqa: E402
 from grasp_study import PAPER, ROOT, data_protocol, eval_objects, protocol_note  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -81,7 +82,7 @@ def main() -> None:
                 s = pair_seed(args.seed, h, o.mesh_hash)
                 rng = np.random.default_rng(s)
                 idx = rng.choice(len(stored), args.n, replace=len(stored) < args.n)
-                rots = np.stack([grasp_to_pose(g)[0][:3, :3] for g in stored[idx]])
+                rots = grasp_to_pose(stored[idx])[0][:, :3, :3]
                 grasps = model.sample(h, o, args.n, rotations=rots, seed=s)
                 with GraspEvaluator(SimHand.from_params(params, name=h), o, protocol) as ev, warnings.catch_warnings():
                     warnings.simplefilter("ignore", UserWarning)
@@ -91,10 +92,7 @@ def main() -> None:
                       f"{np.mean(random_rot['success'][k]):.2f} with random ones", flush=True)
             store(path, key, res)  # one pair at a time: an interruption keeps the pairs done
     keys = [k for k in res["success"] if k in random_rot["success"]]
-
-    def pool(ev: dict, hands: list[str]) -> np.ndarray:
-        return np.concatenate([np.asarray(ev["success"][k]) for k in keys if k.split("/", 1)[0] in hands])
-
+    pool = partial(pooled, keys=keys)
     per_hand = {h: {"data_rotations": float(pool(res, [h]).mean()), "random_rotations": float(pool(random_rot, [h]).mean()),
                     "difference": list(difference(pool(random_rot, [h]), pool(res, [h])))} for h in args.hands}
     d, se = difference(pool(random_rot, args.hands), pool(res, args.hands))

@@ -54,8 +54,10 @@ def baseline(runs: Path, objects: list, n: int, protocol) -> dict:
     return old
 
 
-def pooled(ev: dict, hands: list[str]) -> np.ndarray:
-    return np.concatenate([np.asarray(v) for k, v in sorted(ev["success"].items()) if k.split("/", 1)[0] in hands])
+def pooled(ev: dict, hands: list[str], keys: list[str] | None = None) -> np.ndarray:
+    """The per-grasp verdicts of ``hands`` (of the ``"<hand>/<object>"`` pairs in ``keys`` only, when given), concatenated."""
+    return np.concatenate([np.asarray(v) for k, v in sorted(ev["success"].items())
+                           if k.split("/", 1)[0] in hands and (keys is None or k in keys)])
 
 
 def difference(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:

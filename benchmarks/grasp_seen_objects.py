@@ -98,12 +98,11 @@ def main() -> None:
            "seen_pairs": {k: sum(v) / len(v) for k, v in seen["success"].items()}}
     opt = optimiser_outcomes(args.data)
     keys = sorted(res["seen_pairs"])
-    res["optimiser"] = {h: {"candidates": int(sum(opt[k][0] for k in keys if k.startswith(h + "/"))),
-                            "passed_per_candidate": float(sum(opt[k][2] for k in keys if k.startswith(h + "/"))
-                                                          / sum(opt[k][0] for k in keys if k.startswith(h + "/"))),
-                            "robust_per_candidate": float(sum(opt[k][3] for k in keys if k.startswith(h + "/"))
-                                                          / sum(opt[k][0] for k in keys if k.startswith(h + "/")))}
-                        for h in args.hands}
+    res["optimiser"] = {}
+    for h in args.hands:
+        cand, _, passed, robust = sum(opt[k] for k in keys if k.startswith(h + "/"))
+        res["optimiser"][h] = {"candidates": int(cand), "passed_per_candidate": float(passed / cand),
+                               "robust_per_candidate": float(robust / cand)}
     model_rate = [res["seen_pairs"][k] for k in keys]
     res["spearman_model_vs_optimiser_passed"] = float(spearmanr(model_rate, [opt[k][2] / opt[k][0] for k in keys]).statistic)
     res["spearman_model_vs_optimiser_robust"] = float(spearmanr(model_rate, [opt[k][3] / opt[k][0] for k in keys]).statistic)

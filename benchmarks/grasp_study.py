@@ -133,9 +133,10 @@ def evaluated(model, key: str, hands: list[str], objects: list, original: bool, 
     return store(path, ekey, out)
 
 
-def paired_change(a: dict, b: dict, hand: str) -> tuple[float, float]:
-    """Original - canonical success [points] over the same grasps, and its standard error."""
-    d = np.concatenate([np.asarray(b["success"][k]) - np.asarray(a["success"][k]) for k in a["success"] if k.startswith(hand + "/")])
+def paired_change(a: dict, b: dict, hand: str | list[str]) -> tuple[float, float]:
+    """b - a success [points] over the same grasps of one hand (or of several, pooled), and its standard error."""
+    prefixes = tuple(h + "/" for h in ([hand] if isinstance(hand, str) else hand))
+    d = np.concatenate([np.asarray(b["success"][k]) - np.asarray(a["success"][k]) for k in a["success"] if k.startswith(prefixes)])
     return 100 * d.mean(), 100 * d.std(ddof=1) / np.sqrt(len(d)) if len(d) > 1 else float("nan")
 
 

@@ -69,7 +69,6 @@ AXIS_UNIT_TOL = 1e-3
 FINGER_GAP = 0.001
 
 
-
 def _split(values: np.ndarray, counts: tuple[int, ...]) -> list[Any]:
     """Ragged split of a flat (or row) array into nested Python lists, as in reference JSON files."""
     out, k = [], 0

@@ -32,7 +32,6 @@ VELOCITY = 2.0 * math.pi  # rad/s
 MIN_PALM_DEPTH = 0.01  # m, palm thickness of a hand without fingers
 
 
-
 def fmt(x: float) -> str:
     """Compact deterministic number: 12 significant digits, no negative zero."""
     x = float(x)

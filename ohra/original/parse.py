@@ -32,7 +32,6 @@ from ohra.original.spec import HandSpec, load_spec
 from ohra.original.urdf import OriginalHand, load_urdf
 
 
-
 # FINGER_GAP (m, ohra.canonical.params): how far apart synthesis keeps different fingers
 
 
