@@ -124,6 +124,10 @@ class GraspTrainConfig(_JSONSettings):
     # units (params: standardised units; vae: latent units); 0: none. A regulariser for hands never
     # trained on: the model may not key on the exact condition of one training hand.
     condition_noise: float = 0.0
+    # weight of the finger-object penetration term on the joint network (ohra.learn.grasp.contact; base-form
+    # hands; 0: off) and the std [m] of the palm shift it is evaluated at (0: the data's palm)
+    penetration_weight: float = 0.0
+    penetration_shift: float = 0.0
 
     RESUMABLE_CHANGES = ("steps", "checkpoint_every", "log_every")
 
@@ -136,7 +140,7 @@ class GraspTrainConfig(_JSONSettings):
                 raise GraspConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
         if not self.lr > 0:
             raise GraspConfigError(f"lr must be positive, got {self.lr}")
-        for name in ("lr_min", "point_noise", "joint_loss_weight", "condition_noise"):
+        for name in ("lr_min", "point_noise", "joint_loss_weight", "condition_noise", "penetration_weight", "penetration_shift"):
             if not getattr(self, name) >= 0:
                 raise GraspConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
         require_seed(self.seed, GraspConfigError)

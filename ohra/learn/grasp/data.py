@@ -289,7 +289,13 @@ class Batch:
     t_norm: torch.Tensor  # (B, 3) normalised translation
     q: torch.Tensor  # (B, 22)
     present: torch.Tensor  # (B, 22) bool
-    generator: torch.Generator  # noise of the diffusion loss
+    generator: torch.Generator  # noise of the diffusion loss (then of the penetration term's palm shift)
+    # the rows as stored, before the batch's rotation (the penetration term looks the object up in its own frame)
+    hand_idx: torch.Tensor | None = None  # (B,) into TrainingData.hands
+    obj_idx: torch.Tensor | None = None  # (B,) into TrainingData.objects
+    t_obj: torch.Tensor | None = None  # (B, 3) [m] palm position in the object mesh frame
+    R_obj_palm: torch.Tensor | None = None  # (B, 3, 3) palm rotation in the object mesh frame
+    R_cloud: torch.Tensor | None = None  # (B, 3, 3) the rotation applied to the row's cloud and grasp
 
 
 def _rows(data: TrainingData, cfg: GraspTrainConfig, rng: np.random.Generator) -> np.ndarray:
@@ -336,8 +342,11 @@ def make_batch(data: TrainingData, cfg: GraspTrainConfig, n_points: int, step: i
     hand = hand_table[hi]
     if cfg.condition_noise > 0:  # drawn last: runs without it keep their batches
         hand = hand + f32(rng.normal(0.0, cfg.condition_noise, tuple(hand.shape)))
+    from ohra.rotations import rot6d_to_matrix
+
     return Batch(f32(np.stack(clouds)), torch.from_numpy(cloud_idx), hand, f32(r6), f32(t / t_scale),
-                 f32(data.q[rows]), present_table[hi], gen)
+                 f32(data.q[rows]), present_table[hi], gen, hi, torch.from_numpy(data.obj_idx[rows]), f32(data.t[rows]),
+                 f32(rot6d_to_matrix(data.rot6d[rows])), f32(R))
 
 
 __all__ = ["TrainingData", "Batch", "make_batch", "check_disjoint", "object_key", "load_dataset_object"]

@@ -30,13 +30,14 @@ import torch
 from ohra.errors import CheckpointError, ParamsError
 from ohra.learn.grasp.condition import HandCondition
 from ohra.learn.grasp.config import GraspConfigError, GraspModelConfig, GraspTrainConfig, RunSpec
+from ohra.learn.grasp.contact import FingerCapsules, SDFGrids, penetration
 from ohra.learn.grasp.data import TrainingData, make_batch
 from ohra.learn.grasp.model import CHECKPOINT_FORMAT, GraspModel, GraspNet
 from ohra.io import folder_lock, write_text
 from ohra.learn.train_vae import _peak_rss_mib, atomic_save, load_torch_file, torch_settings
 from ohra.objects.model import ObjectModel
 
-LOSS_TERMS = ("total", "diffusion", "joints")
+LOSS_TERMS = ("total", "diffusion", "joints")  # plus "penetration" when that term is on
 TEST_SEED = 7919  # noise levels of the held-out loss (fixed, so it compares across runs)
 
 
@@ -70,8 +71,9 @@ def _check_resume(ckpt: dict[str, Any], spec: RunSpec, digest: str, path: Path) 
     if old["model"] != spec.model.to_dict():
         raise CheckpointError(f"{path}: cannot resume, the model settings differ from the checkpoint's")
     new_train = spec.train.to_dict()
+    defaults = GraspTrainConfig().to_dict()  # settings added since the checkpoint was made: their defaults
     for f in fields(GraspTrainConfig):
-        if f.name not in GraspTrainConfig.RESUMABLE_CHANGES and old["train"].get(f.name) != new_train[f.name]:
+        if f.name not in GraspTrainConfig.RESUMABLE_CHANGES and old["train"].get(f.name, defaults[f.name]) != new_train[f.name]:
             raise CheckpointError(f"{path}: cannot resume, the checkpoint was trained with {f.name}="
                                   f"{old['train'].get(f.name)!r}, this run asks for {new_train[f.name]!r}")
     if ckpt.get("data_digest") != digest:
@@ -88,11 +90,46 @@ def _payload(model: GraspModel, opt: torch.optim.Optimizer, spec: RunSpec, step:
             "window": {"sums": dict(window[0]), "count": int(window[1])}}
 
 
-def train_step(net: GraspNet, batch, joint_weight: float) -> dict[str, torch.Tensor]:
+@dataclass
+class ContactTerm:
+    """The penetration term of :mod:`ohra.learn.grasp.contact` for the hands and objects of a training set."""
+
+    caps: FingerCapsules
+    sdf: SDFGrids
+    weight: float
+    shift: float  # m
+    t_scale: float  # m
+
+    @classmethod
+    def for_data(cls, td: TrainingData, cfg: GraspTrainConfig, t_scale: float) -> "ContactTerm":
+        return cls(FingerCapsules(td.params, td.hands), SDFGrids.from_objects(td.objects), float(cfg.penetration_weight),
+                   float(cfg.penetration_shift), float(t_scale))
+
+    def __call__(self, net: GraspNet, feats: torch.Tensor, batch) -> torch.Tensor:
+        """The term for the joint network's joints at each row's palm (shifted when ``shift`` > 0; the shift
+        is drawn from the batch's generator after the diffusion noise, so runs without it keep theirs)."""
+        t_obj, t_in = batch.t_obj, batch.t_norm
+        if self.shift > 0:
+            delta = torch.randn(t_obj.shape, generator=batch.generator) * self.shift  # object frame [m]
+            t_obj = t_obj + delta
+            t_in = t_in + torch.einsum("bij,bj->bi", batch.R_cloud, delta) / self.t_scale
+        q_hat = net.joints(torch.cat([feats, batch.hand, batch.rot6d, t_in], dim=-1))
+        return penetration(self.caps, self.sdf, batch.hand_idx, batch.obj_idx, q_hat, t_obj, batch.R_obj_palm)[0]
+
+
+def loss_terms(cfg: GraspTrainConfig) -> tuple[str, ...]:
+    """The loss terms a run logs."""
+    return LOSS_TERMS + (("penetration",) if cfg.penetration_weight > 0 else ())
+
+
+def train_step(net: GraspNet, batch, joint_weight: float, contact: ContactTerm | None = None) -> dict[str, torch.Tensor]:
     """Losses of one batch: each cloud encoded once, its feature shared by the rows that use it."""
     feats = net.encoder(batch.clouds)[batch.cloud_idx]
     terms = net.losses(feats, batch.hand, batch.rot6d, batch.t_norm, batch.q, batch.present, batch.generator)
     terms["total"] = terms["diffusion"] + joint_weight * terms["joints"]
+    if contact is not None:
+        terms["penetration"] = contact(net, feats, batch)
+        terms["total"] = terms["total"] + contact.weight * terms["penetration"]
     return terms
 
 
@@ -127,6 +164,7 @@ class _State:
     step: int = 0
     history: list = field(default_factory=list)
     window: tuple[dict[str, float], int] = ({}, 0)  # loss sums and count since the last history entry
+    contact: ContactTerm | None = None
 
 
 def _prepare(spec: RunSpec, paths: list, ckpt_path: Path | None, resume: bool,
@@ -149,13 +187,15 @@ def _prepare(spec: RunSpec, paths: list, ckpt_path: Path | None, resume: bool,
     summary = td.summary()
     meta = {"hands": td.hands, "data": spec.data, "data_digest": digest,
             **{k: summary[k] for k in ("train_objects", "test_objects", "per_hand")}}
+    terms = loss_terms(cfg)
+    contact = ContactTerm.for_data(td, cfg, t_scale) if cfg.penetration_weight > 0 else None
     state = _State(td, GraspModel(net, cond, t_scale, model_cfg, meta), opt, _tables(cond, td),
-                   window=({k: 0.0 for k in LOSS_TERMS}, 0))
+                   window=({k: 0.0 for k in terms}, 0), contact=contact)
     if ckpt is not None:
         try:
             net.load_state_dict(ckpt["model"])
             opt.load_state_dict(ckpt["optimizer"])
-            state.window = ({k: float(ckpt["window"]["sums"][k]) for k in LOSS_TERMS}, int(ckpt["window"]["count"]))
+            state.window = ({k: float(ckpt["window"]["sums"][k]) for k in terms}, int(ckpt["window"]["count"]))
         except (RuntimeError, KeyError, ValueError) as exc:
             raise CheckpointError(f"{ckpt_path}: incompatible checkpoint ({str(exc).splitlines()[0][:160]})") from None
         state.step, state.history = int(ckpt["step"]), list(ckpt["history"])
@@ -170,6 +210,7 @@ def _loop(st: _State, spec: RunSpec, ckpt_path: Path | None, progress: bool,
     cfg, net, opt = spec.train, st.model.net, st.opt
     elapsed_before = float(st.history[-1]["elapsed_s"]) if st.history else 0.0
     sums, count = st.window
+    terms_logged = loss_terms(cfg)
     net.train()
     bar = tqdm(range(st.step, cfg.steps), initial=st.step, total=cfg.steps, desc="train grasp", unit="step",
                disable=not progress, dynamic_ncols=True)
@@ -179,19 +220,19 @@ def _loop(st: _State, spec: RunSpec, ckpt_path: Path | None, progress: bool,
         for group in opt.param_groups:
             group["lr"] = lr
         batch = make_batch(st.td, cfg, spec.model.n_points, s, *st.tables, st.model.t_scale)
-        terms = train_step(net, batch, cfg.joint_loss_weight)
+        terms = train_step(net, batch, cfg.joint_loss_weight, st.contact)
         opt.zero_grad(set_to_none=True)
         terms["total"].backward()
         opt.step()
-        vals = {k: float(terms[k].detach()) for k in LOSS_TERMS}
-        sums, count = {k: sums[k] + vals[k] for k in LOSS_TERMS}, count + 1
+        vals = {k: float(terms[k].detach()) for k in terms_logged}
+        sums, count = {k: sums[k] + vals[k] for k in terms_logged}, count + 1
         done = s + 1
         if done % cfg.log_every == 0 or done == cfg.steps:
-            entry = {"step": done, "lr": lr, **{k: sums[k] / count for k in LOSS_TERMS},
+            entry = {"step": done, "lr": lr, **{k: sums[k] / count for k in terms_logged},
                      "elapsed_s": elapsed_before + time.perf_counter() - t_run}
             st.history.append(entry)
             bar.set_postfix(diff=f"{entry['diffusion']:.4f}", joints=f"{entry['joints']:.4f}")
-            sums, count = {k: 0.0 for k in LOSS_TERMS}, 0
+            sums, count = {k: 0.0 for k in terms_logged}, 0
         if ckpt_path is not None and (done % cfg.checkpoint_every == 0 or done == cfg.steps):
             atomic_save(_payload(st.model, opt, spec, done, st.history, st.model.meta["data_digest"], (sums, count)), ckpt_path)
         if on_step is not None:
@@ -230,7 +271,7 @@ def train_grasp(data: str | Path | Sequence[str | Path], model_cfg: GraspModelCo
             "steps": cfg.steps, "train_seconds_this_run": seconds, "train_seconds_total": h[-1]["elapsed_s"] if h else 0.0,
             "steps_per_s": n_steps / seconds if seconds > 0 and n_steps else None,
             "grasps_per_s": n_steps * cfg.batch_size / seconds if seconds > 0 and n_steps else None,
-            "final_losses": {k: h[-1][k] for k in LOSS_TERMS} if h else {},
+            "final_losses": {k: h[-1][k] for k in loss_terms(cfg)} if h else {},
             "heldout_losses": heldout_losses(st.model, st.td, st.td.test_models),
             "data": st.td.summary(), "translation_scale_m": st.model.t_scale, "condition": model_cfg.condition,
             "encoder": model_cfg.encoder, "threads": cfg.threads, "history": h,
@@ -244,4 +285,4 @@ def train_grasp(data: str | Path | Sequence[str | Path], model_cfg: GraspModelCo
     return GraspTrainResult(model, metrics, run)
 
 
-__all__ = ["train_grasp", "GraspTrainResult", "learning_rate", "heldout_losses", "train_step"]
+__all__ = ["train_grasp", "GraspTrainResult", "learning_rate", "heldout_losses", "train_step", "ContactTerm", "loss_terms"]
