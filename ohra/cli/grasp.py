@@ -117,6 +117,10 @@ def register_train(train_sub: Any) -> None:
     p.add_argument("--max-per-pair", type=int, default=t.max_per_pair, help="cap on grasps per (hand, object) (0: all)")
     p.add_argument("--condition-noise", type=float, default=t.condition_noise,
                    help="std of Gaussian noise on each training row's hand condition (standardised units for params; 0: none)")
+    p.add_argument("--penetration-weight", type=float, default=t.penetration_weight,
+                   help="weight of the finger-object penetration term on the joints (base-form hands; 0: off)")
+    p.add_argument("--penetration-shift", type=float, default=t.penetration_shift,
+                   help="std [m] of the palm shift the penetration term is evaluated at (0: the data's palm)")
     p.add_argument("--checkpoint-every", type=int, default=t.checkpoint_every)
     p.add_argument("--vae", help="VAE for the 'vae' condition (default: the shipped one)")
     p.add_argument("-o", "--output", required=True, help="run directory")
@@ -147,7 +151,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
     tcfg = GraspTrainConfig(steps=args.steps, batch_size=args.batch_size, lr=args.lr, seed=args.seed, threads=args.threads,
                             rotated_copies=args.rotated_copies, objects_per_step=args.objects_per_step,
                             max_per_pair=args.max_per_pair, checkpoint_every=args.checkpoint_every,
-                            condition_noise=args.condition_noise, hands=tuple(args.hands), test_objects=tuple(args.test_objects),
+                            condition_noise=args.condition_noise, penetration_weight=args.penetration_weight,
+                            penetration_shift=args.penetration_shift, hands=tuple(args.hands), test_objects=tuple(args.test_objects),
                             test_hands=tuple(args.test_hands))
     res = train_grasp(args.data, mcfg, tcfg, out, resume=args.resume, progress=not args.quiet, vae_path=args.vae)
     m = res.metrics

@@ -41,8 +41,8 @@ SAMPLES_PER_CAPSULE = 5
 @dataclass
 class SDFGrids:
     """Signed distances [m] of K objects sampled on regular grids (G per axis) over each object's
-    mesh bounding box grown by ``margin`` [m]; trilinear lookups, clamped to the grid (points beyond
-    it are at least ``margin`` outside the object, where the term is zero anyway)."""
+    mesh bounding box grown by ``margin`` [m]; trilinear lookups (within 1 mm of the exact distance near
+    the surface at the default 48 per axis on 3-25 cm objects; tests), differentiable in the points."""
 
     values: torch.Tensor  # (K, G, G, G) float32, object mesh frame
     lower: torch.Tensor  # (K, 3) [m] grid corner
@@ -67,13 +67,18 @@ class SDFGrids:
     def __call__(self, obj_idx: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
         """Signed distances (M,) [m] of points (M, 3) [m] in the frames of objects ``obj_idx`` (M,)."""
         g = self.resolution
-        u = (points - self.lower[obj_idx]) / self.spacing[obj_idx]
-        u = u.clamp(0.0, g - 1 - 1e-4)
+        lo, step = self.lower[obj_idx], self.spacing[obj_idx]
+        raw = (points - lo) / step
+        u = raw.clamp(0.0, g - 1 - 1e-4)
+        # a point beyond the grid: the value at the nearest grid point plus the way there (the grid's edge
+        # lies ``margin`` or more outside the object, so this stays an outside distance); exactly 0 within
+        beyond = torch.linalg.vector_norm(points - (lo + u * step), dim=-1)
+        beyond = torch.where((raw != u).any(dim=-1), beyond, torch.zeros_like(beyond))
         i0 = u.detach().floor().long()
         f = u - i0
         flat = self.values.reshape(-1)
         base = obj_idx.long() * g**3
-        out = torch.zeros(len(points), dtype=points.dtype, device=points.device)
+        out = beyond
         for dx in (0, 1):
             wx = f[:, 0] if dx else 1 - f[:, 0]
             for dy in (0, 1):
