@@ -87,17 +87,20 @@ def trained(name: str, data: list[str], hands: list[str], args, condition: str =
 
 
 def evaluated(model, key: str, hands: list[str], objects: list, original: bool, protocol: Protocol, args,
-              inertials: str = "capsule", refine: bool = False, collisions: str = "own", seed: int = 0,
+              inertials: str = "capsule", refine: bool | RefineSettings = False, collisions: str = "own", seed: int = 0,
               tag: str = "", candidates: int = 1) -> dict:
     """One model's evaluation, cached in ``eval_<key><tag><suffix>.json`` under its settings' key (``tag``:
-    tells apart evaluations of the same model on other hand subsets)."""
+    tells apart evaluations of the same model on other hand subsets; ``refine``: True for the default
+    refinement, or its settings)."""
+    settings = refine if isinstance(refine, RefineSettings) else RefineSettings() if refine else None
+    touch = settings is not None and settings.touch
     suffix = tag + (("_original" if original else "") + ("_hybrid" if collisions != "own" else "")
-              + ("_origmass" if inertials != "capsule" else "") + ("_refined" if refine else "")
+              + ("_origmass" if inertials != "capsule" else "") + ("_touched" if touch else "_refined" if settings else "")
               + (f"_seed{seed}" if seed else "") + (f"_k{candidates}" if candidates > 1 else ""))
     path = Path(args.runs) / f"eval_{key}{suffix}.json"
     extra = {"inertials": inertials} if inertials != "capsule" else {}  # the capsule evaluations keep their keys
-    if refine:
-        extra["refine"] = RefineSettings()
+    if settings is not None:
+        extra["refine"] = settings
     if collisions != "own":  # the other evaluations keep their keys
         extra["collisions"] = collisions
     if candidates > 1:  # likewise
@@ -116,7 +119,7 @@ def evaluated(model, key: str, hands: list[str], objects: list, original: bool, 
     out = {"per_hand": {}, "pairs": [], "success": {}}
     if todo:
         rep = evaluate_model(model, todo, objects, n=args.n, seed=seed, original=original, protocol=protocol,
-                             workers=args.workers, inertials=inertials, refine=refine, collisions=collisions,
+                             workers=args.workers, inertials=inertials, refine=settings or False, collisions=collisions,
                              candidates=candidates)
         out = {"per_hand": rep.per_hand(), "pairs": [{"hand": p.hand, "object": p.object, "successes": int(p.success.sum()),
                                                       "n": int(len(p.success))} for p in rep.pairs],
