@@ -176,3 +176,57 @@ def test_the_model_chooses_among_draws_on_request(tmp_path):
         with pytest.raises(GraspError, match="candidates"):
             model.sample("barrett_hand", obj, 2, candidates=bad)
     assert evaluate_model(model, ["barrett_hand"], [obj], n=2, allow_seen=True, candidates=3).meta["candidates"] == 3
+
+
+def _finger_distances(hand: HandModel, obj: ObjectModel, g: np.ndarray) -> np.ndarray:
+    """(N, fingers) each finger's nearest capsule-core sample to the object, minus the radius [m]."""
+    from ohra.rotations import grasp_to_pose
+
+    T, q = grasp_to_pose(g)
+    caps = hand.capsules(q)
+    u = np.linspace(0.0, 1.0, RefineSettings().samples_per_capsule)[:, None, None]
+    pts = caps.p0[:, None] + u * (caps.p1 - caps.p0)[:, None]
+    world = np.einsum("nij,nskj->nski", T[:, :3, :3], pts) + T[:, None, None, :3, 3]
+    d = (obj.signed_distance(world.reshape(-1, 3)).reshape(world.shape[:3]) - caps.radius).min(axis=1)
+    return np.stack([d[:, caps.finger == f].min(axis=1) for f in np.unique(caps.finger)], axis=1)
+
+
+def _data_grasps_with_joint_error(hand_name: str = "shadow_hand_right", obj_name: str = "capsule-0", sigma: float = 0.15):
+    """Robust grasps of the committed dataset (every finger within 2 mm of the surface) with seeded joint
+    noise of ``sigma`` [rad], the size of the grasp model's joint error: some fingers sunk, some hovering."""
+    from pathlib import Path
+
+    from ohra.data import GraspDataset
+    from ohra.learn.grasp.data import load_dataset_object
+
+    root = Path(__file__).resolve().parents[1] / "datasets" / "grasp_unified_s0"
+    ds = GraspDataset([root], hands=[hand_name])
+    for (r, _, o, sh), (_, _, g) in zip(ds.entries, ds):
+        if o == obj_name:
+            hand = HandModel.from_params(get_hand(hand_name))
+            g = np.asarray(g[:8], dtype=float)
+            noise = np.random.default_rng(0).normal(0.0, sigma, (len(g), 22)) * (hand.upper > hand.lower)
+            g[:, 9:] = np.clip(g[:, 9:] + noise, hand.lower, hand.upper)
+            return hand, load_dataset_object(r, o, sh.get("object", {}), {}), g
+    raise AssertionError(f"{obj_name} not in {root}")
+
+
+def test_touch_also_closes_hovering_fingers_onto_the_surface():
+    """Opening alone leaves the hovering fingers where they are; ``touch`` brings every finger within
+    the clearance of the surface, as in the data, and sinks none."""
+    hand, obj, g = _data_grasps_with_joint_error()
+    before = _finger_distances(hand, obj, g)
+    assert np.mean(before > 0.002) > 0.3 and np.mean(before < -0.002) > 0.2  # both kinds of error
+    opened = _finger_distances(hand, obj, refine_grasps(hand, obj, g).grasps)
+    assert np.mean(opened > 0.002) > 0.3
+    touched = refine_grasps(hand, obj, g, RefineSettings(touch=True))
+    after = _finger_distances(hand, obj, touched.grasps)
+    s = RefineSettings()
+    assert np.mean(np.abs(after) <= s.clearance_m + 0.001) > 0.95, after
+    assert np.all(after >= -s.clearance_m - 0.0001)  # and none is sunk
+    assert np.array_equal(touched.grasps[:, :9], g[:, :9])  # the palm stays
+
+
+def test_settings_text_without_touch_is_what_caches_made_before_it_hold():
+    assert repr(RefineSettings()) == "RefineSettings(clearance_m=0.001, iterations=30, step_rad=0.03, samples_per_capsule=5, fd_rad=0.001)"
+    assert repr(RefineSettings(touch=True)).endswith("touch=True)")
