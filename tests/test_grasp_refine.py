@@ -230,3 +230,34 @@ def test_touch_also_closes_hovering_fingers_onto_the_surface():
 def test_settings_text_without_touch_is_what_caches_made_before_it_hold():
     assert repr(RefineSettings()) == "RefineSettings(clearance_m=0.001, iterations=30, step_rad=0.03, samples_per_capsule=5, fd_rad=0.001)"
     assert repr(RefineSettings(touch=True)).endswith("touch=True)")
+
+
+def test_cli_refine_takes_open_or_touch(tmp_path, capsys):
+    """``--refine`` alone opens sunk fingers (as before the choice existed); ``--refine touch`` also closes the
+    hovering ones: both are the library's refinements of the same samples."""
+    pytest.importorskip("torch")
+    import importlib
+
+    from grasp_fixtures import tiny_model_config, tiny_train_config, write_dataset
+
+    from ohra.learn.grasp.train import train_grasp
+
+    run = tmp_path / "run"
+    train_grasp(write_dataset(tmp_path / "ds"), tiny_model_config(condition="params"), tiny_train_config(), run, progress=False)
+    cli = importlib.import_module("ohra.cli.main").main
+    out = {}
+    for how in ([], ["--refine"], ["--refine", "touch"]):
+        f = tmp_path / f"g{len(how)}.npz"
+        assert cli(["grasp", "sample", "--model", str(run), "--hand", "barrett_hand", "--object", "builtin:cylinder", "-n", "6",
+                    "--seed", "2", *how, "-o", str(f)]) == 0
+        with np.load(f) as z:
+            out[tuple(how)] = z["grasps"]
+    obj, p = ObjectModel.builtin("cylinder"), get_hand("barrett_hand")
+    raw = out[()]
+    np.testing.assert_allclose(out[("--refine",)], refine_grasps(p, obj, raw).grasps)
+    np.testing.assert_allclose(out[("--refine", "touch")], refine_grasps(p, obj, raw, RefineSettings(touch=True)).grasps)
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exc:  # argparse's usage error
+        cli(["grasp", "sample", "--model", str(run), "--hand", "barrett_hand", "--object", "builtin:cylinder",
+             "--refine", "squeeze", "-o", str(tmp_path / "x.npz")])
+    assert exc.value.code == 2 and "choose from 'open', 'touch'" in capsys.readouterr().err

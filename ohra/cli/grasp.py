@@ -3,8 +3,8 @@
     ohra train grasp --data DIR [DIR ...] [--hands H ...] [--test-objects O ...] --condition vae|params
                      [--encoder pointnet|dgcnn] [--steps N] [--batch-size B] [--seed S] [--threads T]
                      -o RUN [--resume]
-    ohra grasp sample --hand H --object O [-n 100] [--seed S] [--refine] [--centre] [--candidates K] [--condition-hand H] [--model RUN] -o grasps.npz
-    ohra grasp eval --hands H ... --objects O ... [-n 100] [--seed S] [--original [--collisions canonical] | --inertials original] [--condition-hand H] [--refine] [--centre] [--candidates K] [--model RUN] [-o report.json]
+    ohra grasp sample --hand H --object O [-n 100] [--seed S] [--refine [open|touch]] [--centre] [--candidates K] [--condition-hand H] [--model RUN] -o grasps.npz
+    ohra grasp eval --hands H ... --objects O ... [-n 100] [--seed S] [--original [--collisions canonical] | --inertials original] [--condition-hand H] [--refine [open|touch]] [--centre] [--candidates K] [--model RUN] [-o report.json]
 
 Plugged into :mod:`ohra.cli.main` by ``register(subparsers)`` (adds the ``grasp`` group and
 ``grasp`` under the ``train`` group, creating ``train`` if no other plugin did). torch is imported
@@ -32,8 +32,18 @@ CENTRE_HELP = ("sample on the object centred on its bounding box, grasps moved b
                "whose frame origin lies away from the object, e.g. exported in scene coordinates)")
 CANDIDATES_HELP = ("draw K grasps per wrist rotation and keep the one whose fingers lie nearest the object's surface "
                    "(default 1: the first draw)")
-REFINE_HELP = ("open the fingers just enough to clear the object after sampling "
-               "(ohra.learn.grasp.refine; tens of ms per grasp)")
+REFINE_HELP = ("refine the fingers after sampling (ohra.learn.grasp.refine; tens of ms per grasp): 'open' (the flag "
+               "alone) opens sunk fingers just enough to clear the object; 'touch' also closes hovering fingers onto "
+               "its surface (+7.8 points over 'open' for the shipped model on unseen objects)")
+
+
+def _refine(choice: str | None) -> Any:
+    """The ``refine=`` argument of ``--refine [open|touch]``."""
+    if choice is None:
+        return False
+    from ohra.learn.grasp.refine import RefineSettings
+
+    return RefineSettings(touch=choice == "touch")
 
 
 def register(sub: Any) -> None:
@@ -52,7 +62,7 @@ def register(sub: Any) -> None:
     p.add_argument("-n", type=int, default=100, help="number of grasps (default 100)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--model", help=model_help)
-    p.add_argument("--refine", action="store_true", help=REFINE_HELP)
+    p.add_argument("--refine", nargs="?", const="open", choices=("open", "touch"), help=REFINE_HELP)
     p.add_argument("--centre", action="store_true", help=CENTRE_HELP)
     p.add_argument("--candidates", type=int, default=1, help=CANDIDATES_HELP)
     p.add_argument("--condition-hand", help="condition the model on this hand instead (paper Table 9); the joints stay "
@@ -77,7 +87,7 @@ def register(sub: Any) -> None:
     p.add_argument("--collisions", choices=("own", "canonical"), default="own",
                    help="with --original: the original URDF's collision shapes (default) or the canonical capsules on "
                         "its links (the hybrid hand: tells the link shapes' effect from the rest of the URDF's)")
-    p.add_argument("--refine", action="store_true", help=REFINE_HELP)
+    p.add_argument("--refine", nargs="?", const="open", choices=("open", "touch"), help=REFINE_HELP)
     p.add_argument("--centre", action="store_true", help=CENTRE_HELP)
     p.add_argument("--candidates", type=int, default=1, help=CANDIDATES_HELP)
     p.add_argument("--condition-hand", help="condition the model on this hand instead (paper Table 9); the grasps run on "
@@ -224,7 +234,7 @@ def _cmd_sample(args: argparse.Namespace) -> int:
     obj = resolve_object(args.object, scale=args.scale)
     warn_if_ungraspable(obj)
     timing: dict = {}
-    g = model.sample(params, obj, args.n, seed=args.seed, timing=timing, refine=args.refine, centre=args.centre,
+    g = model.sample(params, obj, args.n, seed=args.seed, timing=timing, refine=_refine(args.refine), centre=args.centre,
                      condition_hand=args.condition_hand, candidates=args.candidates)
     atomic_write_npz(out, {"grasps": g.astype(np.float64)})
     if note:
@@ -254,7 +264,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     rep = evaluate_model(model, args.hands, objs, n=args.n, seed=args.seed, original=args.original,
                          workers=args.workers, progress=not args.quiet, allow_seen=args.allow_seen,
                          protocol=replace(Protocol.preset(args.protocol), object_point=args.object_point), inertials=args.inertials,
-                         condition_hand=args.condition_hand, refine=args.refine, collisions=args.collisions, centre=args.centre,
+                         condition_hand=args.condition_hand, refine=_refine(args.refine), collisions=args.collisions, centre=args.centre,
                          candidates=args.candidates)
     if args.output:
         from ohra.data.dataset import atomic_write_json
