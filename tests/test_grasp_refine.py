@@ -217,6 +217,9 @@ def test_touch_also_closes_hovering_fingers_onto_the_surface():
     hand, obj, g = _data_grasps_with_joint_error()
     before = _finger_distances(hand, obj, g)
     assert np.mean(before > 0.002) > 0.3 and np.mean(before < -0.002) > 0.2  # both kinds of error
+    from ohra.learn.grasp.refine import finger_distances
+
+    np.testing.assert_allclose(finger_distances(hand, obj, g), before)  # the library's measure is this one
     opened = _finger_distances(hand, obj, refine_grasps(hand, obj, g).grasps)
     assert np.mean(opened > 0.002) > 0.3
     touched = refine_grasps(hand, obj, g, RefineSettings(touch=True))

@@ -31,3 +31,10 @@ def test_grasp_model_notebook_executes(tmp_path):
     shown = "\n".join(o.get("data", {}).get("text/markdown", "") for o in code[6].outputs)
     assert "unified-24000" in shown and "seen (training objects)" in shown and "stored rotations" in shown and "best of 8" in shown
     assert "palm position error" in shown
+    # ... and fingers on the surface (stop 45): touch brings the fingers to the surface; both tables shown
+    lines = "".join(o.get("text", "") for o in code[7].outputs).splitlines()
+    pct = {ln.split()[0]: [int(w.rstrip("%,")) for w in ln.split() if w.rstrip(",").endswith("%")] for ln in lines if "%" in ln}
+    assert pct["touch"][1] >= 80 and pct["touch"][1] > pct["opened"][1] > pct["sampled"][1] - 1  # touching share
+    assert pct["touch"][0] == 0 == pct["opened"][0] and pct["sampled"][0] > 0  # nothing sunk after either
+    shown = "\n".join(o.get("data", {}).get("text/markdown", "") for o in code[7].outputs)
+    assert "penetration weight" in shown and "hovering ones closed" in shown

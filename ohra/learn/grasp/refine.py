@@ -111,6 +111,24 @@ def finger_clearance(hand, obj, grasps: np.ndarray, settings: RefineSettings | N
     return _penetration(hm, obj, T, q, settings or RefineSettings())[1]
 
 
+def finger_distances(hand, obj, grasps: np.ndarray, settings: RefineSettings | None = None) -> np.ndarray:
+    """(N, F) each present finger's nearest capsule-core sample to ``obj``, minus the capsule radius [m]
+    (negative: sunk), for grasps (N, 31); fingers in thumb-to-little order. What ``touch`` brings within
+    the clearance of the surface."""
+    from ohra.canonical.kinematics import HandModel
+    from ohra.rotations import grasp_to_pose
+
+    hm = hand if isinstance(hand, HandModel) else HandModel.from_params(hand)
+    s = settings or RefineSettings()
+    T, q = grasp_to_pose(np.asarray(grasps, dtype=float))
+    caps = hm.capsules(q)
+    u = np.linspace(0.0, 1.0, s.samples_per_capsule)[:, None, None]
+    pts = caps.p0[:, None] + u * (caps.p1 - caps.p0)[:, None]
+    world = np.einsum("nij,nskj->nski", T[:, :3, :3], pts) + T[:, None, None, :3, 3]
+    d = (obj.signed_distance(world.reshape(-1, 3)).reshape(world.shape[:3]) - caps.radius).min(axis=1)
+    return np.stack([d[:, caps.finger == f].min(axis=1) for f in np.unique(caps.finger)], axis=1)
+
+
 def refine_grasps(hand, obj, grasps: np.ndarray, settings: RefineSettings | None = None) -> RefineResult:
     """Clear the fingers of ``hand`` (a :class:`~ohra.canonical.kinematics.HandModel` or params) out of
     ``obj`` (an :class:`~ohra.objects.model.ObjectModel`) for grasps (N, 31) in the dataset convention
@@ -155,4 +173,4 @@ def refine_grasps(hand, obj, grasps: np.ndarray, settings: RefineSettings | None
     return RefineResult(out, d0, d1, steps)
 
 
-__all__ = ["RefineSettings", "RefineResult", "as_refine_settings", "refine_grasps"]
+__all__ = ["RefineSettings", "RefineResult", "as_refine_settings", "refine_grasps", "finger_clearance", "finger_distances"]
