@@ -145,25 +145,30 @@ def paired_change(a: dict, b: dict, hand: str | list[str]) -> tuple[float, float
 
 def tables(res: dict) -> str:
     u, uo, ur = res["unified"], res["unified_original"], res.get("unified_refined")
+    ut = res.get("unified_touched")
     lines = ["Table 5 analogue: success on unseen objects (unified model)", "",
              "| hand | training grasps | success (canonical) | ms / grasp | "
              + ("success, fingers refined | refinement ms / grasp | " if ur else "")
+             + ("success, fingers onto the surface (touch) | refinement ms / grasp | " if ut else "")
              + " | ".join(f"{m} (reported)" for m in REPORTED) + " |",
-             "|---|---|---|---|" + ("---|---|" if ur else "") + "---|" * len(REPORTED)]
+             "|---|---|---|---|" + ("---|---|" if ur else "") + ("---|---|" if ut else "") + "---|" * len(REPORTED)]
     for h in res["hands"]:
         r = u["per_hand"][h]
         refined = ""
-        if ur:
-            rr = ur["per_hand"][h]
-            d, se = paired_change(u, ur, h)  # the same sampled grasps before and after refinement
-            refined = f"{100 * rr['success_rate']:.1f} % ({d:+.1f} ± {se:.1f}) | {rr.get('refine_ms_per_grasp', float('nan')):.0f} | "
+        for ev in (ur, ut):
+            if ev:
+                rr = ev["per_hand"][h]
+                d, se = paired_change(u, ev, h)  # the same sampled grasps before and after refinement
+                refined += f"{100 * rr['success_rate']:.1f} % ({d:+.1f} ± {se:.1f}) | {rr.get('refine_ms_per_grasp', float('nan')):.0f} | "
         lines.append(f"| {h} | {res['train_counts'].get(h, 0)} | {100 * r['success_rate']:.1f} % of {r['n']} | "
                      f"{r['sample_ms_per_grasp']:.2f} | " + refined
                      + " | ".join(f"{v[h]} %" if h in v else "-" for v in REPORTED.values()) + " |")
     if ur:
         lines += ["", "Fingers refined: the same sampled grasps with the fingers opened just enough to clear the object "
                   "(`refine=True`, `ohra.learn.grasp.refine`: joints only, 1 mm of penetration left alone); the change "
-                  "is paired over the same grasps, in points."]
+                  "is paired over the same grasps, in points."
+                  + (" Touch: sunk fingers opened likewise and hovering ones closed until they touch "
+                     "(`RefineSettings(touch=True)`, `--refine touch`; in the data every finger touches)." if ut else "")]
     lines += ["", "Reported columns: other protocol (Isaac Gym), other objects and hardware; DFC, GenDexGrasp and "
               "D(R,O) as reported by D(R,O) Grasp (arXiv 2410.01702, Table I), OHRA by its paper's Table 5.",
               "", "Table 6 analogue: unified vs hand-specific (same data, steps, batch, seed)", "",
@@ -183,19 +188,21 @@ def tables(res: dict) -> str:
             a, b = u["per_hand"][h]["success_rate"], up["per_hand"][h]["success_rate"]
             se = np.sqrt(a * (1 - a) / u["per_hand"][h]["n"] + b * (1 - b) / up["per_hand"][h]["n"])
             lines.append(f"| {h} | {100 * a:.1f} % | {100 * b:.1f} % | {100 * (b - a):+.1f} ± {100 * se:.1f} |")
-    um, rro = res.get("unified_origmass"), res.get("unified_refined_original")
+    um, rro, rto = res.get("unified_origmass"), res.get("unified_refined_original"), res.get("unified_touched_original")
     lines += ["", "Table 4 analogue: the unified model's grasps replayed on the original URDFs"
               + (" (and on the canonical hand carrying the original URDF's finger masses)" if um else ""), ""]
     if um:
         head = ["hand", "finger masses: canonical / original [kg]", "canonical", "canonical, original masses", "original",
                 "original - canonical ± SE [points]", "original - canonical (original masses) ± SE"]
         head += ["fingers refined: canonical → original", "original - canonical, refined ± SE"] if rro else []
+        head += ["touch: canonical → original", "original - canonical, touch ± SE"] if rto else []
     else:
         head = ["hand", "canonical", "original", "change ± SE [points]"]
     lines += ["| " + " | ".join(head + ["paper (reported)"]) + " |", "|" + "---|" * (len(head) + 1)]
     for h in res["hands"]:
         c, s = paired_change(u, uo, h)
-        rate = {k: f"{100 * v['per_hand'][h]['success_rate']:.1f} %" for k, v in (("u", u), ("um", um), ("uo", uo), ("ur", ur), ("rro", rro)) if v}
+        rate = {k: f"{100 * v['per_hand'][h]['success_rate']:.1f} %" for k, v in
+                (("u", u), ("um", um), ("uo", uo), ("ur", ur), ("rro", rro), ("ut", ut), ("rto", rto)) if v}
         if um:
             cm, sm = paired_change(um, uo, h)
             fm = res["finger_masses"][h]
@@ -204,12 +211,16 @@ def tables(res: dict) -> str:
             if rro:
                 cr, sr = paired_change(ur, rro, h)
                 cells += [f"{rate['ur']} → {rate['rro']}", f"{cr:+.1f} ± {sr:.1f}"]
+            if rto:
+                ct, st = paired_change(ut, rto, h)
+                cells += [f"{rate['ut']} → {rate['rto']}", f"{ct:+.1f} ± {st:.1f}"]
         else:
             cells = [h, rate["u"], rate["uo"], f"{c:+.1f} ± {s:.1f}"]
         lines.append("| " + " | ".join(cells + [str(PAPER_REPLAY.get(h, "-"))]) + " |")
     if rro:
         lines += ["", "Fingers refined: the same grasps with their fingers opened out of the object first (`refine=True`), "
-                  "then simulated on the canonical and the original URDF."]
+                  "then simulated on the canonical and the original URDF." + (" Touch: opened and the hovering ones closed onto "
+                                                                             "the surface (`--refine touch`) first." if rto else "")]
     if um and (uh := res.get("unified_hybrid")):
         lines += ["", "Table 4 attribution: the same grasps on four hands, each one step from the canonical hand to the "
                   "original URDF (paired changes over the same grasps, points ± SE): the finger masses (canonical "
@@ -328,6 +339,9 @@ def main() -> None:
     res["unified_hybrid"] = evaluated(unified, "unified", args.hands, objects, True, protocol, args, collisions="canonical")
     res["unified_refined"] = evaluated(unified, "unified", args.hands, objects, False, protocol, args, refine=True)
     res["unified_refined_original"] = evaluated(unified, "unified", args.hands, objects, True, protocol, args, refine=True)
+    touch = RefineSettings(touch=True)
+    res["unified_touched"] = evaluated(unified, "unified", args.hands, objects, False, protocol, args, refine=touch)
+    res["unified_touched_original"] = evaluated(unified, "unified", args.hands, objects, True, protocol, args, refine=touch)
     res["finger_masses"] = {h: {"canonical": SimHand.from_params(get_hand(h), name=h).finger_masses.tolist(),
                                 "original": SimHand.registered_original(h).finger_masses.tolist()} for h in args.hands}
     res["specific"] = {}
