@@ -54,7 +54,7 @@ def table(res: dict) -> str:
         lines.append(f"| {r['name']} | " + " | ".join(f"{100 * r['per_hand'][h]:.1f} %" for h in hands)
                      + f" | {100 * r['pooled']:.1f} % | " + (f"{r['refine_ms']:.0f}" if r.get("refine_ms") else "-") + " |")
     lines.append("| paper (reported, Isaac Gym) | " + " | ".join(f"{PAPER.get(h, '-')} %" for h in hands) + " | - | - |")
-    lines += ["", "| comparison (paired over the same grasps) | " + " | ".join(hands) + " | pooled ± SE [points] | reading |",
+    lines += ["", "| comparison (paired over the same rotations; the same grasps before refinement but for best of K) | " + " | ".join(hands) + " | pooled ± SE [points] | reading |",
               "|---|" + "---|" * (len(hands) + 2)]
     for c in res["comparisons"]:
         lines.append(f"| {c['what']} | " + " | ".join(f"{c['per_hand'][h][0]:+.1f} ± {c['per_hand'][h][1]:.1f}" for h in hands)
