@@ -139,8 +139,7 @@ def main() -> None:
     res = {"hands": args.hands, "n": args.n, "objects": [o.name for o in objects], "data": args.data,
            "protocol_note": protocol_note(protocol), "comparisons": comps,
            "rows": [{k: v for k, v in r.items() if k != "ev"} for r in rows]}
-    write_results(args.name, res, table(res))
-    print(table(res))
+    write_results(args.name, res, table(res))  # prints it too
 
 
 if __name__ == "__main__":

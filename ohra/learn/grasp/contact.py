@@ -41,8 +41,11 @@ SAMPLES_PER_CAPSULE = 5
 @dataclass
 class SDFGrids:
     """Signed distances [m] of K objects sampled on regular grids (G per axis) over each object's
-    mesh bounding box grown by ``margin`` [m]; trilinear lookups (within 1 mm of the exact distance near
-    the surface at the default 48 per axis on 3-25 cm objects; tests), differentiable in the points."""
+    mesh bounding box grown by ``margin`` [m]; trilinear lookups, differentiable in the points (within 1 mm
+    of the exact distance near the surface of the built-in shapes at 48 per axis: tests; the error grows
+    with the cell, i.e. with the object's size over the resolution). Not :meth:`ObjectModel.sdf` (numpy,
+    one object, cubic cells, for the solver): a batch's rows look up different objects in one gather, so
+    every object shares one G^3 layout."""
 
     values: torch.Tensor  # (K, G, G, G) float32, object mesh frame
     lower: torch.Tensor  # (K, 3) [m] grid corner
