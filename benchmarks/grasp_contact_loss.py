@@ -47,9 +47,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import natural_sorted, write_results  # noqa: E402
-from _study_cache import claim_run, run_key, train_key, when_free  # noqa: E402
-from grasp_scale_up import baseline, pooled  # noqa: E402
-from grasp_study import PAPER, ROOT, data_protocol, eval_objects, evaluated, paired_change, protocol_note  # noqa: E402
+from _study_cache import claim_run, train_key, when_free  # noqa: E402
+from grasp_scale_up import baseline, paired_comparison, rates, require_data_of  # noqa: E402
+from grasp_study import PAPER, ROOT, data_protocol, eval_objects, evaluated, protocol_note  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -135,8 +135,7 @@ def main() -> None:
     from ohra.learn.grasp.model import load_grasp_model
 
     args.data = natural_sorted(args.data)
-    if run_key(args.baseline / "unified")["data"] != train_key(args.data, args.hands, 12000, 0, "vae")["data"]:
-        raise SystemExit(f"--data differ from the data of {args.baseline / 'unified'}: pass the folders it was trained on")
+    require_data_of(args.baseline / "unified", args.data)
     objects = eval_objects(args.objects_file)
     protocol = data_protocol(args.data)
     base = baseline(args.baseline, objects, args.n, protocol)
@@ -150,15 +149,10 @@ def main() -> None:
         rows.append({"name": name, "weight": ARMS[name]["penetration_weight"], "shift": ARMS[name]["penetration_shift"],
                      "ev": ev, "train_min": m["train_seconds_total"] / 60, "model": model})
     for r in rows:
-        r["per_hand"] = {h: float(pooled(r["ev"], [h]).mean()) for h in args.hands}
-        r["pooled"] = float(pooled(r["ev"], args.hands).mean())
+        r.update(rates(r["ev"], args.hands))
         r["deepest"] = deepest_finger(r.pop("model"), args.hands, objects, args.n, args.seed)
-    comps = []
-    for r in rows[1:]:
-        d, se = paired_change(rows[0]["ev"], r["ev"], args.hands)
-        reading = "the term helped" if d > 2 * se else "the term hurt" if d < -2 * se else "no change detectable"
-        comps.append({"what": f"{r['name']} - committed", "pooled": [d, se], "reading": reading,
-                      "per_hand": {h: list(paired_change(rows[0]["ev"], r["ev"], h)) for h in args.hands}})
+    comps = [paired_comparison(rows[0]["ev"], r["ev"], args.hands, f"{r['name']} - committed",
+                               ("the term helped", "the term hurt")) for r in rows[1:]]
     res = {"hands": args.hands, "n": args.n, "steps": args.steps, "objects": [o.name for o in objects], "data": args.data,
            "protocol_note": protocol_note(protocol), "comparisons": comps,
            "rows": [{k: v for k, v in r.items() if k != "ev"} for r in rows]}

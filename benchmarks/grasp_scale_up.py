@@ -60,6 +60,30 @@ def pooled(ev: dict, hands: list[str], keys: list[str] | None = None) -> np.ndar
                            if k.split("/", 1)[0] in hands and (keys is None or k in keys)])
 
 
+def rates(ev: dict, hands: list[str]) -> dict:
+    """Success per hand and pooled over ``hands`` of one evaluation."""
+    return {"per_hand": {h: float(pooled(ev, [h]).mean()) for h in hands}, "pooled": float(pooled(ev, hands).mean())}
+
+
+def paired_comparison(a: dict, b: dict, hands: list[str], what: str, readings: tuple[str, str] | None) -> dict:
+    """b - a paired over the same grasps (rotations), pooled and per hand; ``readings`` (above +2 SE, below
+    -2 SE) read the pooled difference, None: shown, not read."""
+    from grasp_study import paired_change
+
+    d, se = paired_change(a, b, hands)
+    reading = ("shown, not read" if readings is None else readings[0] if d > 2 * se else readings[1] if d < -2 * se
+               else "no change detectable")
+    return {"what": what, "pooled": [d, se], "reading": reading, "per_hand": {h: list(paired_change(a, b, h)) for h in hands}}
+
+
+def require_data_of(run: Path, data: list[str]) -> None:
+    """Exit with one line unless ``data`` are the folders (same content) the run was trained on."""
+    from _study_cache import data_fingerprint
+
+    if run_key(run)["data"] != data_fingerprint(data):
+        raise SystemExit(f"--data differ from the data of {run}: pass the folders it was trained on")
+
+
 def difference(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
     """b - a success [points] and its standard error, as two independent binomial samples."""
     pa, pb = a.mean(), b.mean()

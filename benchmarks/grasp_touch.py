@@ -35,9 +35,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import natural_sorted, write_results  # noqa: E402
-from _study_cache import cached, eval_key, run_key, train_key  # noqa: E402
-from grasp_scale_up import baseline, pooled  # noqa: E402
-from grasp_study import PAPER, ROOT, data_protocol, eval_objects, evaluated, paired_change, protocol_note  # noqa: E402
+from _study_cache import cached, eval_key, run_key  # noqa: E402
+from grasp_scale_up import baseline, paired_comparison, rates, require_data_of  # noqa: E402
+from grasp_study import PAPER, ROOT, data_protocol, eval_objects, evaluated, protocol_note  # noqa: E402
 
 from ohra.learn.grasp.refine import RefineSettings  # noqa: E402
 
@@ -75,8 +75,7 @@ def main() -> None:
     from ohra.learn.grasp.model import load_grasp_model
 
     args.data = natural_sorted(args.data)
-    if run_key(args.runs / "unified")["data"] != train_key(args.data, args.hands, 12000, 0, "vae")["data"]:
-        raise SystemExit(f"--data differ from the data of {args.runs / 'unified'}: pass the folders it was trained on")
+    require_data_of(args.runs / "unified", args.data)
     objects = eval_objects(args.objects_file)
     protocol = data_protocol(args.data)
     raw = baseline(args.runs, objects, args.n, protocol)
@@ -96,27 +95,17 @@ def main() -> None:
 
     rows = [{"name": "sampled (Table 5)", "ev": raw}, {"name": "fingers opened out of the object (`--refine`)", "ev": opened},
             {"name": "fingers opened and hovering ones closed (`touch=True`)", "ev": touched}]
-    for r in rows:
-        r["per_hand"] = {h: float(pooled(r["ev"], [h]).mean()) for h in args.hands}
-        r["pooled"] = float(pooled(r["ev"], args.hands).mean())
-        r["refine_ms"] = ms(r["ev"])
-
-    def compare(a: dict, b: dict, what: str, read: bool) -> dict:
-        d, se = paired_change(a["ev"], b["ev"], args.hands)
-        reading = ("closing the hovering fingers helps" if d > 2 * se else "it hurts" if d < -2 * se
-                   else "no change detectable") if read else "shown, not read"
-        return {"what": what, "pooled": [d, se], "reading": reading,
-                "per_hand": {h: list(paired_change(a["ev"], b["ev"], h)) for h in args.hands}}
-
-    comps = [compare(rows[1], rows[2], "touch - opening only", True), compare(rows[0], rows[2], "touch - sampled", False)]
     if args.candidates > 1:
         both = evaluated(model, "unified", args.hands, objects, False, protocol, ns, refine=TOUCH, candidates=args.candidates)
         rows.append({"name": f"best of {args.candidates} draws, then touch", "ev": both})
-        rows[-1].update(per_hand={h: float(pooled(both, [h]).mean()) for h in args.hands}, pooled=float(pooled(both, args.hands).mean()),
-                        refine_ms=ms(both))
-        c = compare(rows[2], rows[3], f"best of {args.candidates} + touch - touch", True)
-        c["reading"] = c["reading"].replace("closing the hovering fingers helps", "the best of K adds to touch")
-        comps.append(c)
+    for r in rows:
+        r.update(rates(r["ev"], args.hands), refine_ms=ms(r["ev"]))
+    comps = [paired_comparison(rows[1]["ev"], rows[2]["ev"], args.hands, "touch - opening only",
+                               ("closing the hovering fingers helps", "it hurts")),
+             paired_comparison(rows[0]["ev"], rows[2]["ev"], args.hands, "touch - sampled", None)]
+    if args.candidates > 1:
+        comps.append(paired_comparison(rows[2]["ev"], rows[3]["ev"], args.hands, f"best of {args.candidates} + touch - touch",
+                                       ("the best of K adds to touch", "it hurts")))
     res = {"hands": args.hands, "n": args.n, "objects": [o.name for o in objects], "protocol_note": protocol_note(protocol),
            "settings": repr(TOUCH), "comparisons": comps, "rows": [{k: v for k, v in r.items() if k != "ev"} for r in rows]}
     write_results("grasp_touch", res, table(res))

@@ -82,18 +82,27 @@ class RefineResult:
     steps: np.ndarray
 
 
-def _penetration(hand, obj, T: np.ndarray, q: np.ndarray, s: RefineSettings) -> tuple[np.ndarray, np.ndarray]:
-    """(energy (N,), smallest signed distance (N,)) of grasps with palm poses T (N,4,4) and joints q (N,22)."""
+def _capsule_distances(hand, obj, T: np.ndarray, q: np.ndarray, s: RefineSettings) -> tuple[np.ndarray, np.ndarray]:
+    """Signed distances (N, S, K) [m] of S samples along each of the K capsule cores to ``obj``, minus the
+    capsule radius, for palm poses T (N,4,4) and joints q (N,22); and each capsule's finger index (K,)."""
     caps = hand.capsules(q)
     u = np.linspace(0.0, 1.0, s.samples_per_capsule)[:, None, None]
     pts = caps.p0[:, None] + u * (caps.p1 - caps.p0)[:, None]  # (N, S, K, 3) palm frame
     world = np.einsum("nij,nskj->nski", T[:, :3, :3], pts) + T[:, None, None, :3, 3]
-    d = obj.signed_distance(world.reshape(-1, 3)).reshape(world.shape[:3]) - caps.radius
+    return obj.signed_distance(world.reshape(-1, 3)).reshape(world.shape[:3]) - caps.radius, caps.finger
+
+
+def _per_finger(per_capsule: np.ndarray, finger: np.ndarray) -> np.ndarray:
+    """(N, K) per-capsule values -> (N, F) the smallest per finger (thumb-to-little order)."""
+    return np.stack([per_capsule[:, finger == f].min(axis=1) for f in np.unique(finger)], axis=1)
+
+
+def _penetration(hand, obj, T: np.ndarray, q: np.ndarray, s: RefineSettings) -> tuple[np.ndarray, np.ndarray]:
+    """(energy (N,), smallest signed distance (N,)) of grasps with palm poses T (N,4,4) and joints q (N,22)."""
+    d, finger = _capsule_distances(hand, obj, T, q, s)
     energy = (np.maximum(-s.clearance_m - d, 0.0) ** 2).sum(axis=(1, 2))
     if s.touch:
-        per_capsule = d.min(axis=1)  # (N, K)
-        for f in np.unique(caps.finger):
-            nearest = per_capsule[:, caps.finger == f].min(axis=1)
+        for nearest in _per_finger(d.min(axis=1), finger).T:  # added finger by finger (the evaluated runs' order)
             energy = energy + np.maximum(nearest - s.clearance_m, 0.0) ** 2
     return energy, d.min(axis=(1, 2))
 
@@ -119,14 +128,9 @@ def finger_distances(hand, obj, grasps: np.ndarray, settings: RefineSettings | N
     from ohra.rotations import grasp_to_pose
 
     hm = hand if isinstance(hand, HandModel) else HandModel.from_params(hand)
-    s = settings or RefineSettings()
     T, q = grasp_to_pose(np.asarray(grasps, dtype=float))
-    caps = hm.capsules(q)
-    u = np.linspace(0.0, 1.0, s.samples_per_capsule)[:, None, None]
-    pts = caps.p0[:, None] + u * (caps.p1 - caps.p0)[:, None]
-    world = np.einsum("nij,nskj->nski", T[:, :3, :3], pts) + T[:, None, None, :3, 3]
-    d = (obj.signed_distance(world.reshape(-1, 3)).reshape(world.shape[:3]) - caps.radius).min(axis=1)
-    return np.stack([d[:, caps.finger == f].min(axis=1) for f in np.unique(caps.finger)], axis=1)
+    d, finger = _capsule_distances(hm, obj, T, q, settings or RefineSettings())
+    return _per_finger(d.min(axis=1), finger)
 
 
 def refine_grasps(hand, obj, grasps: np.ndarray, settings: RefineSettings | None = None) -> RefineResult:
