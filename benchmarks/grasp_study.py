@@ -284,7 +284,7 @@ def add_run_args(ap: argparse.ArgumentParser, steps: int, n: int, runs: str, nam
 
 def pictures(model, hands: list[str], objects: list, ev: dict, name: str, per_row: int = 8,
              title: str = "unified model: first passing grasp per (hand, unseen object); red: none passed",
-             refine: bool = False) -> dict:
+             refine: "bool | RefineSettings" = False) -> dict:
     """Contact sheet (hands x objects, the first grasp of each pair that passed, else the first grasp;
     green / red frame = passed / failed) and a meshcat scene (each hand's first passing grasp on the
     first object, side by side). Grasps are re-sampled with the evaluation's pair seeds (sampling is

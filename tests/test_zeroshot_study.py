@@ -80,22 +80,25 @@ def test_wrong_condition_evaluations_are_kept_apart_from_the_true_one(study):
     assert true["key"]["condition_hand"] is None and wrong["key"]["condition_hand"] == "leap_3333"
 
 
-@pytest.mark.slow  # a second study run (~11 s); the suite keeps the first
-def test_refined_evaluations_are_cached_apart(study):
-    """--refine on the same runs: no retraining, new evaluation files whose keys carry the settings."""
+@pytest.mark.slow  # two more study runs (~11 s each); the suite keeps the first
+@pytest.mark.parametrize("flag, suffix, touch", [([], "_refined", False), (["touch"], "_touched", True)])
+def test_refined_evaluations_are_cached_apart(study, flag, suffix, touch):
+    """--refine [open|touch] on the same runs: no retraining, new evaluation files (one per refinement)
+    whose keys carry the settings, and the results say which refinement ran."""
     import os
 
     tmp, results, _ = study
     data, objs = tmp / "data", tmp / "eval.yaml"
+    name = "zs" + suffix
     cmd = [sys.executable, str(ROOT / "benchmarks" / "zeroshot_study.py"), "--data", str(data), "--objects-file", str(objs),
-           "--steps", "2", "-n", "2", "--runs", str(tmp / "runs"), "--name", "zs_refined", "--quiet", "--refine"]
+           "--steps", "2", "-n", "2", "--runs", str(tmp / "runs"), "--name", name, "--quiet", "--tables", "7", "--refine", *flag]
     before = {p.name: p.stat().st_mtime for p in (tmp / "runs").glob("*/model.pt")}
     r = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "OHRA_RESULTS_DIR": str(results)}, timeout=600)
     assert r.returncode == 0, r.stderr[-3000:]
     assert {p.name: p.stat().st_mtime for p in (tmp / "runs").glob("*/model.pt")} == before
-    ref = json.loads((tmp / "runs" / "eval_all_leap_3303_refined.json").read_text())
-    assert ref["key"]["refine"]["clearance_m"] == 0.001
-    assert json.loads((results / "zs_refined.json").read_text())["refine"] is True
+    ref = json.loads((tmp / "runs" / f"eval_all_leap_3303{suffix}.json").read_text())
+    assert ref["key"]["refine"]["clearance_m"] == 0.001 and ref["key"]["refine"]["touch"] is touch
+    assert json.loads((results / f"{name}.json").read_text())["refine"] == ("touch" if touch else "open")
 
 
 def test_the_gallery_and_the_saliency_figure_are_written(study):
