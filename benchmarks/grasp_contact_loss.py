@@ -57,14 +57,15 @@ ARMS = {"pen": {"penetration_weight": 0.05, "penetration_shift": 0.0},
         "pen-shift": {"penetration_weight": 0.05, "penetration_shift": 0.005}}
 
 
-def trained_arm(name: str, args) -> object:
-    """The arm ``name`` trained (resumed, or reused when its run is complete)."""
+def trained_arm(name: str, args, settings: dict | None = None) -> object:
+    """The arm ``name`` trained with the training ``settings`` (default ``ARMS[name]``; resumed, or reused
+    when its run is complete)."""
     from ohra.learn.grasp import GraspModelConfig, GraspTrainConfig
     from ohra.learn.grasp.model import load_grasp_model
     from ohra.learn.grasp.train import train_grasp
 
     run = Path(args.runs) / name
-    settings = ARMS[name]
+    settings = ARMS[name] if settings is None else settings
     key = {**train_key(args.data, args.hands, args.steps, args.seed, "vae"), **settings}
 
     def get():

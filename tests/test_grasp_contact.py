@@ -1,6 +1,8 @@
-"""The finger-penetration training term: capsules as Pinocchio places them, the object's signed distance
-from a grid, a term that is zero for a clear grasp, grows with depth and opens sunk fingers, and a
-training option that changes nothing when off."""
+"""The finger-object training terms: capsules as Pinocchio places them, the object's signed distance
+from a grid, a penetration term that is zero for a clear grasp, grows with depth and opens sunk fingers,
+a two-sided contact term that is zero at the data's fingers, pulls hovering fingers onto the surface and
+sunk ones out of it, and ignores links clear of the object in both, and training options that change
+nothing when off."""
 
 from __future__ import annotations
 
@@ -17,7 +19,7 @@ from ohra.canonical.kinematics import HandModel  # noqa: E402
 from ohra.errors import CheckpointError  # noqa: E402
 from ohra.hands import get_hand  # noqa: E402
 from ohra.learn.grasp.config import GraspConfigError  # noqa: E402
-from ohra.learn.grasp.contact import FingerCapsules, SDFGrids, penetration  # noqa: E402
+from ohra.learn.grasp.contact import FingerCapsules, SDFGrids, contact_gap, link_distances, penetration  # noqa: E402
 from ohra.learn.grasp.refine import finger_clearance  # noqa: E402
 from ohra.learn.grasp.train import train_grasp  # noqa: E402
 from ohra.objects.model import ObjectModel  # noqa: E402
@@ -165,7 +167,7 @@ def test_a_checkpoint_made_before_the_option_existed_resumes(dataset, tmp_path):
     assert json.loads((run / "config.json").read_text())["train"]["penetration_weight"] == 0.0
 
 
-@pytest.mark.parametrize("kw", [{"penetration_weight": -0.1}, {"penetration_shift": -0.001}])
+@pytest.mark.parametrize("kw", [{"penetration_weight": -0.1}, {"penetration_shift": -0.001}, {"contact_weight": -0.1}])
 def test_negative_settings_are_refused(kw):
     with pytest.raises(GraspConfigError, match=next(iter(kw))):
         tiny_train_config(**kw)
@@ -213,3 +215,79 @@ def test_the_shifted_palm_is_the_one_the_joint_network_sees(dataset, monkeypatch
     assert 0.002 < float(moved.norm(dim=1).mean()) < 0.05  # shifted by about the std
     in_rotated = torch.einsum("bij,bj->bi", batch.R_cloud, t_obj) / 0.1
     torch.testing.assert_close(seen["t_in"], in_rotated, atol=1e-5, rtol=1e-5)
+
+
+def _gap(caps, grid, hand_i, data_g, palm_dx, q=None):
+    """C for the data grasp ``data_g`` against a prediction with joints ``q`` (default: the data's) and
+    the palm moved by ``palm_dx`` [m] along x (+: away from the object, whose +x face the palm faces)."""
+    T, qd = grasp_to_pose(data_g[None])
+    f = lambda a: torch.from_numpy(np.asarray(a, dtype=np.float32))  # noqa: E731
+    t = f(T[:, :3, 3])
+    q = f(qd) if q is None else q
+    return contact_gap(caps, grid, torch.tensor([hand_i]), torch.tensor([0]), q, t + torch.tensor([[palm_dx, 0.0, 0.0]]),
+                       f(qd), t, f(T[:, :3, :3]))
+
+
+def test_the_contact_term_is_zero_at_the_datas_fingers_and_two_sided_around_them(caps):
+    obj = ObjectModel.builtin("box")
+    grid = SDFGrids.from_objects([obj])
+    touching = _sunk_grasp("allegro_hand_left", obj, 0.0)
+    assert float(_gap(caps, grid, 0, touching, 0.0)) == 0.0
+    hover, sunk = float(_gap(caps, grid, 0, touching, 0.003)), float(_gap(caps, grid, 0, touching, -0.003))
+    # the deepest link moves by the full 3 mm either way: (0.3 cm)^2 from it alone, near-linear in the shift
+    assert hover >= 0.09 * 0.9 and sunk >= 0.09 * 0.9
+    assert float(_gap(caps, grid, 0, touching, 0.006)) > 3 * hover
+    d, mask = link_distances(caps, grid, torch.tensor([0]), torch.tensor([0]), *[
+        torch.from_numpy(np.asarray(a, dtype=np.float32)) for a in (grasp_to_pose(touching[None])[1],
+                                                                      grasp_to_pose(touching[None])[0][:, :3, 3],
+                                                                      grasp_to_pose(touching[None])[0][:, :3, :3])])
+    assert float(d[mask].min()) == pytest.approx(0.0, abs=1e-3) and torch.isinf(d[~mask]).all()
+
+
+def test_links_clear_of_the_object_in_both_do_not_count(caps):
+    """Beyond ``reach`` (1 cm) clear is clear: the data 2 cm off, a prediction whose nearest link is 1.7 cm
+    off costs nothing, one whose nearest link is 1.1 cm off neither, one 0.5 cm off (within reach) does
+    (the palm moves 5 / 12 / 18 mm; the bent fingers' nearest points approach the box's edge slower)."""
+    obj = ObjectModel.builtin("box")
+    grid = SDFGrids.from_objects([obj])
+    far = _sunk_grasp("allegro_hand_left", obj, -0.02)
+    assert float(_gap(caps, grid, 0, far, -0.005)) == 0.0
+    assert float(_gap(caps, grid, 0, far, -0.012)) == 0.0
+    assert float(_gap(caps, grid, 0, far, -0.018)) > 0.0
+
+
+@pytest.mark.parametrize("palm_dx", [0.004, -0.004])
+def test_descending_the_contact_terms_gradient_moves_fingers_back_to_the_datas_contact(caps, palm_dx):
+    obj = ObjectModel.builtin("box")
+    grid = SDFGrids.from_objects([obj])
+    touching = _sunk_grasp("shadow_hand_right", obj, 0.0)
+    qt = torch.from_numpy(grasp_to_pose(touching[None])[1].astype(np.float32)).requires_grad_(True)
+    C0 = _gap(caps, grid, 2, touching, palm_dx, qt)
+    C0.backward()
+    step = qt.detach() - 0.02 * qt.grad / qt.grad.norm()
+    assert float(_gap(caps, grid, 2, touching, palm_dx, step)) < float(C0.detach())
+
+
+def test_the_contact_option_trains_logs_and_enters_the_total_with_its_weight(dataset, tmp_path):
+    off = train_grasp(dataset, tiny_model_config(), tiny_train_config(log_every=1), progress=False)
+    on = train_grasp(dataset, tiny_model_config(), tiny_train_config(contact_weight=0.2, log_every=1), progress=False)
+    h = on.metrics["history"]
+    assert "contact" not in off.metrics["history"][-1] and "penetration" not in h[-1]
+    assert all(np.isfinite(e["contact"]) and e["contact"] > 0 for e in h)
+    assert all(e["total"] == pytest.approx(e["diffusion"] + e["joints"] + 0.2 * e["contact"], rel=1e-5) for e in h)
+    assert h[0]["diffusion"] == pytest.approx(off.metrics["history"][0]["diffusion"], rel=1e-6)
+    both = train_grasp(dataset, tiny_model_config(), tiny_train_config(contact_weight=0.2, penetration_weight=0.05, log_every=1),
+                       progress=False)
+    e = both.metrics["history"][0]
+    assert e["total"] == pytest.approx(e["diffusion"] + e["joints"] + 0.05 * e["penetration"] + 0.2 * e["contact"], rel=1e-5)
+
+
+def test_cli_takes_the_contact_weight(dataset, tmp_path):
+    import importlib
+
+    cli = importlib.import_module("ohra.cli.main").main
+    run = tmp_path / "run"
+    assert cli(["train", "grasp", "--data", str(dataset), "--steps", "2", "--batch-size", "8", "--contact-weight", "0.3",
+                "-o", str(run), "--quiet"]) == 0
+    assert json.loads((run / "config.json").read_text())["train"]["contact_weight"] == 0.3
+    assert "contact" in json.loads((run / "metrics.json").read_text())["final_losses"]

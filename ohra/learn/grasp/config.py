@@ -125,9 +125,13 @@ class GraspTrainConfig(_JSONSettings):
     # trained on: the model may not key on the exact condition of one training hand.
     condition_noise: float = 0.0
     # weight of the finger-object penetration term on the joint network (ohra.learn.grasp.contact; base-form
-    # hands; 0: off) and the std [m] of the palm shift it is evaluated at (0: the data's palm)
+    # hands; 0: off) and the std [m] of the palm shift it is evaluated at (0: the data's palm; the contact
+    # term below is evaluated at the same shifted palm)
     penetration_weight: float = 0.0
     penetration_shift: float = 0.0
+    # weight of the two-sided finger-contact term (ohra.learn.grasp.contact.contact_gap: each finger link's
+    # distance to the object pulled to the data's, both capped at 1 cm; base-form hands; 0: off)
+    contact_weight: float = 0.0
 
     RESUMABLE_CHANGES = ("steps", "checkpoint_every", "log_every")
 
@@ -140,7 +144,8 @@ class GraspTrainConfig(_JSONSettings):
                 raise GraspConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
         if not self.lr > 0:
             raise GraspConfigError(f"lr must be positive, got {self.lr}")
-        for name in ("lr_min", "point_noise", "joint_loss_weight", "condition_noise", "penetration_weight", "penetration_shift"):
+        for name in ("lr_min", "point_noise", "joint_loss_weight", "condition_noise", "penetration_weight", "penetration_shift",
+                     "contact_weight"):
             if not getattr(self, name) >= 0:
                 raise GraspConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
         require_seed(self.seed, GraspConfigError)

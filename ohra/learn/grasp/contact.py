@@ -17,6 +17,19 @@ first, so the network learns joints that clear the object from palm positions ne
 the data's: at inference the palm comes from the diffusion model, ~1 cm from where the data's would
 be for the same rotation.
 
+The penetration term is one-sided, and it cleared the fingers off the object (stop 45: fingers 3-10 mm
+outside, success 7 % against 45 %): fingers must touch, not clear. :func:`contact_gap` is two-sided:
+per finger link, the nearest point of the predicted joints' capsule to the object is pulled to the
+distance the data's joints have there, both capped at ``reach`` (1 cm), so links that touch in the data
+touch in the prediction, links that are clear stay at least ``reach`` clear, and neither is pushed
+inside:
+
+    C = mean over rows of  sum over links  ((min(m_hat, reach) - min(m_data, reach)) / 1 cm)^2
+
+with ``m`` a link's nearest signed distance (capsule surface, negative inside) at the row's palm (the
+prediction's possibly shifted as above, the data's never). At the data's own joints C is 0, so the term
+agrees with the joint regression at its optimum and weighs the joint errors by what they do to contact.
+
 Base-form hands only (the torch FK covers that tree): the unified model's hands.
 """
 
@@ -135,19 +148,52 @@ class FingerCapsules:
         return (pts.reshape(b, -1, 3), r.expand(b, 15 * samples), (L > 0)[..., None].expand(b, 15, samples).reshape(b, -1))
 
 
+def _distances(caps: FingerCapsules, sdf: SDFGrids, hand_idx: torch.Tensor, obj_idx: torch.Tensor, q: torch.Tensor,
+               t_obj: torch.Tensor, R_obj_palm: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Signed distances (B, 15*S) [m] of the capsule surfaces at the core points (negative inside) and the
+    mask of the points on links that carry geometry."""
+    pts, r, mask = caps.points(hand_idx, q)
+    world = torch.einsum("bij,bpj->bpi", R_obj_palm, pts) + t_obj[:, None]
+    b, n, _ = world.shape
+    return sdf(obj_idx.long().repeat_interleave(n), world.reshape(-1, 3)).reshape(b, n) - r, mask
+
+
 def penetration(caps: FingerCapsules, sdf: SDFGrids, hand_idx: torch.Tensor, obj_idx: torch.Tensor, q: torch.Tensor,
                 t_obj: torch.Tensor, R_obj_palm: torch.Tensor, clearance: float = 0.001
                 ) -> tuple[torch.Tensor, torch.Tensor]:
     """The term P (see the module docstring; scalar) and each row's deepest finger point (B,) [m]
     (signed: negative inside), for joints q (B, 22) at palm poses (t_obj (B, 3) [m], R_obj_palm
     (B, 3, 3)) in the frames of objects ``obj_idx``."""
-    pts, r, mask = caps.points(hand_idx, q)
-    world = torch.einsum("bij,bpj->bpi", R_obj_palm, pts) + t_obj[:, None]
-    b, n, _ = world.shape
-    d = sdf(obj_idx.long().repeat_interleave(n), world.reshape(-1, 3)).reshape(b, n) - r
+    d, mask = _distances(caps, sdf, hand_idx, obj_idx, q, t_obj, R_obj_palm)
     d = torch.where(mask, d, torch.full_like(d, 1.0))
     depth = torch.relu(-clearance - d) / UNIT_M
     return (depth**2).sum(dim=1).mean(), d.min(dim=1).values
 
 
-__all__ = ["SDFGrids", "FingerCapsules", "penetration", "UNIT_M"]
+def link_distances(caps: FingerCapsules, sdf: SDFGrids, hand_idx: torch.Tensor, obj_idx: torch.Tensor, q: torch.Tensor,
+                   t_obj: torch.Tensor, R_obj_palm: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Per finger link (thumb, index, middle, ring, little x proximal, middle, distal), the nearest signed
+    distance of its capsule to the object (B, 15) [m] (negative inside; +inf on links without geometry)
+    and the mask of the links with geometry (B, 15)."""
+    d, mask = _distances(caps, sdf, hand_idx, obj_idx, q, t_obj, R_obj_palm)
+    b = len(q)
+    d = torch.where(mask, d, torch.full_like(d, float("inf")))
+    return d.reshape(b, 15, -1).min(dim=2).values, mask.reshape(b, 15, -1)[..., 0]
+
+
+def contact_gap(caps: FingerCapsules, sdf: SDFGrids, hand_idx: torch.Tensor, obj_idx: torch.Tensor, q: torch.Tensor,
+                t_obj: torch.Tensor, q_data: torch.Tensor, t_obj_data: torch.Tensor, R_obj_palm: torch.Tensor,
+                reach: float = 0.01) -> torch.Tensor:
+    """The two-sided term C (see the module docstring; scalar) for predicted joints q (B, 22) with the palm
+    at ``t_obj`` (B, 3) [m] against the data's joints ``q_data`` at the data's palm ``t_obj_data``, both
+    rotated by ``R_obj_palm`` (B, 3, 3) in the frames of objects ``obj_idx``; ``reach`` [m]: distances
+    beyond it count as ``reach`` (clear is clear)."""
+    m, mask = link_distances(caps, sdf, hand_idx, obj_idx, q, t_obj, R_obj_palm)
+    with torch.no_grad():
+        target, _ = link_distances(caps, sdf, hand_idx, obj_idx, q_data, t_obj_data, R_obj_palm)
+    gap = (m.clamp(max=reach) - target.clamp(max=reach)) / UNIT_M
+    gap = torch.where(mask, gap, torch.zeros_like(gap))
+    return (gap**2).sum(dim=1).mean()
+
+
+__all__ = ["SDFGrids", "FingerCapsules", "penetration", "link_distances", "contact_gap", "UNIT_M"]

@@ -30,14 +30,14 @@ import torch
 from ohra.errors import CheckpointError, ParamsError
 from ohra.learn.grasp.condition import HandCondition
 from ohra.learn.grasp.config import GraspConfigError, GraspModelConfig, GraspTrainConfig, RunSpec
-from ohra.learn.grasp.contact import FingerCapsules, SDFGrids, penetration
+from ohra.learn.grasp.contact import FingerCapsules, SDFGrids, contact_gap, penetration
 from ohra.learn.grasp.data import TrainingData, make_batch
 from ohra.learn.grasp.model import CHECKPOINT_FORMAT, GraspModel, GraspNet
 from ohra.io import folder_lock, write_text
 from ohra.learn.train_vae import _peak_rss_mib, atomic_save, load_torch_file, torch_settings
 from ohra.objects.model import ObjectModel
 
-LOSS_TERMS = ("total", "diffusion", "joints")  # plus "penetration" when that term is on
+LOSS_TERMS = ("total", "diffusion", "joints")  # plus "penetration" and "contact" when those terms are on
 TEST_SEED = 7919  # noise levels of the held-out loss (fixed, so it compares across runs)
 
 
@@ -92,21 +92,26 @@ def _payload(model: GraspModel, opt: torch.optim.Optimizer, spec: RunSpec, step:
 
 @dataclass
 class ContactTerm:
-    """The penetration term of :mod:`ohra.learn.grasp.contact` for the hands and objects of a training set."""
+    """The finger-object terms of :mod:`ohra.learn.grasp.contact` (penetration, two-sided contact) for the
+    hands and objects of a training set; a term of weight 0 is not computed."""
 
     caps: FingerCapsules
     sdf: SDFGrids
-    weight: float
+    weight: float  # penetration
     shift: float  # m
     t_scale: float  # m
+    contact_weight: float = 0.0
 
     @classmethod
     def for_data(cls, td: TrainingData, cfg: GraspTrainConfig, t_scale: float) -> "ContactTerm":
         return cls(FingerCapsules(td.params, td.hands), SDFGrids.from_objects(td.objects), float(cfg.penetration_weight),
-                   float(cfg.penetration_shift), float(t_scale))
+                   float(cfg.penetration_shift), float(t_scale), float(cfg.contact_weight))
 
-    def __call__(self, net: GraspNet, feats: torch.Tensor, batch) -> torch.Tensor:
-        """The term for the joint network's joints at each row's palm (shifted when ``shift`` > 0; the shift
+    def weights(self) -> dict[str, float]:
+        return {k: w for k, w in (("penetration", self.weight), ("contact", self.contact_weight)) if w > 0}
+
+    def __call__(self, net: GraspNet, feats: torch.Tensor, batch) -> dict[str, torch.Tensor]:
+        """The terms for the joint network's joints at each row's palm (shifted when ``shift`` > 0; the shift
         is drawn from the batch's generator after the diffusion noise, so runs without it keep theirs)."""
         t_obj, t_in = batch.t_obj, batch.t_norm
         if self.shift > 0:
@@ -114,12 +119,19 @@ class ContactTerm:
             t_obj = t_obj + delta
             t_in = t_in + torch.einsum("bij,bj->bi", batch.R_cloud, delta) / self.t_scale
         q_hat = net.joints(torch.cat([feats, batch.hand, batch.rot6d, t_in], dim=-1))
-        return penetration(self.caps, self.sdf, batch.hand_idx, batch.obj_idx, q_hat, t_obj, batch.R_obj_palm)[0]
+        out = {}
+        if self.weight > 0:
+            out["penetration"] = penetration(self.caps, self.sdf, batch.hand_idx, batch.obj_idx, q_hat, t_obj, batch.R_obj_palm)[0]
+        if self.contact_weight > 0:
+            out["contact"] = contact_gap(self.caps, self.sdf, batch.hand_idx, batch.obj_idx, q_hat, t_obj, batch.q,
+                                         batch.t_obj, batch.R_obj_palm)
+        return out
 
 
 def loss_terms(cfg: GraspTrainConfig) -> tuple[str, ...]:
     """The loss terms a run logs."""
-    return LOSS_TERMS + (("penetration",) if cfg.penetration_weight > 0 else ())
+    return (LOSS_TERMS + (("penetration",) if cfg.penetration_weight > 0 else ())
+            + (("contact",) if cfg.contact_weight > 0 else ()))
 
 
 def train_step(net: GraspNet, batch, joint_weight: float, contact: ContactTerm | None = None) -> dict[str, torch.Tensor]:
@@ -128,8 +140,10 @@ def train_step(net: GraspNet, batch, joint_weight: float, contact: ContactTerm |
     terms = net.losses(feats, batch.hand, batch.rot6d, batch.t_norm, batch.q, batch.present, batch.generator)
     terms["total"] = terms["diffusion"] + joint_weight * terms["joints"]
     if contact is not None:
-        terms["penetration"] = contact(net, feats, batch)
-        terms["total"] = terms["total"] + contact.weight * terms["penetration"]
+        extra = contact(net, feats, batch)
+        for name, w in contact.weights().items():
+            terms[name] = extra[name]
+            terms["total"] = terms["total"] + w * extra[name]
     return terms
 
 
@@ -188,7 +202,7 @@ def _prepare(spec: RunSpec, paths: list, ckpt_path: Path | None, resume: bool,
     meta = {"hands": td.hands, "data": spec.data, "data_digest": digest,
             **{k: summary[k] for k in ("train_objects", "test_objects", "per_hand")}}
     terms = loss_terms(cfg)
-    contact = ContactTerm.for_data(td, cfg, t_scale) if cfg.penetration_weight > 0 else None
+    contact = ContactTerm.for_data(td, cfg, t_scale) if cfg.penetration_weight > 0 or cfg.contact_weight > 0 else None
     state = _State(td, GraspModel(net, cond, t_scale, model_cfg, meta), opt, _tables(cond, td),
                    window=({k: 0.0 for k in terms}, 0), contact=contact)
     if ckpt is not None:
