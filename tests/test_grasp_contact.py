@@ -217,7 +217,7 @@ def test_the_shifted_palm_is_the_one_the_joint_network_sees(dataset, monkeypatch
     torch.testing.assert_close(seen["t_in"], in_rotated, atol=1e-5, rtol=1e-5)
 
 
-def _gap(caps, grid, hand_i, data_g, palm_dx, q=None):
+def _gap(caps, grid, hand_i, data_g, palm_dx, q=None, form="capped"):
     """C for the data grasp ``data_g`` against a prediction with joints ``q`` (default: the data's) and
     the palm moved by ``palm_dx`` [m] along x (+: away from the object, whose +x face the palm faces)."""
     T, qd = grasp_to_pose(data_g[None])
@@ -225,7 +225,7 @@ def _gap(caps, grid, hand_i, data_g, palm_dx, q=None):
     t = f(T[:, :3, 3])
     q = f(qd) if q is None else q
     return contact_gap(caps, grid, torch.tensor([hand_i]), torch.tensor([0]), q, t + torch.tensor([[palm_dx, 0.0, 0.0]]),
-                       f(qd), t, f(T[:, :3, :3]))
+                       f(qd), t, f(T[:, :3, :3]), form=form)
 
 
 def test_the_contact_term_is_zero_at_the_datas_fingers_and_two_sided_around_them(caps):
@@ -291,3 +291,36 @@ def test_cli_takes_the_contact_weight(dataset, tmp_path):
                 "-o", str(run), "--quiet"]) == 0
     assert json.loads((run / "config.json").read_text())["train"]["contact_weight"] == 0.3
     assert "contact" in json.loads((run / "metrics.json").read_text())["final_losses"]
+
+
+def test_the_target_form_pulls_a_touching_link_back_from_beyond_reach(caps):
+    """The data touch; the prediction's palm is 2 cm out, every link beyond the 1 cm reach: the capped
+    form is flat there (no gradient), the target form costs the whole distance and its descent closes
+    the fingers. Where the data's links are clear beyond reach the two forms agree."""
+    obj = ObjectModel.builtin("box")
+    grid = SDFGrids.from_objects([obj])
+    touching = _sunk_grasp("shadow_hand_right", obj, 0.0)
+    q0 = torch.from_numpy(grasp_to_pose(touching[None])[1].astype(np.float32))
+    qc, qt = q0.clone().requires_grad_(True), q0.clone().requires_grad_(True)
+    capped = _gap(caps, grid, 2, touching, 0.02, qc)
+    target = _gap(caps, grid, 2, touching, 0.02, qt, form="target")
+    capped.backward()
+    target.backward()
+    assert torch.all(qc.grad == 0) and float(target.detach()) > float(capped.detach()) > 0
+    step = qt.detach() - 0.02 * qt.grad / qt.grad.norm()
+    assert float(_gap(caps, grid, 2, touching, 0.02, step, form="target")) < float(target.detach())
+    far = _sunk_grasp("allegro_hand_left", obj, -0.02)
+    for dx in (-0.005, -0.018):
+        assert float(_gap(caps, grid, 0, far, dx, form="target")) == pytest.approx(float(_gap(caps, grid, 0, far, dx)))
+
+
+def test_the_contact_form_is_a_checked_setting(dataset, tmp_path):
+    import importlib
+
+    with pytest.raises(GraspConfigError, match="contact_form"):
+        tiny_train_config(contact_form="both")
+    cli = importlib.import_module("ohra.cli.main").main
+    run = tmp_path / "run"
+    assert cli(["train", "grasp", "--data", str(dataset), "--steps", "2", "--batch-size", "8", "--contact-weight", "0.3",
+                "--contact-form", "target", "-o", str(run), "--quiet"]) == 0
+    assert json.loads((run / "config.json").read_text())["train"]["contact_form"] == "target"

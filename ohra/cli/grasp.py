@@ -134,6 +134,9 @@ def register_train(train_sub: Any) -> None:
     p.add_argument("--contact-weight", type=float, default=t.contact_weight,
                    help="weight of the two-sided finger-contact term: each finger link's distance to the object pulled "
                         "to the data's (base-form hands; 0: off)")
+    p.add_argument("--contact-form", choices=("capped", "target"), default=t.contact_form,
+                   help="'capped': both distances capped at 1 cm; 'target': a link the data has on the surface is pulled "
+                        "there from any distance")
     p.add_argument("--checkpoint-every", type=int, default=t.checkpoint_every)
     p.add_argument("--vae", help="VAE for the 'vae' condition (default: the shipped one)")
     p.add_argument("-o", "--output", required=True, help="run directory")
@@ -165,7 +168,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
                             rotated_copies=args.rotated_copies, objects_per_step=args.objects_per_step,
                             max_per_pair=args.max_per_pair, checkpoint_every=args.checkpoint_every,
                             condition_noise=args.condition_noise, penetration_weight=args.penetration_weight,
-                            penetration_shift=args.penetration_shift, contact_weight=args.contact_weight, hands=tuple(args.hands), test_objects=tuple(args.test_objects),
+                            penetration_shift=args.penetration_shift, contact_weight=args.contact_weight, contact_form=args.contact_form, hands=tuple(args.hands), test_objects=tuple(args.test_objects),
                             test_hands=tuple(args.test_hands))
     res = train_grasp(args.data, mcfg, tcfg, out, resume=args.resume, progress=not args.quiet, vae_path=args.vae)
     m = res.metrics

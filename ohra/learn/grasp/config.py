@@ -132,6 +132,9 @@ class GraspTrainConfig(_JSONSettings):
     # weight of the two-sided finger-contact term (ohra.learn.grasp.contact.contact_gap: each finger link's
     # distance to the object pulled to the data's, both capped at 1 cm; base-form hands; 0: off)
     contact_weight: float = 0.0
+    # its form: "capped" (both distances capped at 1 cm; stop 46's first arms) or "target" (only the data's
+    # clear links capped: a link the data has on the surface is pulled there from any distance)
+    contact_form: str = "capped"
 
     RESUMABLE_CHANGES = ("steps", "checkpoint_every", "log_every")
 
@@ -148,6 +151,8 @@ class GraspTrainConfig(_JSONSettings):
                      "contact_weight"):
             if not getattr(self, name) >= 0:
                 raise GraspConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
+        if self.contact_form not in ("capped", "target"):
+            raise GraspConfigError(f"contact_form must be 'capped' or 'target', got {self.contact_form!r}")
         require_seed(self.seed, GraspConfigError)
 
 

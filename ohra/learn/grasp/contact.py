@@ -30,6 +30,14 @@ with ``m`` a link's nearest signed distance (capsule surface, negative inside) a
 prediction's possibly shifted as above, the data's never). At the data's own joints C is 0, so the term
 agrees with the joint regression at its optimum and weighs the joint errors by what they do to contact.
 
+That form (``form="capped"``, stop 46's first arms) has no gradient for a link the data has on the
+surface but the prediction holds beyond ``reach``: it costs a constant (1 cm)^2 there. ``form="target"``
+caps only what the data has clear: a link the data has within ``reach`` is pulled to the data's distance
+from wherever it is, one the data has beyond ``reach`` only kept at least ``reach`` clear:
+
+    gap = m_hat - m_data            where m_data < reach
+          min(m_hat, reach) - reach  elsewhere
+
 Base-form hands only (the torch FK covers that tree): the unified model's hands.
 """
 
@@ -49,6 +57,7 @@ from ohra.transforms import rpy_to_matrix
 
 UNIT_M = 0.01  # penetration is measured in centimetres in the loss
 SAMPLES_PER_CAPSULE = 5
+CONTACT_FORMS = ("capped", "target")
 
 
 @dataclass
@@ -183,17 +192,24 @@ def link_distances(caps: FingerCapsules, sdf: SDFGrids, hand_idx: torch.Tensor, 
 
 def contact_gap(caps: FingerCapsules, sdf: SDFGrids, hand_idx: torch.Tensor, obj_idx: torch.Tensor, q: torch.Tensor,
                 t_obj: torch.Tensor, q_data: torch.Tensor, t_obj_data: torch.Tensor, R_obj_palm: torch.Tensor,
-                reach: float = 0.01) -> torch.Tensor:
+                reach: float = 0.01, form: str = "capped") -> torch.Tensor:
     """The two-sided term C (see the module docstring; scalar) for predicted joints q (B, 22) with the palm
     at ``t_obj`` (B, 3) [m] against the data's joints ``q_data`` at the data's palm ``t_obj_data``, both
     rotated by ``R_obj_palm`` (B, 3, 3) in the frames of objects ``obj_idx``; ``reach`` [m]: distances
-    beyond it count as ``reach`` (clear is clear)."""
+    beyond it count as ``reach`` (clear is clear); ``form``: ``"capped"`` (both sides capped) or
+    ``"target"`` (only the data's clear links capped)."""
+    if form not in CONTACT_FORMS:
+        raise GraspConfigError(f"contact form must be one of {CONTACT_FORMS}, got {form!r}")
     m, mask = link_distances(caps, sdf, hand_idx, obj_idx, q, t_obj, R_obj_palm)
     with torch.no_grad():
         target, _ = link_distances(caps, sdf, hand_idx, obj_idx, q_data, t_obj_data, R_obj_palm)
-    gap = (m.clamp(max=reach) - target.clamp(max=reach)) / UNIT_M
+    if form == "capped":
+        gap = (m.clamp(max=reach) - target.clamp(max=reach)) / UNIT_M
+    else:
+        near = target < reach
+        gap = torch.where(near, m - torch.where(near, target, torch.zeros_like(target)), m.clamp(max=reach) - reach) / UNIT_M
     gap = torch.where(mask, gap, torch.zeros_like(gap))
     return (gap**2).sum(dim=1).mean()
 
 
-__all__ = ["SDFGrids", "FingerCapsules", "penetration", "link_distances", "contact_gap", "UNIT_M"]
+__all__ = ["SDFGrids", "FingerCapsules", "penetration", "link_distances", "contact_gap", "UNIT_M", "CONTACT_FORMS"]

@@ -101,11 +101,12 @@ class ContactTerm:
     shift: float  # m
     t_scale: float  # m
     contact_weight: float = 0.0
+    contact_form: str = "capped"
 
     @classmethod
     def for_data(cls, td: TrainingData, cfg: GraspTrainConfig, t_scale: float) -> "ContactTerm":
         return cls(FingerCapsules(td.params, td.hands), SDFGrids.from_objects(td.objects), float(cfg.penetration_weight),
-                   float(cfg.penetration_shift), float(t_scale), float(cfg.contact_weight))
+                   float(cfg.penetration_shift), float(t_scale), float(cfg.contact_weight), cfg.contact_form)
 
     def weights(self) -> dict[str, float]:
         return {k: w for k, w in (("penetration", self.weight), ("contact", self.contact_weight)) if w > 0}
@@ -124,7 +125,7 @@ class ContactTerm:
             out["penetration"] = penetration(self.caps, self.sdf, batch.hand_idx, batch.obj_idx, q_hat, t_obj, batch.R_obj_palm)[0]
         if self.contact_weight > 0:
             out["contact"] = contact_gap(self.caps, self.sdf, batch.hand_idx, batch.obj_idx, q_hat, t_obj, batch.q,
-                                         batch.t_obj, batch.R_obj_palm)
+                                         batch.t_obj, batch.R_obj_palm, form=self.contact_form)
         return out
 
 
