@@ -48,7 +48,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import natural_sorted, write_results  # noqa: E402
 from _study_cache import claim_run, train_key, when_free  # noqa: E402
-from grasp_scale_up import baseline, paired_comparison, rates, require_data_of  # noqa: E402
+from grasp_scale_up import baseline, comparison_lines, paired_comparison, rates, require_data_of  # noqa: E402
 from grasp_study import PAPER, ROOT, data_protocol, eval_objects, evaluated, protocol_note  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -106,11 +106,7 @@ def table(res: dict) -> str:
         lines.append(f"| {r['name']} | {r['weight']:g} | {1000 * r['shift']:g} | {r['train_min']:.0f} | "
                      + " | ".join(f"{100 * r['per_hand'][h]:.1f} %" for h in hands) + f" | {100 * r['pooled']:.1f} % |")
     lines.append("| paper (reported, Isaac Gym) | - | - | - | " + " | ".join(f"{PAPER.get(h, '-')} %" for h in hands) + " | - |")
-    lines += ["", "| comparison (paired over the same rotations) | " + " | ".join(hands) + " | pooled ± SE [points] | reading |",
-              "|---|" + "---|" * (len(hands) + 2)]
-    for c in res["comparisons"]:
-        lines.append(f"| {c['what']} | " + " | ".join(f"{c['per_hand'][h][0]:+.1f} ± {c['per_hand'][h][1]:.1f}" for h in hands)
-                     + f" | {c['pooled'][0]:+.1f} ± {c['pooled'][1]:.1f} | {c['reading']} |")
+    lines += [""] + comparison_lines(res["comparisons"], hands, "comparison (paired over the same rotations)")
     lines += ["", "Deepest finger point of the sampled grasps, median per hand [mm] (negative: inside the object; "
               "descriptive):", "", "| model | " + " | ".join(hands) + " |", "|---|" + "---|" * len(hands)]
     for r in res["rows"]:
@@ -118,12 +114,14 @@ def table(res: dict) -> str:
     return "\n".join(lines)
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def arm_parser(doc: str, arms: dict) -> argparse.ArgumentParser:
+    """The command line of a script that trains ``arms`` on the committed unified recipe and evaluates them
+    against the committed study (this one and ``grasp_contact_term.py``)."""
+    ap = argparse.ArgumentParser(description=doc.split("\n\n")[0])
     ap.add_argument("--data", nargs="+", required=True)
     ap.add_argument("--hands", nargs="+", default=list(PAPER))
     ap.add_argument("--objects-file", type=Path, default=ROOT / "recipes" / "grasp_eval_objects.yaml")
-    ap.add_argument("--arms", nargs="+", default=list(ARMS), choices=list(ARMS))
+    ap.add_argument("--arms", nargs="+", default=list(arms), choices=list(arms))
     ap.add_argument("--steps", type=int, default=12000)
     ap.add_argument("-n", type=int, default=100, help="sampled grasps per (hand, object)")
     ap.add_argument("--seed", type=int, default=0)
@@ -132,6 +130,11 @@ def main() -> None:
     ap.add_argument("--runs", default=str(ROOT / "runs" / "grasp_contact"))
     ap.add_argument("--baseline", type=Path, default=ROOT / "runs" / "grasp_study", help="the committed study's runs")
     ap.add_argument("--quiet", action="store_true")
+    return ap
+
+
+def main() -> None:
+    ap = arm_parser(__doc__, ARMS)
     args = ap.parse_args()
     from ohra.learn.grasp.model import load_grasp_model
 

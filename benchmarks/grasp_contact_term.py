@@ -65,8 +65,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import natural_sorted, write_results  # noqa: E402
-from grasp_contact_loss import trained_arm  # noqa: E402
-from grasp_scale_up import baseline, paired_comparison, rates, require_data_of  # noqa: E402
+from grasp_contact_loss import arm_parser, trained_arm  # noqa: E402
+from grasp_scale_up import baseline, comparison_lines, paired_comparison, rates, require_data_of  # noqa: E402
 from grasp_study import PAPER, ROOT, data_protocol, eval_objects, evaluated, protocol_note  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -114,11 +114,7 @@ def table(res: dict) -> str:
                      + " | ".join(f"{100 * r['raw']['per_hand'][h]:.1f} / {100 * r['touch']['per_hand'][h]:.1f} %" for h in hands)
                      + f" | {100 * r['raw']['pooled']:.1f} / {100 * r['touch']['pooled']:.1f} % |")
     lines.append("| paper (reported, Isaac Gym) | - | - | - | - | " + " | ".join(f"{PAPER.get(h, '-')} %" for h in hands) + " | - |")
-    lines += ["", "| comparison (paired over the same rotations) | " + " | ".join(hands) + " | pooled ± SE [points] | reading |",
-              "|---|" + "---|" * (len(hands) + 2)]
-    for c in res["comparisons"]:
-        lines.append(f"| {c['what']} | " + " | ".join(f"{c['per_hand'][h][0]:+.1f} ± {c['per_hand'][h][1]:.1f}" for h in hands)
-                     + f" | {c['pooled'][0]:+.1f} ± {c['pooled'][1]:.1f} | {c['reading']} |")
+    lines += [""] + comparison_lines(res["comparisons"], hands, "comparison (paired over the same rotations)")
     lines += ["", "Fingers of the raw samples, pooled over hands and objects (descriptive; touching: within 1 mm of the surface):",
               "", "| model | sunk > 1 mm | touching | hovering |", "|---|---|---|---|"]
     for r in res["rows"]:
@@ -128,19 +124,7 @@ def table(res: dict) -> str:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--data", nargs="+", required=True)
-    ap.add_argument("--hands", nargs="+", default=list(PAPER))
-    ap.add_argument("--objects-file", type=Path, default=ROOT / "recipes" / "grasp_eval_objects.yaml")
-    ap.add_argument("--arms", nargs="+", default=list(ARMS), choices=list(ARMS))
-    ap.add_argument("--steps", type=int, default=12000)
-    ap.add_argument("-n", type=int, default=100, help="sampled grasps per (hand, object)")
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--threads", type=int, default=1)
-    ap.add_argument("--workers", type=int, default=1, help="simulation processes")
-    ap.add_argument("--runs", default=str(ROOT / "runs" / "grasp_contact"))
-    ap.add_argument("--baseline", type=Path, default=ROOT / "runs" / "grasp_study", help="the committed study's runs")
-    ap.add_argument("--quiet", action="store_true")
+    ap = arm_parser(__doc__, ARMS)
     args = ap.parse_args()
     from ohra.learn.grasp.model import load_grasp_model
 

@@ -76,6 +76,15 @@ def paired_comparison(a: dict, b: dict, hands: list[str], what: str, readings: t
     return {"what": what, "pooled": [d, se], "reading": reading, "per_hand": {h: list(paired_change(a, b, h)) for h in hands}}
 
 
+def comparison_lines(comparisons: list[dict], hands: list[str], head: str = "comparison (paired over the same rotations)") -> list[str]:
+    """Markdown rows of :func:`paired_comparison` results: per hand and pooled difference ± SE, and the reading."""
+    lines = [f"| {head} | " + " | ".join(hands) + " | pooled ± SE [points] | reading |", "|---|" + "---|" * (len(hands) + 2)]
+    for c in comparisons:
+        lines.append(f"| {c['what']} | " + " | ".join(f"{c['per_hand'][h][0]:+.1f} ± {c['per_hand'][h][1]:.1f}" for h in hands)
+                     + f" | {c['pooled'][0]:+.1f} ± {c['pooled'][1]:.1f} | {c['reading']} |")
+    return lines
+
+
 def require_data_of(run: Path, data: list[str]) -> None:
     """Exit with one line unless ``data`` are the folders (same content) the run was trained on."""
     from _study_cache import data_fingerprint

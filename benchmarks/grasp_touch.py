@@ -36,7 +36,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import natural_sorted, write_results  # noqa: E402
 from _study_cache import cached, eval_key, run_key  # noqa: E402
-from grasp_scale_up import baseline, paired_comparison, rates, require_data_of  # noqa: E402
+from grasp_scale_up import baseline, comparison_lines, paired_comparison, rates, require_data_of  # noqa: E402
 from grasp_study import PAPER, ROOT, data_protocol, eval_objects, evaluated, protocol_note  # noqa: E402
 
 from ohra.learn.grasp.refine import RefineSettings  # noqa: E402
@@ -54,11 +54,7 @@ def table(res: dict) -> str:
         lines.append(f"| {r['name']} | " + " | ".join(f"{100 * r['per_hand'][h]:.1f} %" for h in hands)
                      + f" | {100 * r['pooled']:.1f} % | " + (f"{r['refine_ms']:.0f}" if r.get("refine_ms") else "-") + " |")
     lines.append("| paper (reported, Isaac Gym) | " + " | ".join(f"{PAPER.get(h, '-')} %" for h in hands) + " | - | - |")
-    lines += ["", "| comparison (paired over the same rotations; the same grasps before refinement but for best of K) | " + " | ".join(hands) + " | pooled ± SE [points] | reading |",
-              "|---|" + "---|" * (len(hands) + 2)]
-    for c in res["comparisons"]:
-        lines.append(f"| {c['what']} | " + " | ".join(f"{c['per_hand'][h][0]:+.1f} ± {c['per_hand'][h][1]:.1f}" for h in hands)
-                     + f" | {c['pooled'][0]:+.1f} ± {c['pooled'][1]:.1f} | {c['reading']} |")
+    lines += [""] + comparison_lines(res["comparisons"], hands, "comparison (paired over the same rotations; the same grasps before refinement but for best of K)")
     return "\n".join(lines)
 
 
