@@ -177,3 +177,25 @@ def test_ohra_eval_checks_every_output_and_option_before_writing_anything(tmp_pa
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and named in err, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["adir", "g.npy"]  # no report, no temporary file
+
+
+def test_a_hand_without_a_movable_joint_is_refused_by_every_simulation_by_name(tmp_path, capsys):
+    """leap_0000 (no finger) and a hand whose every joint has upper == lower cannot be simulated: an ohra error
+    naming the hand, and exit 2 from the CLI, not a numpy error from PyBullet's empty joint lists."""
+    import dataclasses
+
+    from ohra.cli import main
+    from ohra.sim.hands import SimHand
+
+    with pytest.raises(GraspError, match="'leap_0000' has no movable joint"):
+        SimHand.from_params(ohra.get_hand("leap_0000"), name="leap_0000")
+    p = ohra.get_hand("allegro_hand_left", "base")
+    rigid = dataclasses.replace(p, joint_uppers=tuple(p.joint_lowers))
+    with pytest.raises(GraspError, match="no movable joint"):
+        SimHand.from_params(rigid, name="rigid")
+    SimHand.from_params(p, name="allegro")  # one movable joint is enough: the check is not on the finger count
+    for argv in (["rotate", "grasps", "--hand", "leap_0000", "--grasps", "2"],
+                 ["grasp", "eval", "--hands", "leap_0000", "--objects", "builtin:box", "-n", "2"]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert "no movable joint" in err and "Traceback" not in err

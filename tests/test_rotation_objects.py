@@ -115,3 +115,63 @@ def test_a_mesh_file_object_runs_in_the_env_and_caches_under_its_stem(tmp_path, 
         assert path.is_file() and path.parent == tmp_path / "rotation" and "TomatoSoupCan" in path.name
     finally:
         env.close()
+
+
+def _off_centre_box(tmp_path, offset=(0.05, 0.03, 0.0)):
+    """A 6 x 5 x 5 cm box whose mesh frame origin lies ``offset`` [m] from its centre (a mesh exported in scene
+    coordinates, as the YCB meshes are, 1-10 cm off-centre)."""
+    import trimesh
+
+    m = trimesh.creation.box(extents=(0.06, 0.05, 0.05))
+    m.apply_translation(offset)
+    path = tmp_path / "off_box.obj"
+    m.export(path)
+    return str(path)
+
+
+def test_starting_states_of_an_off_centre_mesh_turn_it_about_its_centre_of_mass(tmp_path):
+    """Every starting state has the object's centre of mass over the palm centre, whatever its random yaw: the
+    yaw turns the object about its centre of mass, not about the mesh frame origin 6 cm away (which swung the
+    object up to 12 cm off the palm)."""
+    from ohra.sim.rotation.grasps import generate
+
+    cfg = RotationConfig(object=_off_centre_box(tmp_path), grasp_count=4)
+    t = resolve(cfg)
+    scene = RotationScene(t.hand, t.obj, cfg, t.palm_radius)
+    try:
+        centre = scene.palm_centre_world()
+    finally:
+        scene.close()
+    gs = generate(t)
+    yaws = [2 * np.arctan2(q[2], q[3]) for q in gs.obj_quat]
+    assert np.ptp(np.unwrap(yaws)) > 0.5  # the states do differ in yaw
+    for pos, quat in zip(gs.obj_pos, gs.obj_quat):
+        com = pos + quat_to_matrix(quat) @ t.obj.com
+        assert np.linalg.norm((com - centre)[:2]) < 0.015
+
+
+def test_turning_an_off_centre_object_in_place_neither_ends_the_episode_nor_counts_as_drift(tmp_path, monkeypatch):
+    """Termination, the drift term and the observed position follow the centre of mass: a mesh turned 3 rad
+    about its centre of mass has not left the hand (its frame origin, 5.8 cm off, moved ~11 cm)."""
+    gym = pytest.importorskip("gymnasium", reason="the rotation env needs the rl extra (gymnasium)")
+    import pybullet as pb
+
+    import ohra.sim.rotation  # noqa: F401  (registers the env)
+
+    monkeypatch.setenv("OHRA_CACHE_DIR", str(tmp_path))
+    env = gym.make("ohra/InHandRotate-v0", object=_off_centre_box(tmp_path), grasp_count=2)
+    try:
+        env.reset(seed=0)
+        u = env.unwrapped
+        body, c = u.scene.obj_body, u.scene.client
+        p, q = pb.getBasePositionAndOrientation(body, physicsClientId=c)  # the base frame is the centre of mass
+        turned = pb.multiplyTransforms([0, 0, 0], [0.0, 0.0, np.sin(1.5), np.cos(1.5)], [0, 0, 0], q)[1]
+        pb.resetBasePositionAndOrientation(body, p, turned, physicsClientId=c)
+        obs, _, terminated, _, info = env.step(np.zeros(env.action_space.shape, dtype=np.float32))
+        assert info["termination"] is None and not terminated
+        assert info["reward/drift"] < 0.01
+        from ohra.sim.rotation.observations import slices
+
+        assert np.linalg.norm(obs[slices(u.space.dim)["object_pos"]]) < 0.01
+    finally:
+        env.close()

@@ -69,6 +69,12 @@ class SimHand:
     mimic: dict[str, tuple[str, float, float]] = field(default_factory=dict)
     couplings: tuple = ()
 
+    def __post_init__(self) -> None:
+        # a hand without one driven joint would fail deep in PyBullet calls on empty joint lists
+        if len(self.joints) == 0:
+            raise GraspError(f"hand {self.name!r} has no movable joint (none is driven, or every upper limit is at "
+                             "or below its lower one): simulating a grasp or an in-hand rotation needs at least one")
+
     @property
     def coupled(self) -> bool:
         """A canonical hand with couplings (an original hand couples through its URDF mimic tags)."""

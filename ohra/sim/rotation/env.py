@@ -5,8 +5,8 @@ clipped into the joint limits, sent to the position motors, held for one control
 ``n`` = 22 in the canonical joint space (immovable slots ignore their action) or the original
 URDF's driven joints (``space="native"``). Observation: see :mod:`ohra.sim.rotation.observations`
 (``observation_structure`` gives the layout). Reward: see :mod:`ohra.sim.rotation.rewards`; each
-term is in ``info["reward/<term>"]``. Termination: the object fell ``fall_height`` below or moved
-``max_distance`` from its start, or the simulation diverged; truncation after ``episode_steps``.
+term is in ``info["reward/<term>"]``. Termination: the object's centre of mass fell ``fall_height`` below
+or moved ``max_distance`` from its start, or the simulation diverged; truncation after ``episode_steps``.
 ``info`` also carries ``delta_yaw`` (rad turned about +z this step), ``cumulative_rotation`` (rad
 since reset), ``steps`` and ``termination`` (None, "fell", "left" or "broken").
 
@@ -82,7 +82,7 @@ class InHandRotateEnv(gym.Env):
         self.scene.new_object(g.obj_pos[i], g.obj_quat[i])
         self._target = np.clip(self.space.from_sim(target), self._lo, self._hi)
         self._q_start = self.space.from_sim(g.q[i])
-        self._obj_start = np.asarray(g.obj_pos[i], dtype=float).copy()
+        self._obj_start = self.scene.com_world(g.obj_pos[i], g.obj_quat[i])  # centre of mass
         self._quat = np.asarray(g.obj_quat[i], dtype=float).copy()
         self._steps, self._rotation = 0, 0.0
         self._snap = snap = self.scene.read()
@@ -96,7 +96,7 @@ class InHandRotateEnv(gym.Env):
         self.scene.step()
         prev, self._snap = self._snap, (snap := self.scene.read())
         self._steps += 1
-        why = termination.reason(snap.obj_pos, self._obj_start, cfg.fall_height, cfg.max_distance, snap.obj_quat,
+        why = termination.reason(snap.obj_com, self._obj_start, cfg.fall_height, cfg.max_distance, snap.obj_quat,
                                  snap.q, snap.dq, snap.tau, snap.obj_linvel, snap.obj_angvel)
         if why == "broken":
             terms = {k: 0.0 for k in rewards.TERMS}
@@ -134,7 +134,7 @@ class InHandRotateEnv(gym.Env):
         dq = (snap.q - prev.q) / cfg.control_dt if cfg.work_velocity == "step" else snap.dq
         q = self.space.from_sim(snap.q)
         return {"rotation": rewards.rotation(dyaw, cfg.control_dt, cfg.angvel_clip),
-                "drift": rewards.drift(snap.obj_pos, self._obj_start),
+                "drift": rewards.drift(snap.obj_com, self._obj_start),
                 "pose": rewards.pose(q, self._q_start),
                 "torque": rewards.torque(snap.tau),
                 "work": rewards.work(snap.tau, dq),
@@ -143,7 +143,7 @@ class InHandRotateEnv(gym.Env):
     def _observe(self, snap) -> np.ndarray:
         o = obs_terms.ObsInput(q=self.space.from_sim(snap.q), target=self._target,
                                dq=self.space.velocity_from_sim(snap.dq), lower=self._lo, upper=self._hi,
-                               obj_pos=snap.obj_pos, obj_start=self._obj_start, obj_quat=snap.obj_quat,
+                               obj_pos=snap.obj_com, obj_start=self._obj_start, obj_quat=snap.obj_quat,
                                obj_linvel=snap.obj_linvel, obj_angvel=snap.obj_angvel,
                                time=self._steps * self.cfg.control_dt, phase_period=self.cfg.phase_period)
         out = self._observer(o)

@@ -3,7 +3,7 @@
 Procedure (HORA's grasp cache, made hand-agnostic):
 
 1. *Nominal object pose*: the object rests on the palm centre (its lowest point 1 mm above the
-   palm surface found by a ray cast), at yaw 0.
+   palm surface found by a ray cast), at yaw 0; its centre of mass above the palm centre.
 2. *Holding pose*: with the object pinned there, every driven joint sweeps from 0 (clipped into
    its limits) towards its closing limit: the one whose rotation swings the joint's subtree
    (the links it moves) towards the object. Each finger stops when it touches the object (or
@@ -11,10 +11,10 @@ Procedure (HORA's grasp cache, made hand-agnostic):
    canonical hand's holding pose through its action map (``grasp_hold="canonical"``, the default),
    so canonical and original start from the same hand pose; ``"own"`` closes its own fingers.
 3. *Samples*: the holding pose plus uniform per-joint noise of +-``grasp_noise`` rad (reference
-   ranges: LEAP 0.25, Shadow 0.1), clipped into the limits; the object at the nominal position with
-   a uniform random yaw; the motors hold the noisy pose for ``settle_time`` s under gravity. A
-   sample is kept when the object is still within half the termination margins (height, distance),
-   has not moved over the last ``STILL_TIME`` s (a creeping object would start every episode with a
+   ranges: LEAP 0.25, Shadow 0.1), clipped into the limits; the object at the nominal pose turned by a
+   uniform random yaw about its centre of mass (which stays over the palm centre); the motors hold the noisy pose for ``settle_time`` s under gravity. A
+   sample is kept when the object's centre of mass is still within half the termination margins (height,
+   distance), has not moved over the last ``STILL_TIME`` s (a creeping object would start every episode with a
    free drift) and is touched by at least ``min_contacts`` distinct hand links. The kept state after
    the settle (joints, motor targets, object pose) is a starting state.
 
@@ -217,7 +217,8 @@ def cache_key(task: Task) -> str:
                   prims=[dict(p) for p in task.obj.prims], version=VERSION, palm_radius=task.palm_radius,
                   **({"body": task.obj.digest} if task.obj.digest else {}),  # a mesh object (keys of primitives unchanged)
                   # placed by its centre of mass (keys of objects whose frame is their centre of mass unchanged)
-                  **({"placed": "com"} if np.any(np.asarray(task.obj.com) != 0.0) else {}),
+                  # and turned about it ("com-yaw"; before, the yaw turned it about its frame origin)
+                  **({"placed": "com-yaw"} if np.any(np.asarray(task.obj.com) != 0.0) else {}),
                   pybullet=pb.getAPIVersion())
     h = hashlib.sha256(task.hand.urdf.encode())
     h.update(json.dumps(fields, sort_keys=True, default=float).encode())
@@ -238,16 +239,17 @@ def _label(spec: str) -> str:
 
 
 def _keep(scene: RotationScene, start: np.ndarray, before) -> bool:
-    """Keep a settled sample: in place (half the termination margins), still since ``before``
+    """Keep a settled sample: its centre of mass in place (half the termination margins; ``start`` is where it
+    began, world [m]), still since ``before``
     (the state ``STILL_TIME`` s earlier), and touched by ``min_contacts`` hand links."""
     cfg, s = scene.cfg, scene.read()
-    if not (np.all(np.isfinite(s.obj_pos)) and np.all(np.isfinite(s.q))):
+    if not (np.all(np.isfinite(s.obj_com)) and np.all(np.isfinite(s.q))):
         return False
-    if s.obj_pos[2] < start[2] - cfg.fall_height / 2:
+    if s.obj_com[2] < start[2] - cfg.fall_height / 2:
         return False
-    if np.linalg.norm(s.obj_pos - start) > cfg.max_distance / 2:
+    if np.linalg.norm(s.obj_com - start) > cfg.max_distance / 2:
         return False
-    if np.linalg.norm(s.obj_pos - before.obj_pos) > STILL_MOVE[0]:
+    if np.linalg.norm(s.obj_com - before.obj_com) > STILL_MOVE[0]:
         return False
     if abs(delta_yaw(before.obj_quat, s.obj_quat)) > STILL_MOVE[1]:
         return False
@@ -261,6 +263,7 @@ def generate(task: Task, progress: bool | None = False) -> GraspSet:
     try:
         hold = _hold(task, scene)
         pos, rest = nominal_pose(scene)
+        com = scene.com_world(pos, rest)  # each sample turns the object about its centre of mass
         rng = np.random.default_rng(cfg.grasp_seed)
         r = cfg.resolved_grasp_noise
         steps = int(round(cfg.settle_time * cfg.control_hz))
@@ -273,13 +276,13 @@ def generate(task: Task, progress: bool | None = False) -> GraspSet:
             q = np.clip(hold + rng.uniform(-r, r, size=hold.shape), hand.lower, hand.upper)
             quat = _quat_mul(yaw_quat(float(rng.uniform(-math.pi, math.pi))), rest)
             scene.set_hand(q)
-            scene.new_object(pos, quat)
+            scene.new_object(com - (scene.com_world(np.zeros(3), quat)), quat)
             before = None
             for k in range(steps):
                 scene.step()
                 if k + 1 == check:
                     before = scene.read()
-            if _keep(scene, pos, before):
+            if _keep(scene, com, before):
                 s = scene.read()
                 Q.append(s.q)
                 T.append(q)

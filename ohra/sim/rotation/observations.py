@@ -37,8 +37,8 @@ class ObsInput:
     dq: np.ndarray  # (n,) rad/s
     lower: np.ndarray  # (n,) rad
     upper: np.ndarray  # (n,) rad
-    obj_pos: np.ndarray  # (3,) m
-    obj_start: np.ndarray  # (3,) m
+    obj_pos: np.ndarray  # (3,) m, the object's centre of mass
+    obj_start: np.ndarray  # (3,) m, the centre of mass at the episode start
     obj_quat: np.ndarray  # (4,) xyzw
     obj_linvel: np.ndarray  # (3,) m/s
     obj_angvel: np.ndarray  # (3,) rad/s

@@ -42,6 +42,8 @@ class Snapshot:
 
     ``q``, ``dq``, ``tau``: (n,) driven joint positions [rad], velocities [rad/s], motor torques [N m],
     in ``SimHand.joints`` order. ``obj_pos`` (3,) [m] and ``obj_quat`` (4,) xyzw: the object frame;
+    ``obj_com`` (3,) [m]: the object's centre of mass (what termination, drift and the observation measure:
+    a mesh's frame origin may lie centimetres off the object, and it swings round as the object turns);
     ``obj_linvel`` [m/s] (of the centre of mass) and ``obj_angvel`` [rad/s]: (3,) each.
     """
 
@@ -52,6 +54,7 @@ class Snapshot:
     obj_quat: np.ndarray
     obj_linvel: np.ndarray
     obj_angvel: np.ndarray
+    obj_com: np.ndarray
 
 
 def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -232,11 +235,16 @@ class RotationScene:
         quat = np.asarray(quat)
         if self._turned_inertia:  # PyBullet reports the inertial frame: back to the object frame
             quat = _quat_mul(quat, self._inertia_conj)
-        pos = np.asarray(p)
+        com = pos = np.asarray(p)  # the body's base frame is its centre of mass (new_object)
         if self.obj.com.any():
             R = np.reshape(pb.getMatrixFromQuaternion(quat.tolist()), (3, 3))
             pos = pos - R @ self.obj.com
-        return Snapshot(q, dq, tau, pos, quat, np.asarray(v), np.asarray(w))
+        return Snapshot(q, dq, tau, pos, quat, np.asarray(v), np.asarray(w), com)
+
+    def com_world(self, pos: np.ndarray, quat: np.ndarray) -> np.ndarray:
+        """(3,) world position [m] of the centre of mass of the object whose frame is at ``pos``, ``quat`` (xyzw)."""
+        R = np.reshape(pb.getMatrixFromQuaternion([float(x) for x in quat]), (3, 3))
+        return np.asarray(pos, dtype=float) + R @ np.asarray(self.obj.com, dtype=float)
 
     def hand_contacts(self) -> int:
         """Number of distinct hand links touching the object now."""
