@@ -541,3 +541,85 @@ def test_a_run_started_from_an_exported_policy_gets_its_weights_and_observation_
     train_rotation(env_cfg, ppo, tmp_path / "again", init_from=tmp_path / "fine")
     chain = json.loads((tmp_path / "again" / "config.json").read_text())["init_from"]
     assert chain["source_init_from"]["file"] == "policy.pth" and chain["source_init_from"]["timesteps"] == 24
+
+
+def test_a_run_keeps_its_own_copy_of_a_params_file_hand_and_an_absolute_object_path(tmp_path, monkeypatch):
+    """A hand given as a params file is copied into the run and config.json names the copy: evaluating from
+    another folder, or after the file changed or vanished, uses the hand the policy was trained on (it used
+    the path as typed: 'params file not found' elsewhere, or silently another hand)."""
+    import dataclasses
+
+    import trimesh
+
+    from ohra.hands import get_hand
+    from ohra.learn.rl.evaluate import Policy, export_policy
+    from ohra.learn.rl.train import load_run, read_config
+
+    monkeypatch.setenv("OHRA_CACHE_DIR", str(tmp_path / "cache"))
+    work = tmp_path / "work"
+    work.mkdir()
+    monkeypatch.chdir(work)
+    p = get_hand("leap_3303")
+    (work / "my_leap.json").write_text(json.dumps(p.to_dict()))
+    trimesh.creation.box(extents=(0.05, 0.05, 0.05)).export(work / "block.obj")
+    env_cfg = RotationConfig(hand="my_leap.json", object="block.obj", grasp_count=2, episode_steps=24)
+    ppo = PPOSettings(total_steps=24, n_envs=1, n_steps=24, batch_size=24, n_epochs=1, net_arch=(16, 16),
+                      checkpoint_every=24)
+    train_rotation(env_cfg, ppo, "run")
+    saved = read_config(work / "run")
+    assert saved["env"]["hand"] == "my_leap.json" and saved["hand_source"] == str(work / "my_leap.json")
+    assert saved["env"]["object"] == str(work / "block.obj")
+    trained = (work / "run" / "my_leap.json").read_text()
+    assert trained == (work / "my_leap.json").read_text()
+
+    train_rotation(env_cfg, dataclasses.replace(ppo, total_steps=36), "run", resume=True)  # the same file: same hand
+    other = dataclasses.replace(p, palm_radius=p.palm_radius * 1.3)  # the user's file changes afterwards
+    (work / "my_leap.json").write_text(json.dumps(other.to_dict()))
+    monkeypatch.chdir(tmp_path)
+    cfg, _ = load_run(work / "run")
+    assert cfg.hand == str(work / "run" / "my_leap.json") and get_hand(cfg.hand).palm_radius == p.palm_radius
+    assert cfg.resolved_grasp_noise == 0.25  # the copy keeps the file's name, so its LEAP start-pose noise
+    with pytest.raises(RLConfigError, match="hand: run"):  # the changed file is another hand
+        train_rotation(env_cfg.with_overrides(hand=str(work / "my_leap.json"), object=str(work / "block.obj")), ppo,
+                       work / "run", resume=True)
+    train_rotation(cfg, dataclasses.replace(ppo, total_steps=72), work / "run", resume=True)  # the run's own
+    export_policy(work / "run", tmp_path / "export")
+    assert (tmp_path / "export" / "my_leap.json").read_text() == trained
+    (work / "run" / "my_leap.json").unlink()
+    assert Policy(tmp_path / "export").env_cfg.hand == str(tmp_path / "export" / "my_leap.json")
+
+
+@pytest.mark.parametrize("damaged", ["model.zip", "vecnormalize.pkl", "checkpoints/last.zip",
+                                     "checkpoints/last_vecnormalize.pkl"])
+def test_a_damaged_policy_or_statistics_file_is_a_checkpoint_error_naming_it(raw_obs_run, tmp_path, monkeypatch,
+                                                                               damaged):
+    """Evaluating, resuming or starting from a run whose zip or pickle is damaged names the file (it was a
+    zipfile or pickle traceback); the CLI prints it on one line and exits 2."""
+    import shutil
+
+    from ohra.cli import main
+    from ohra.learn.rl.evaluate import Policy
+    from ohra.learn.rl.train import load_run
+
+    run, cache, _ = raw_obs_run
+    monkeypatch.setenv("OHRA_CACHE_DIR", str(cache))
+    bad = tmp_path / "run"
+    shutil.copytree(run, bad)
+    if not (bad / "vecnormalize.pkl").exists():  # trained without normalisation: the pickle is optional
+        (bad / "vecnormalize.pkl").write_bytes(b"")
+        (bad / "checkpoints" / "last_vecnormalize.pkl").write_bytes(b"")
+    (bad / damaged).write_bytes(b"not a policy\n")
+    name = damaged.rsplit("/", 1)[-1].replace(".", r"\.")
+    which = "last" if damaged.startswith("checkpoints") else "model"
+    with pytest.raises(CheckpointError, match=rf"{name} is not a readable SB3"):
+        Policy(bad, which)
+    if which == "last":
+        env_cfg, ppo = load_run(bad)
+        with pytest.raises(CheckpointError, match=rf"{name} is not a readable SB3"):
+            train_rotation(env_cfg, with_budget(ppo, total_steps=48), bad, resume=True)
+        assert main(["rotate", "train", "-o", str(bad), "--resume", "--steps", "48"]) == 2
+        with pytest.raises(CheckpointError, match=rf"{name}"):  # a new run starts from the last checkpoint
+            train_rotation(env_cfg, ppo, tmp_path / "fine", init_from=bad)
+        assert not (tmp_path / "fine" / "config.json").exists()
+    else:
+        assert main(["rotate", "eval", str(bad), "--episodes", "1"]) == 2

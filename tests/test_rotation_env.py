@@ -362,3 +362,13 @@ def test_generating_starting_states_shows_progress_on_a_terminal_only(monkeypatc
     monkeypatch.setattr(sys, "stderr", io.StringIO())
     grasps._bar(3, "grasps x", None).update(1)
     assert sys.stderr.getvalue() == ""
+
+
+def test_start_pose_noise_follows_the_hand_not_the_folders_its_file_lies_in():
+    """LEAP hands take the reference's +-0.25 rad, others Shadow's 0.1: an Allegro params file in a folder
+    named for LEAP is not a LEAP hand (it got 0.25 and other starting states when the path was matched)."""
+    noise = lambda hand: RotationConfig(hand=hand).resolved_grasp_noise  # noqa: E731
+    assert noise("leap_hand_right") == noise("leap_2211") == noise("runs/my_leap_3303.json") == 0.25
+    assert noise("shadow_hand_right") == noise("allegro_hand_left") == 0.1
+    assert noise("/data/leap_runs/allegro_mod.json") == noise("leap_exp\\allegro.yaml") == 0.1
+    assert RotationConfig(hand="leap_hand_right", grasp_noise=0.05).resolved_grasp_noise == 0.05

@@ -175,3 +175,21 @@ def test_turning_an_off_centre_object_in_place_neither_ends_the_episode_nor_coun
         assert np.linalg.norm(obs[slices(u.space.dim)["object_pos"]]) < 0.01
     finally:
         env.close()
+
+
+@pytest.mark.parametrize("extent, size, ok", [(60.0, None, False), (0.008, None, False), (0.06, None, True),
+                                              (60.0, 0.06, True), (0.06, 0.6, False), (0.06, 0.45, True)])
+def test_an_object_no_hand_can_hold_is_refused_with_the_fix(tmp_path, extent, size, ok):
+    """A mesh in millimetres (a 60 m brick) or an 8 mm one ran as if held; the graspable range is the data
+    engine's (1-50 cm, either side of its edges here) and ``object_size`` is the way out."""
+    import trimesh
+
+    path = tmp_path / "brick.stl"
+    trimesh.creation.box(extents=(extent, 0.5 * extent, 0.4 * extent)).export(path)
+    if ok:
+        assert make_object(str(path), size, 500.0).mesh.extents.max() == pytest.approx(size or extent)
+    else:
+        with pytest.raises(ObjectError, match=r"largest extent .* outside the graspable range 0\.01-0\.5 m.*object_size"):
+            make_object(str(path), size, 500.0)
+    with pytest.raises(ObjectError, match="outside the graspable range"):
+        make_object("cube", 0.6, 500.0)

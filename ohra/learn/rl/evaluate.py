@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ohra.errors import CheckpointError
+from ohra.learn.rl.files import load_checked, load_pickle
 from ohra.learn.rl.config import RLConfigError
 from ohra.sim.rotation.config import RotationConfig, RotationConfigError
 
@@ -147,10 +148,12 @@ class Policy:
             else:
                 from stable_baselines3.common.policies import ActorCriticPolicy as policy_class
 
-            self._policy = policy_class.load(str(run / "policy.pth"), device="cpu")
+            self._policy = load_checked(run / "policy.pth", "exported policy (policy.pth)",
+                                        lambda: policy_class.load(str(run / "policy.pth"), device="cpu"))
             self._read_obs_stats(run / "obs_stats.npz")
             if (run / "grasps.npz").is_file():
-                self.grasps = GraspSet.load(run / "grasps.npz")
+                self.grasps = load_checked(run / "grasps.npz", "starting-state file (grasps.npz)",
+                                           lambda: GraspSet.load(run / "grasps.npz"))
             return
         zip_path, stats = {"model": (run / "model.zip", run / "vecnormalize.pkl"),
                            "last": (run / "checkpoints" / "last.zip", run / "checkpoints" / "last_vecnormalize.pkl")}[which]
@@ -158,12 +161,12 @@ class Policy:
             raise CheckpointError(f"no trained policy at {zip_path}")
         from ohra.learn.rl.train import ppo_class
 
-        self._policy = ppo_class(self.ppo.policy).load(zip_path, device="cpu").policy
+        self._policy = load_checked(zip_path, "SB3 policy (.zip)",
+                                    lambda: ppo_class(self.ppo.policy).load(zip_path, device="cpu").policy)
         if stats.is_file():
-            import pickle
-
-            with open(stats, "rb") as fh:
-                vn = pickle.load(fh)
+            vn = load_pickle(stats, "SB3 VecNormalize statistics (.pkl)")
+            if not hasattr(vn, "norm_obs"):
+                raise CheckpointError(f"{stats} holds a {type(vn).__name__}, not SB3 VecNormalize statistics")
             if vn.norm_obs:
                 self._mean, self._var, self._clip, self._eps = vn.obs_rms.mean, vn.obs_rms.var, vn.clip_obs, vn.epsilon
 
@@ -256,6 +259,9 @@ def export_policy(run_dir: str | Path, out_dir: str | Path, which: str = "model"
     else:
         np.savez(out / "obs_stats.npz", norm_obs=True, mean=pol._mean, var=pol._var, clip=pol._clip, eps=pol._eps)
     load_or_generate(resolve(pol.env_cfg)).save(out / "grasps.npz")
+    hand = Path(pol.env_cfg.hand)
+    if hand.is_file() and hand.parent.resolve() == run.resolve() and run.resolve() != out.resolve():
+        shutil.copy(hand, out / hand.name)  # the run's own copy of a params-file hand (config.json names it)
     for name in ("config.json", "progress.csv", "eval.json"):
         if (run / name).is_file():
             shutil.copy(run / name, out / name)

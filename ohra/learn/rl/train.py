@@ -3,6 +3,7 @@
 Run directory::
 
     RUN/config.json                 env (RotationConfig) + PPO settings + library versions
+    RUN/<hand>.json                 a hand given as a params file: the run's own copy, which config.json names
     RUN/progress.csv                one row per rollout, appended (survives --resume)
     RUN/checkpoints/last.zip        model, rewritten atomically every ``checkpoint_every`` steps
     RUN/checkpoints/last_vecnormalize.pkl, last.json (steps, wall seconds so far)
@@ -33,6 +34,7 @@ from typing import Any, Iterator
 
 import numpy as np
 
+from ohra.errors import CheckpointError
 from ohra.io import folder_lock
 from ohra.learn.rl.config import POLICIES, PPOSettings, RLConfigError
 from ohra.sim.rotation.config import RotationConfig
@@ -219,8 +221,16 @@ def _check_resume(run_dir: Path, env_cfg: RotationConfig, ppo: PPOSettings) -> N
     config is read through the dataclasses, so a setting added to ohra after the run was made counts
     at the value the run had (``SAVED_BEFORE``) or its default instead of failing the comparison."""
     saved = read_config(run_dir)
-    theirs = _plain(RotationConfig.from_saved(saved["env"], f"{run_dir}/config.json").to_dict())
-    mine = _plain(env_cfg.to_dict())
+    theirs = _plain(RotationConfig.from_saved(_saved_env(run_dir, saved), f"{run_dir}/config.json").to_dict())
+    mine = env_cfg.to_dict()
+    hand, own = Path(env_cfg.hand), Path(run_dir) / Path(env_cfg.hand).name
+    if hand.suffix.lower() in HAND_FILE_SUFFIXES and hand.is_file() and own.is_file() \
+            and hand.read_bytes() == own.read_bytes():  # the same hand file as the run's copy
+        mine["hand"] = str(own.resolve())
+    obj = Path(str(env_cfg.object)).expanduser()
+    if obj.exists() and not str(env_cfg.object).startswith(("builtin:", "procedural:")):
+        mine["object"] = str(obj.resolve())
+    mine = _plain(mine)
     diff = sorted(k for k in set(theirs) | set(mine) if theirs.get(k) != mine.get(k))
     if diff:
         raise RLConfigError(f"{run_dir}: the environment config differs from the run being resumed: "
@@ -276,8 +286,6 @@ def _init_record(src: Path, zip_path: Path, budget: dict, env_cfg: RotationConfi
 
 def _load_init(model, venv, zip_path: Path, stats: Path, src: Path) -> None:
     """Copy the source's weights into ``model`` and its observation/return statistics into ``venv``."""
-    import pickle
-
     fit = (f"init_from {src}: its weights do not fit this run's spaces (the same observation and action sizes are "
            "needed: the hand's joint space): ")
 
@@ -301,12 +309,18 @@ def _load_init(model, venv, zip_path: Path, stats: Path, src: Path) -> None:
             venv.obs_rms.mean, venv.obs_rms.var = pol._mean.astype(np.float64), pol._var.astype(np.float64)
             venv.obs_rms.count = float(done or 1e6)
         return
+    import zipfile
+
+    from ohra.learn.rl.files import load_pickle
+
+    if not zipfile.is_zipfile(zip_path):
+        raise CheckpointError(f"init_from {src}: {zip_path} is not a readable SB3 policy (.zip)")
     try:
         model.set_parameters(str(zip_path), exact_match=True, device="cpu")
     except (RuntimeError, ValueError) as exc:  # torch's size mismatch: another hand, space or observation layout
         raise RLConfigError(fit + first_mismatch(exc)) from None
-    with open(stats, "rb") as fh:
-        theirs = pickle.load(fh).__dict__  # an unpickled VecNormalize has no venv: read its fields, not attributes
+    # an unpickled VecNormalize has no venv: read its fields, not attributes
+    theirs = load_pickle(stats, "SB3 VecNormalize statistics (.pkl)").__dict__
     mine = venv.__dict__
     if "obs_rms" in theirs and "obs_rms" in mine:  # a run without observation normalisation has none
         venv.obs_rms = theirs["obs_rms"]
@@ -385,8 +399,16 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
         cls = ppo_class(ppo.policy)
         wall_before = 0.0
         if resume:
-            venv = VecNormalize.load(str(run_dir / "checkpoints" / "last_vecnormalize.pkl"), venv)
-            model = cls.load(last, env=venv, device="cpu", tensorboard_log=tb_dir)
+            from ohra.learn.rl.files import load_checked
+
+            stats = run_dir / "checkpoints" / "last_vecnormalize.pkl"
+            try:
+                venv = load_checked(stats, "SB3 VecNormalize statistics (.pkl)", lambda: VecNormalize.load(str(stats), venv))
+                model = load_checked(last, "SB3 checkpoint (.zip)",
+                                     lambda: cls.load(last, env=venv, device="cpu", tensorboard_log=tb_dir))
+            except CheckpointError:
+                venv.close()  # no worker processes left behind
+                raise
             wall_before = json.loads((run_dir / "checkpoints" / "last.json").read_text())["wall_s"]
             # rows logged after the checkpoint by an interrupted session are redone from it
             truncate_progress(run_dir / "progress.csv", int(model.num_timesteps))
@@ -396,7 +418,7 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
             if record is not None:
                 try:
                     _load_init(model, venv, zip_path, stats, src)
-                except RLConfigError:  # leave no workers and no half-made run behind
+                except (RLConfigError, CheckpointError):  # leave no workers and no half-made run behind
                     venv.close()
                     for name in ("config.json", "progress.csv"):
                         (run_dir / name).unlink(missing_ok=True)
@@ -506,12 +528,52 @@ def _write_config(run_dir: Path, env_cfg: RotationConfig, ppo: PPOSettings, init
     import stable_baselines3
     import torch
 
-    d = {"env": env_cfg.to_dict(), "ppo": ppo.to_dict(),
+    env, hand_source = _portable_env(run_dir, env_cfg)
+    d = {"env": env, "ppo": ppo.to_dict(),
          "versions": {"stable_baselines3": stable_baselines3.__version__, "gymnasium": gymnasium.__version__,
                       "torch": torch.__version__, "pybullet_api": pybullet.getAPIVersion()}}
     if init_from is not None:
         d["init_from"] = init_from
+    if hand_source is not None:
+        d["hand_source"] = hand_source  # where the run's copy of its hand file came from
     _replace_config(run_dir, d)
+
+
+HAND_FILE_SUFFIXES = (".json", ".yaml", ".yml")
+
+
+def _portable_env(run_dir: Path, env_cfg: RotationConfig) -> tuple[dict, str | None]:
+    """The env settings as ``config.json`` stores them: a hand given as a params file is copied into the run
+    folder under its own name and named by that (the run keeps the hand it was trained on, wherever it is
+    evaluated from and whatever later happens to the file); an object file is named by its absolute path.
+    Returns the settings and the absolute path the hand file was copied from (None: no file)."""
+    import shutil
+
+    d, source = env_cfg.to_dict(), None
+    hand = Path(env_cfg.hand)
+    if hand.suffix.lower() in HAND_FILE_SUFFIXES and hand.is_file():
+        source = str(hand.resolve())
+        copy = run_dir / hand.name
+        if hand.resolve() != copy.resolve():
+            tmp = run_dir / f".{hand.name}.tmp"
+            shutil.copyfile(hand, tmp)
+            os.replace(tmp, copy)
+        d["hand"] = hand.name
+    obj = Path(str(env_cfg.object)).expanduser()
+    if obj.exists() and not str(env_cfg.object).startswith(("builtin:", "procedural:")):
+        d["object"] = str(obj.resolve())
+    return d, source
+
+
+def _saved_env(run_dir: str | Path, d: dict) -> dict:
+    """``d["env"]`` with a hand file stored in the run folder (:func:`_portable_env`) named by its path."""
+    env = dict(d["env"])
+    hand = env.get("hand")
+    if isinstance(hand, str) and Path(hand).suffix.lower() in HAND_FILE_SUFFIXES and not Path(hand).is_absolute():
+        own = Path(run_dir) / hand
+        if own.is_file():
+            env["hand"] = str(own.resolve())
+    return env
 
 
 def read_config(run_dir: str | Path) -> dict:
@@ -522,8 +584,6 @@ def read_config(run_dir: str | Path) -> dict:
         CheckpointError: the file does not exist, is not valid JSON, is not a JSON object, or lacks the
             ``env`` or ``ppo`` object (the file and the problem named).
     """
-    from ohra.errors import CheckpointError
-
     path = Path(run_dir) / "config.json"
     if not path.is_file():
         raise CheckpointError(f"{run_dir} is not a rotation run or exported policy: {path} does not exist")
@@ -560,7 +620,7 @@ def load_run(run_dir: str | Path) -> tuple[RotationConfig, PPOSettings]:
         RLConfigError: an unknown or invalid PPO setting in it.
     """
     d = read_config(run_dir)
-    return RotationConfig.from_saved(d["env"], f"{run_dir}/config.json"), PPOSettings.from_dict(d["ppo"])
+    return RotationConfig.from_saved(_saved_env(run_dir, d), f"{run_dir}/config.json"), PPOSettings.from_dict(d["ppo"])
 
 
 def with_budget(ppo: PPOSettings, total_steps: int | None = None, max_minutes: float | None = None) -> PPOSettings:

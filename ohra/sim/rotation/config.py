@@ -22,6 +22,7 @@ import math
 import os
 import warnings
 from dataclasses import asdict, dataclass, field, fields, replace
+from pathlib import PurePath
 from typing import Any, Mapping
 
 import numpy as np
@@ -50,7 +51,8 @@ COLLISIONS = ("own", "canonical")
 SAVED_BEFORE = {"joint_damping": True, "work_velocity": "instant", "grasp_hold": "own"}
 
 # Reference ranges of the per-joint noise around the holding pose for the initial grasps (issue 15,
-# from the paper's setup): LEAP +-0.25 rad, Shadow +-0.1 rad; other hands take Shadow's, the safer one.
+# from the paper's setup): LEAP +-0.25 rad, Shadow +-0.1 rad; other hands take Shadow's, the safer one. Chosen
+# by the hand's name (a params file's own name, not the folders it lies in).
 GRASP_NOISE = {"leap": 0.25, "shadow": 0.1}
 DEFAULT_GRASP_NOISE = 0.1
 
@@ -230,8 +232,11 @@ class RotationConfig:
     def resolved_grasp_noise(self) -> float:
         if self.grasp_noise is not None:
             return float(self.grasp_noise)
+        name = self.hand
+        if "/" in name or "\\" in name or name.endswith((".json", ".yaml", ".yml")):
+            name = PurePath(name.replace("\\", "/").rsplit("/", 1)[-1]).stem  # the file's own name, not its folders
         for key, v in GRASP_NOISE.items():
-            if key in self.hand:
+            if key in name:
                 return v
         return DEFAULT_GRASP_NOISE
 

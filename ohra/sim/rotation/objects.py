@@ -57,9 +57,35 @@ class ObjectShape:
 
 def make_object(name: str, size: float | None, density: float) -> ObjectShape:
     """The object ``name`` (see module doc) of characteristic length ``size`` [m] (``None``: its own size, for
-    objects other than the sized shapes) and density [kg/m^3]."""
+    objects other than the sized shapes) and density [kg/m^3].
+
+    Raises:
+        ObjectError: an unknown object; a sized shape without a size; an object whose largest extent lies
+            outside the graspable range (``ohra.objects.resolve.GRASPABLE_EXTENT_M``), e.g. a mesh in millimetres.
+    """
     if name in SIZED and not (size is not None and size > 0):
         raise ObjectError(f"object {name!r} needs a size > 0 [m], got {size!r}")
+    shape = _make(name, size, density)
+    _check_size(shape, size)
+    return shape
+
+
+def _check_size(shape: "ObjectShape", size: float | None) -> None:
+    """Refuse an object no hand can hold: the task would run (a 100 m capsule 'held' 50 m up) and mean nothing."""
+    from ohra.objects.resolve import GRASPABLE_EXTENT_M
+
+    ext = float(np.max(shape.mesh.extents))
+    lo, hi = GRASPABLE_EXTENT_M
+    if lo <= ext <= hi:
+        return
+    how = ("set object_size (--object-size M) within that range" if size is not None else
+           "if its units are wrong (a mesh in millimetres?), give its largest extent in metres with object_size "
+           "(--object-size M)")
+    raise ObjectError(f"rotation object {shape.name!r}: largest extent {ext:.4g} m is outside the graspable range "
+                      f"{lo:g}-{hi:g} m; {how}")
+
+
+def _make(name: str, size: float | None, density: float) -> "ObjectShape":
     if name == "cube":
         h = size / 2
         m = density * size**3
