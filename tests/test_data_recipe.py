@@ -63,6 +63,23 @@ def test_a_hand_file_is_found_beside_the_recipe_like_an_object_file(tmp_path, mo
     ({"hands": ["leap_3333"], "objects": [{"procedural": "box", "count": -1}]}, r"objects\[0\]: 'count' must be an integer >= 1"),
     ({"hands": ["leap_3333"], "objects": [{"procedural": "box", "seed": -5}]}, r"objects\[0\]: 'seed' must be an integer >= 0"),
     ({"hands": ["leap_3333"], "objects": ["builtin"], "name": "../../escape"}, "'name' is a folder name under out/"),
+    # misspelt or mistyped keys inside entries and the split (stop 47's new-user sweep: silently ignored before)
+    ({"hands": [{"pattern": "leap_*", "digitsum": 12}], "objects": ["builtin"]},
+     r"hands\[0\]: unknown key\(s\) digitsum for a 'pattern' entry; known: pattern, digit_sum"),
+    ({"hands": [{"pattern": "leap_*", "digit_sum": [12, 10]}], "objects": ["builtin"]}, "min > max"),
+    ({"hands": [{"spec": "h.yaml", "from": "base"}], "objects": ["builtin"]}, r"unknown key\(s\) from"),
+    ({"hands": [{"spec": "h.yaml", "form": "basic"}], "objects": ["builtin"]}, "'form' must be base or extended"),
+    ({"hands": [{"params": "a.json", "pattern": "leap_*"}], "objects": ["builtin"]}, "exactly one of pattern, params, spec"),
+    ({"hands": ["leap_3333"], "objects": [{"procedural": "box", "cuont": 3}]}, r"objects\[0\]: unknown key\(s\) cuont"),
+    ({"hands": ["leap_3333"], "objects": [{"path": "mug.obj", "scael": 0.5}]}, r"unknown key\(s\) scael"),
+    ({"hands": ["leap_3333"], "objects": [{"path": "mug.obj", "scale": 0}]}, "'scale' must be a number > 0"),
+    ({"hands": ["leap_3333"], "objects": ["builtin"], "filter": "no"}, "'filter' must be true or false"),
+    ({"hands": ["leap_3333"], "objects": ["builtin"], "cap": True}, "'cap' must be an integer >= 1"),
+    ({"hands": ["leap_3333"], "objects": ["builtin"], "split": {"test_fraction": "half"}}, "split.test_fraction must be a number"),
+    ({"hands": ["leap_3333"], "objects": ["builtin"], "split": {"test_fraction": 1.0}}, r"split.test_fraction .* \[0, 1\)"),
+    ({"hands": ["leap_3333"], "objects": ["builtin"], "split": {"test_fraction": 0.5, "seed": "abc"}}, "split.seed must be"),
+    ({"hands": ["leap_3333"], "objects": ["builtin"], "split": ["box"]}, "'split' is a mapping"),
+    ({"hands": ["leap_3333"], "objects": ["builtin"], "split": {"test": [1, 2]}}, "split.test must be an object name"),
 ])
 def test_bad_recipes_name_the_problem(recipe, message):
     with pytest.raises(RecipeError, match=message):
@@ -189,3 +206,43 @@ def test_dataset_arguments_a_new_user_gets_wrong_are_named_or_read_as_meant(tmp_
 def test_a_recipe_name_may_be_a_number_or_empty():
     assert Recipe.from_dict({"hands": ["leap_3333"], "objects": ["builtin"], "name": 2024}, "r.yaml").name == "2024"
     assert Recipe.from_dict({"hands": ["leap_3333"], "objects": ["builtin"], "name": None}, "r.yaml").name == "r"
+
+
+def test_a_split_names_its_test_objects_from_the_recipe_and_leaves_some_to_train_on():
+    r = Recipe.from_dict({"hands": ["leap_3333"], "objects": ["builtin"], "split": {"test": "box"}})
+    assert r.split_objects(["box", "sphere"])["test"] == ["box"]  # one name, not its letters
+    with pytest.raises(RecipeError, match="unknown object.*thing; the recipe's objects are thing-2c96, box"):
+        Recipe.from_dict({"hands": ["leap_3333"], "objects": ["builtin"], "split": {"test": ["thing"]}}).split_objects(
+            ["thing-2c96", "box"])
+    with pytest.raises(RecipeError, match="leaves no training object"):
+        Recipe.from_dict({"hands": ["leap_3333"], "objects": ["builtin"], "split": {"test": ["a", "b"]}}).split_objects(["a", "b"])
+    with pytest.raises(RecipeError, match="leaves no training object"):  # 0.25 of one object rounds up to it
+        Recipe.from_dict({"hands": ["leap_3333"], "objects": ["builtin"], "split": {"test_fraction": 0.25}}).split_objects(["a"])
+    assert Recipe.from_dict({"hands": ["leap_3333"], "objects": ["builtin"]}).split_objects(["a"])["train"] == ["a"]
+
+
+def test_two_different_hands_under_one_name_are_refused_and_the_same_hand_twice_counts_once(tmp_path):
+    """Two files called grip.json in different folders (a dataset keys hands by name): the second was dropped."""
+    import dataclasses
+
+    from ohra.hands import get_hand
+
+    p = get_hand("allegro_hand_left")
+    for sub, params in (("h1", p), ("h2", dataclasses.replace(p, palm_radius=p.palm_radius * 1.2))):
+        (tmp_path / sub).mkdir()
+        (tmp_path / sub / "grip.json").write_text(json.dumps(params.to_dict()))
+    (tmp_path / "h3").mkdir()
+    (tmp_path / "h3" / "grip.json").write_text(json.dumps(p.to_dict()))
+    with pytest.raises(RecipeError, match=r"hands\[0\] and hands\[1\] are two different hands named 'grip'"):
+        Recipe.from_dict({"hands": [str(tmp_path / "h1/grip.json"), str(tmp_path / "h2/grip.json")],
+                          "objects": ["builtin"]}).resolve_hands()
+    same = Recipe.from_dict({"hands": [str(tmp_path / "h1/grip.json"), str(tmp_path / "h3/grip.json")],
+                             "objects": ["builtin"]}).resolve_hands()
+    assert [n for n, _ in same] == ["grip"]
+
+
+def test_a_yaml_syntax_error_names_its_line(tmp_path):
+    path = tmp_path / "r.yaml"
+    path.write_text("hands: [leap_3333]\nobjects: [builtin\ncap: 2\n")
+    with pytest.raises(RecipeError, match="not valid YAML at line 3"):
+        Recipe.load(path)

@@ -104,6 +104,24 @@ def test_objects_sharing_a_file_name_get_their_own_manifest_entries(tmp_path):
     assert len({ds.load_shard("leap_2200", k)["raw"].tobytes() for k in shards}) == 2
 
 
+def test_resume_after_a_same_named_object_joins_lists_each_shard_once(tmp_path):
+    """``part`` alone is keyed ``part``; resumed with a second ``part`` both become ``part-<hash>``: the first
+    keeps its shard (not recomputed) under its new key only, and back again when the second leaves."""
+    a = _box_file(tmp_path / "a" / "part.stl", (0.04, 0.05, 0.06))
+    b = _box_file(tmp_path / "b" / "part.stl", (0.05, 0.05, 0.07))
+    first = synthesize(HAND, resolve_objects([str(a)]), tmp_path / "out", FAST, progress=False)
+    (old,) = first["hands"]["leap_2200"]["shards"].values()
+    man = synthesize(HAND, resolve_objects([str(a), str(b)]), tmp_path / "out", FAST, resume=True, progress=False)
+    shards = man["hands"]["leap_2200"]["shards"]
+    assert len(shards) == 2 and all(k.startswith("part-") for k in shards)
+    assert len({sh["file"] for sh in shards.values()}) == 2
+    assert old in shards.values()  # the first object's shard, kept as it was
+    assert man["hands"]["leap_2200"]["counts"]["candidates"] == 2
+    back = synthesize(HAND, resolve_objects([str(a)]), tmp_path / "out", FAST, resume=True, progress=False)
+    assert back["hands"]["leap_2200"]["shards"]["part"] == old
+    assert len(GraspDataset(tmp_path / "out").entries) == 2  # 'part' and the second object's 'part-<hash>'
+
+
 @pytest.mark.parametrize("faces, message", [([[0, 1, 2]], "span no volume"), ([[0, 1, 2], [0, 2, 3]], "is flat")])
 def test_flat_and_one_triangle_meshes_are_refused_at_once(tmp_path, faces, message):
     m = trimesh.Trimesh(vertices=[[0, 0, 0], [0.1, 0, 0], [0.1, 0.1, 0], [0, 0.1, 0]], faces=faces, process=False)
@@ -191,3 +209,15 @@ def test_two_pool_workers_write_the_same_shards_as_one(tmp_path):
     b = synthesize(HAND, objs, tmp_path / "two", FAST, workers=2, progress=False)
     sha = lambda m: {k: s["sha256"] for k, s in m["hands"]["leap_2200"]["shards"].items()}  # noqa: E731
     assert sha(a) == sha(b) and len(sha(a)) == 2
+
+
+def test_the_ray_backend_without_ray_is_refused_before_the_output_folder_is_made(tmp_path, monkeypatch):
+    import importlib.util
+
+    from ohra.errors import OhraError
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "ray" else real(name, *a))
+    with pytest.raises(OhraError, match=r"the ray backend needs Ray: pip install -e \"\.\[ray\]\""):
+        synthesize(HAND, [ObjectModel.builtin("box")], tmp_path / "out", FAST, backend="ray", progress=False)
+    assert not (tmp_path / "out").exists()  # it was left holding only its lock file

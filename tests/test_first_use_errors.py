@@ -199,3 +199,15 @@ def test_a_hand_without_a_movable_joint_is_refused_by_every_simulation_by_name(t
         assert main(argv) == 2
         err = capsys.readouterr().err
         assert "no movable joint" in err and "Traceback" not in err
+
+
+def test_a_spec_file_where_a_registered_hand_is_needed_says_how_to_register_it(tmp_path):
+    from ohra.hands import registry
+
+    spec = tmp_path / "trident.yaml"
+    spec.write_text("name: trident\n")
+    with pytest.raises(HandNotFoundError, match=rf"pass --hands {tmp_path} .*and the spec's name"):
+        registry.spec_path(str(spec))
+    with pytest.raises(HandNotFoundError, match="unknown hand 'tridnet'; registered: ") as exc:
+        registry.spec_path("tridnet")
+    assert "--hands" not in str(exc.value)

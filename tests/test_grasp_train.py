@@ -49,6 +49,21 @@ def test_split_holds_out_test_objects_by_name_and_mesh(tmp_path):
     assert len(TrainingData.load(root, tiny_train_config(test_objects=("sphere",), max_per_pair=2))) == 3 * 2 * 2
 
 
+def test_the_test_objects_a_recipe_split_off_are_never_trained_on(tmp_path):
+    """A dataset whose manifest records ``split.test`` (``ohra data build`` with a recipe split) holds those
+    objects out without being told again (training on them silently was the bug), on top of ``test_objects``."""
+    import json
+
+    root = write_dataset(tmp_path, objects=("sphere", "box", "capsule"))
+    man = json.loads((root / "manifest.json").read_text())
+    man["split"] = {"train": ["sphere", "capsule"], "test": ["box"]}
+    (root / "manifest.json").write_text(json.dumps(man))
+    td = TrainingData.load(root, tiny_train_config(test_objects=()))
+    assert {o.name for o in td.objects} == {"sphere", "capsule"} and set(td.test_objects) == {"box"}
+    td = TrainingData.load(root, tiny_train_config(test_objects=("capsule",)))
+    assert {o.name for o in td.objects} == {"sphere"} and set(td.test_objects) == {"box", "capsule"}
+
+
 def test_zero_shot_split_holds_out_test_hands_by_name_and_parameters(tmp_path):
     """A zero-shot model never sees its test hand, not even a copy stored under another name."""
     import json
@@ -229,6 +244,8 @@ def test_resume_equals_an_uninterrupted_run(dataset, tmp_path):
 
     with pytest.raises(_Stop):
         train_grasp(dataset, tiny_model_config(), tiny_train_config(), tmp_path / "cut", progress=False, on_step=stop)
+    with pytest.warns(UserWarning, match=r"checkpoint at step 3 of 6 \(the run has not finished"):
+        load_grasp_model(tmp_path / "cut")  # no model.pt yet: it samples from the checkpoint, and says so
     resumed = train_grasp(dataset, tiny_model_config(), tiny_train_config(), tmp_path / "cut", resume=True, progress=False)
     assert resumed.metrics["history"] == [{**h, "elapsed_s": r["elapsed_s"]} for h, r in
                                           zip(full.metrics["history"], resumed.metrics["history"])]
@@ -417,6 +434,10 @@ def test_cli_train_sample_and_errors(cli, dataset, tmp_path, capsys):
             "--batch-size", "8", "-o", str(tmp_path / "typo"), "--quiet"]
     assert cli(typo) == 0
     assert "test object(s) capsuel are in none of the datasets" in capsys.readouterr().err
+    absent_hand = ["train", "grasp", "--data", str(dataset), "--hands", "barrett_hand", "shadow_hand_right", "--test-hands",
+                   "leap_1111", "--steps", "1", "--batch-size", "8", "-o", str(tmp_path / "th"), "--quiet"]
+    assert cli(absent_hand) == 0
+    assert "test hand(s) leap_1111 are in none of the datasets by name" in capsys.readouterr().err
     assert cli(args) == 2  # already a run there
     assert "--resume" in capsys.readouterr().err
     out = tmp_path / "g.npz"

@@ -176,6 +176,20 @@ def _cmd_train(args: argparse.Namespace) -> int:
     print(f"trained {m['steps']} steps in {m['train_seconds_total']:.1f} s on {m['data']['grasps']} grasps "
           f"({', '.join(f'{h} {c}' for h, c in m['data']['per_hand'].items())}); "
           f"final loss diffusion {f.get('diffusion', float('nan')):.4f}, joints {f.get('joints', float('nan')):.4f}")
+    from ohra.learn.grasp.data import recorded_test_objects
+
+    recorded = sorted(recorded_test_objects([Path(d) for d in args.data]) - set(args.test_objects))
+    if recorded:
+        print(f"ohra: note: held out the test object(s) the dataset's recipe split off: {', '.join(recorded)}",
+              file=sys.stderr)
+    if args.test_hands:
+        from ohra.data import GraspDataset
+
+        in_data = {h for _, h, _, _ in GraspDataset([Path(d) for d in args.data]).entries}
+        unheld = [h for h in args.test_hands if h not in in_data]
+        if unheld:  # held out by name (and parameters) but no dataset has them by that name
+            print(f"ohra: note: test hand(s) {', '.join(unheld)} are in none of the datasets by name (held out by their "
+                  "parameters too; check the spelling if they should be there)", file=sys.stderr)
     absent = sorted(k for k, h in m["data"].get("test_objects", {}).items() if not h)
     if absent:  # held out by name but in no dataset: an evaluation object absent by design, or a typo
         print(f"ohra: note: test object(s) {', '.join(absent)} are in none of the datasets (nothing to hold out; "

@@ -14,6 +14,7 @@ no files (built-ins, procedural).
 
 from __future__ import annotations
 
+import importlib.util
 import multiprocessing as mp
 from typing import Callable, Iterable, Iterator
 
@@ -22,19 +23,27 @@ from ohra.errors import OhraError
 BACKENDS = ("process", "ray")
 
 
+def check_backend(backend: str, address: str | None = None) -> None:
+    """Refuse an unknown backend, ``address`` without Ray, or the Ray backend without Ray installed: before a
+    job creates its output folder, not after."""
+    if backend not in BACKENDS:
+        raise OhraError(f"unknown backend {backend!r}; expected one of {', '.join(BACKENDS)}")
+    if backend != "ray" and address:
+        raise OhraError("--address is for the ray backend; add --backend ray")
+    if backend == "ray" and importlib.util.find_spec("ray") is None:
+        raise OhraError('the ray backend needs Ray: pip install -e ".[ray]"')
+
+
 def run_tasks(fn: Callable, tasks: list, backend: str = "process", workers: int = 1,
               address: str | None = None) -> Iterator:
     """Yield ``fn(task)`` for every task, in completion order."""
-    if backend not in BACKENDS:
-        raise OhraError(f"unknown backend {backend!r}; expected one of {', '.join(BACKENDS)}")
+    check_backend(backend, address)
     if int(workers) < 1:
         raise OhraError(f"workers must be >= 1, got {workers}")
     if not tasks:
         return iter(())
     if backend == "ray":
         return _ray(fn, tasks, int(workers), address)
-    if address:
-        raise OhraError("--address is for the ray backend; add --backend ray")
     return _pool(fn, tasks, int(workers))
 
 

@@ -44,6 +44,20 @@ def object_keys(objects) -> list[str]:
     return keys
 
 
+def rekey_shards(shards: dict, objects, keys: list[str], descs: list[dict]) -> None:
+    """Move a hand's shard entries to the keys :func:`object_keys` gives now, in place: an object keyed by its
+    name alone until a same-named object joined the run (``thing`` -> ``thing-2c9679e7``), or back. Without it a
+    resumed run listed the same shard under both keys and counted its grasps twice."""
+    for obj, key, desc in zip(objects, keys, descs):
+        if key in shards:
+            continue
+        for alias in (obj.name, f"{obj.name}-{desc['mesh_hash'][:8]}"):
+            sh = shards.get(alias)
+            if alias != key and sh is not None and sh.get("object", {}).get("mesh_hash") == desc["mesh_hash"]:
+                shards[key] = shards.pop(alias)
+                break
+
+
 def _flatten(d: dict, prefix: str = "") -> dict:
     out = {}
     for k, v in d.items():

@@ -78,8 +78,15 @@ class Recipe:
         for k in ("seed", "grasps_per_pair"):
             if k in d and (not isinstance(d[k], int) or isinstance(d[k], bool) or d[k] < (0 if k == "seed" else 1)):
                 raise RecipeError(f"{where}: '{k}' must be an integer >= {0 if k == 'seed' else 1}, got {d[k]!r}")
-        if d.get("cap") is not None and (not isinstance(d["cap"], int) or d["cap"] < 1):
+        if d.get("cap") is not None and (not isinstance(d["cap"], int) or isinstance(d["cap"], bool) or d["cap"] < 1):
             raise RecipeError(f"{where}: 'cap' must be an integer >= 1 or null, got {d['cap']!r}")
+        if "filter" in d and not isinstance(d["filter"], bool):
+            raise RecipeError(f"{where}: 'filter' must be true or false, got {d['filter']!r}")
+        for i, h in enumerate(d["hands"]):
+            _check_entry(h, HAND_KEYS, f"{where}: hands[{i}]")
+        for i, o in enumerate(d["objects"]):
+            _check_entry(o, OBJECT_KEYS, f"{where}: objects[{i}]")
+        _check_split(d.get("split"), where)
         name = str(d["name"]) if d.get("name") not in (None, "") else None  # a number is a name; empty: the file's stem
         if name is not None and (any(c in name for c in "/\\") or name in (".", "..")):
             raise RecipeError(f"{where}: 'name' is a folder name under out/ (no '/' or '..'), got {d['name']!r}")
@@ -107,7 +114,9 @@ class Recipe:
         except UnicodeDecodeError:
             raise RecipeError(f"{path}: not a text file (a recipe is YAML)") from None
         except yaml.YAMLError as exc:
-            raise RecipeError(f"{path}: not valid YAML ({str(exc).splitlines()[0]})") from None
+            mark = getattr(exc, "problem_mark", None)
+            at = f" at line {mark.line + 1} column {mark.column + 1}" if mark is not None else ""
+            raise RecipeError(f"{path}: not valid YAML{at} ({str(exc).splitlines()[0]})") from None
         return cls.from_dict(d, path)
 
     def with_seed(self, seed: int) -> "Recipe":
@@ -142,10 +151,20 @@ class Recipe:
         return [(n, e[1], tuple(e[2]) if len(e) > 2 else _couplings(n)) for n, e in self._entries().items()]
 
     def _entries(self) -> dict[str, tuple]:
+        """Hand name -> (name, params[, couplings]); the same hand reached twice (a name and a pattern) counts
+        once, two different hands under one name (two files called grip.json) are refused."""
         out: dict[str, tuple] = {}
+        first: dict[str, int] = {}
         for i, h in enumerate(self.hands):
             for entry in self._hand(h, f"{self.source or '<recipe>'}: hands[{i}]"):
-                out.setdefault(entry[0], entry)
+                name = entry[0]
+                if name in out:
+                    if not _same_params(out[name][1], entry[1]):
+                        raise RecipeError(f"{self.source or '<recipe>'}: hands[{first[name]}] and hands[{i}] are two "
+                                          f"different hands named {name!r} (a dataset keys its hands by name): rename "
+                                          "one (its file, or the spec's name)")
+                    continue
+                out[name], first[name] = entry, i
         return out
 
     def _hand(self, h: Any, where: str) -> list[tuple[str, Any]]:
@@ -221,11 +240,14 @@ class Recipe:
         unknown = set(sp) - {"test", "test_fraction", "seed"}
         if unknown:
             raise RecipeError(f"{self.source or '<recipe>'}: split: unknown key(s) {', '.join(sorted(unknown))}")
+        where = self.source or "<recipe>"
         if "test" in sp:
-            missing = [k for k in sp["test"] if k not in keys]
+            names = [sp["test"]] if isinstance(sp["test"], str) else list(sp["test"])
+            missing = [k for k in names if k not in keys]
             if missing:
-                raise RecipeError(f"{self.source or '<recipe>'}: split.test names unknown object(s) {', '.join(missing)}")
-            test = set(sp["test"])
+                raise RecipeError(f"{where}: split.test names unknown object(s) {', '.join(map(str, missing))}; the "
+                                  f"recipe's objects are {', '.join(keys)}")
+            test = set(names)
         else:
             frac = float(sp.get("test_fraction", 0.0))
             if not 0.0 <= frac < 1.0:
@@ -233,13 +255,76 @@ class Recipe:
             n = max(int(round(frac * len(keys))), 1 if frac > 0 else 0)
             order = np.random.default_rng(int(sp.get("seed", self.seed))).permutation(len(keys))
             test = {keys[i] for i in order[:n]}
-        return {"train": [k for k in keys if k not in test], "test": [k for k in keys if k in test], **sp}
+        if keys and not set(keys) - test:
+            raise RecipeError(f"{where}: the split leaves no training object (all {len(keys)} are test objects): "
+                              "name fewer in split.test or lower split.test_fraction")
+        given = {**sp, "test": [sp["test"]]} if isinstance(sp.get("test"), str) else sp
+        return {"train": [k for k in keys if k not in test], "test": [k for k in keys if k in test], **given}
+
+
+def _same_params(a: Any, b: Any) -> bool:
+    """Two hands' canonical parameters are the same hand (values equal to 1e-9)."""
+    if type(a) is not type(b):
+        return False
+    va, vb = np.asarray(a.to_vector(), dtype=float), np.asarray(b.to_vector(), dtype=float)
+    return va.shape == vb.shape and bool(np.allclose(va, vb, rtol=0.0, atol=1e-9))
+
+
+HAND_KEYS = {"pattern": ("pattern", "digit_sum"), "params": ("params",), "spec": ("spec", "form")}
+OBJECT_KEYS = {"procedural": ("procedural", "count", "seed"), "path": ("path", "scale"), "glob": ("glob", "scale")}
+
+
+def _check_entry(e: Any, kinds: dict[str, tuple[str, ...]], where: str) -> None:
+    """A hand or object mapping names exactly one kind and only that kind's keys, with values of the right type."""
+    if not isinstance(e, dict):
+        return  # a plain string; resolved (and checked) on use
+    kind = [k for k in kinds if k in e]
+    if len(kind) != 1:
+        raise RecipeError(f"{where}: a mapping needs exactly one of {', '.join(kinds)}, got keys {', '.join(map(str, e))}")
+    allowed = kinds[kind[0]]
+    unknown = [k for k in e if k not in allowed]
+    if unknown:
+        raise RecipeError(f"{where}: unknown key(s) {', '.join(map(str, unknown))} for a '{kind[0]}' entry; known: "
+                          f"{', '.join(allowed)}")
+    for k in ("pattern", "params", "spec", "path", "glob", "procedural"):
+        if k in e and not isinstance(e[k], str):
+            raise RecipeError(f"{where}: '{k}' must be a string, got {e[k]!r}")
+    if "form" in e and e["form"] not in ("base", "extended"):
+        raise RecipeError(f"{where}: 'form' must be base or extended, got {e['form']!r}")
+    if "scale" in e and e["scale"] is not None and (isinstance(e["scale"], bool) or not isinstance(e["scale"], (int, float))
+                                                    or not np.isfinite(e["scale"]) or e["scale"] <= 0):
+        raise RecipeError(f"{where}: 'scale' must be a number > 0, got {e['scale']!r}")
+    if "digit_sum" in e:
+        _range(e["digit_sum"], where + ".digit_sum")
+
+
+def _check_split(sp: Any, where: str) -> None:
+    if sp is None:
+        return
+    if not isinstance(sp, dict):
+        raise RecipeError(f"{where}: 'split' is a mapping: {{test: [name, ...]}} or {{test_fraction: 0.25, seed: 0}}, "
+                          f"got {sp!r}")
+    unknown = set(sp) - {"test", "test_fraction", "seed"}
+    if unknown:
+        raise RecipeError(f"{where}: split: unknown key(s) {', '.join(sorted(map(str, unknown)))}; known: test, "
+                          "test_fraction, seed")
+    if "test" in sp and not (isinstance(sp["test"], str) or (isinstance(sp["test"], list)
+                                                            and all(isinstance(x, str) for x in sp["test"]))):
+        raise RecipeError(f"{where}: split.test must be an object name or a list of them, got {sp['test']!r}")
+    f = sp.get("test_fraction", 0.0)
+    if isinstance(f, bool) or not isinstance(f, (int, float)) or not 0.0 <= f < 1.0:
+        raise RecipeError(f"{where}: split.test_fraction must be a number in [0, 1), got {f!r}")
+    seed = sp.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise RecipeError(f"{where}: split.seed must be an integer >= 0, got {seed!r}")
 
 
 def _range(v: Any, where: str) -> tuple[int, int]:
-    if isinstance(v, int):
+    if isinstance(v, int) and not isinstance(v, bool):
         return v, v
-    if isinstance(v, list) and len(v) == 2 and all(isinstance(x, int) for x in v):
+    if isinstance(v, list) and len(v) == 2 and all(isinstance(x, int) and not isinstance(x, bool) for x in v):
+        if v[0] > v[1]:
+            raise RecipeError(f"{where}: [min, max] with min > max: {v!r}")
         return v[0], v[1]
     raise RecipeError(f"{where}: expected an integer or [min, max], got {v!r}")
 

@@ -122,8 +122,17 @@ def spec_path(name: str) -> Path:
         if is_variant(name):  # asked for where an original hand is needed (--original, compare)
             raise HandNotFoundError(f"{name} is a LEAP variant, a canonical hand with no original URDF; the original "
                                     "LEAP hand is leap_hand_right / leap_hand_left")
-        raise HandNotFoundError(f"unknown hand {name!r}; registered: {', '.join(registered_hands())}")
+        raise _unknown(name)
     return files[name]
+
+
+def _unknown(name: str) -> HandNotFoundError:
+    msg = f"unknown hand {name!r}; registered: {', '.join(registered_hands())}"
+    p = Path(str(name)).expanduser()
+    if p.suffix.lower() in (".yaml", ".yml") and p.is_file():  # a spec file where a registered name is expected
+        msg += (f"; a hand spec is registered by its folder: pass --hands {p.parent} (or set $OHRA_HANDS_PATH) and "
+                "the spec's name")
+    return HandNotFoundError(msg)
 
 
 def spec(name: str):
@@ -136,7 +145,7 @@ def spec(name: str):
 def _resolve_form(name: str, form: str | None) -> str:
     forms = registered_forms(name)
     if not forms:
-        raise HandNotFoundError(f"unknown hand {name!r}; registered: {', '.join(registered_hands())}")
+        raise _unknown(name)
     if form is None:
         return forms[0]
     if form not in forms:

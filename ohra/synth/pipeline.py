@@ -32,9 +32,9 @@ import numpy as np
 from ohra import __version__
 from ohra.canonical.kinematics import HandModel
 from ohra.canonical.params import Params
-from ohra.data.backends import run_tasks
+from ohra.data.backends import check_backend, run_tasks
 from ohra.data.dataset import atomic_write_bytes, npz_bytes, shard_name
-from ohra.data.manifest import ManifestWriter, hand_entry, object_keys, open_manifest, shard_complete
+from ohra.data.manifest import ManifestWriter, hand_entry, object_keys, open_manifest, rekey_shards, shard_complete
 from ohra.errors import ObjectError, OhraError, require_seed
 from ohra.io import folder_lock
 from ohra.synth import MIN_GRASP_FINGERS
@@ -295,6 +295,7 @@ def synthesize(hands: list[tuple], objects: list[ObjectModel], out: str | Path, 
         raise OhraError(f"output path {out} exists and is not a directory")
     if int(workers) < 1:
         raise OhraError(f"--workers must be >= 1, got {workers}")
+    check_backend(backend, address)
     hands = [(h[0], h[1], tuple(h[2]) if len(h) > 2 else settings.nlp.couplings) for h in hands]
     for name, params, _ in hands:
         check_hand_for_synthesis(name, params)
@@ -309,6 +310,7 @@ def synthesize(hands: list[tuple], objects: list[ObjectModel], out: str | Path, 
             hand_settings[name] = replace(settings, nlp=replace(settings.nlp, couplings=cs))
             entries[name] = hand_entry(out, manifest, name, params.to_dict(), params_hash(params), overwrite)
             entries[name]["couplings"] = [c.to_dict() for c in cs]
+            rekey_shards(entries[name]["shards"], objects, keys, descs)
         # object-major order: an interrupted build has every hand's shards for the objects it reached,
         # so a partial dataset stays balanced across hands
         tasks = [(name, params, obj, key, hand_settings[name])

@@ -140,6 +140,20 @@ def params_key(params: BaseParams | ExtendedParams) -> str:
     return hashlib.sha256(type(params).__name__.encode() + v.tobytes()).hexdigest()[:16]
 
 
+def recorded_test_objects(roots: Sequence[Path]) -> set[str]:
+    """Object keys a dataset's recipe split off for testing (``manifest.json`` ``split.test``): training holds
+    them out like ``GraspTrainConfig.test_objects``."""
+    out: set[str] = set()
+    for r in roots:
+        try:
+            split = json.loads((Path(r) / "manifest.json").read_text()).get("split") or {}
+        except (OSError, ValueError):
+            continue  # GraspDataset reports an unreadable manifest
+        if isinstance(split, dict) and isinstance(split.get("test"), list):
+            out |= {str(k) for k in split["test"]}
+    return out
+
+
 def _test_hand_keys(roots: Sequence[Path], names: Sequence[str]) -> dict[str, str]:
     """Test hand name -> params key: from a dataset manifest that holds it, else the registry."""
     from ohra.hands import get_hand
@@ -201,7 +215,8 @@ class TrainingData:
         missing = [h for h in cfg.hands if h not in known]
         if missing:
             raise DatasetError(f"hand(s) {missing} have no grasps in {', '.join(map(str, roots))}")
-        test_names = set(cfg.test_objects)
+        recorded = recorded_test_objects(roots)  # a recipe's split: never trained on, whatever cfg says
+        test_names = set(cfg.test_objects) | recorded
         test = {n: "" for n in test_names}
         for _, _, o, sh in ds.entries:
             if o in test_names:

@@ -381,6 +381,12 @@ def load_grasp_model(path: str | Path | None = None) -> GraspModel:
             # neither a model nor a checkpoint: name both grasp formats, not only the last one tried
             raise CheckpointError(str(first).replace(f"an {MODEL_FORMAT!r} file",
                                                      f"a grasp model ({MODEL_FORMAT!r} or {CHECKPOINT_FORMAT!r})")) from None
+    if obj.get("format") == CHECKPOINT_FORMAT:  # a run without model.pt: stopped, or still training
+        steps = (obj.get("spec") or {}).get("train", {}).get("steps")
+        if steps is not None and int(obj.get("step", 0)) < int(steps):
+            warnings.warn(f"{f}: a training checkpoint at step {int(obj['step'])} of {int(steps)} (the run has not "
+                          "finished: resume it with --resume for the trained model)", UserWarning,
+                          stacklevel=user_stacklevel())
     return model_from_payload(obj, str(f))
 
 
