@@ -227,9 +227,8 @@ def _check_resume(run_dir: Path, env_cfg: RotationConfig, ppo: PPOSettings) -> N
     if hand.suffix.lower() in HAND_FILE_SUFFIXES and hand.is_file() and own.is_file() \
             and hand.read_bytes() == own.read_bytes():  # the same hand file as the run's copy
         mine["hand"] = str(own.resolve())
-    obj = Path(str(env_cfg.object)).expanduser()
-    if obj.exists() and not str(env_cfg.object).startswith(("builtin:", "procedural:")):
-        mine["object"] = str(obj.resolve())
+    if _object_file(env_cfg.object):
+        mine["object"] = str(Path(env_cfg.object).expanduser().resolve())
     mine = _plain(mine)
     diff = sorted(k for k in set(theirs) | set(mine) if theirs.get(k) != mine.get(k))
     if diff:
@@ -539,7 +538,7 @@ def _write_config(run_dir: Path, env_cfg: RotationConfig, ppo: PPOSettings, init
     _replace_config(run_dir, d)
 
 
-HAND_FILE_SUFFIXES = (".json", ".yaml", ".yml")
+HAND_FILE_SUFFIXES = (".json",)  # a params file; a spec YAML names its URDF relative to itself: not copied
 
 
 def _portable_env(run_dir: Path, env_cfg: RotationConfig) -> tuple[dict, str | None]:
@@ -559,10 +558,17 @@ def _portable_env(run_dir: Path, env_cfg: RotationConfig) -> tuple[dict, str | N
             shutil.copyfile(hand, tmp)
             os.replace(tmp, copy)
         d["hand"] = hand.name
-    obj = Path(str(env_cfg.object)).expanduser()
-    if obj.exists() and not str(env_cfg.object).startswith(("builtin:", "procedural:")):
-        d["object"] = str(obj.resolve())
+    if _object_file(env_cfg.object):
+        d["object"] = str(Path(env_cfg.object).expanduser().resolve())
     return d, source
+
+
+def _object_file(obj: str) -> bool:
+    """Whether a config's object names a file or folder (not cube/sphere/cylinder, a built-in or procedural one)."""
+    from ohra.sim.rotation.objects import SIZED
+
+    s = str(obj)
+    return s not in SIZED and not s.startswith(("builtin:", "procedural:")) and Path(s).expanduser().exists()
 
 
 def _saved_env(run_dir: str | Path, d: dict) -> dict:
