@@ -14,7 +14,6 @@ fingertip error <= 2 mm (extended) and <= 8 mm (base).
 from __future__ import annotations
 
 import re
-import sys
 import time
 import warnings
 
@@ -71,4 +70,12 @@ def main(names: list[str]) -> None:
 
 
 if __name__ == "__main__":
-    main(sys.argv[1:])
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("hands", nargs="*", help="registered hands to measure (default: all)")
+    args = ap.parse_args()
+    unknown = [h for h in args.hands if h not in registry.registered_hands()]
+    if unknown:
+        ap.error(f"unknown hand(s) {', '.join(unknown)}; registered: {', '.join(registry.registered_hands())}")
+    main(args.hands)

@@ -49,7 +49,7 @@ def casadi_batch(hm: HandModel, frames: list[str]):
 
 
 def keypoints_fn(params):
-    from ohra.original.parse import canonical_keypoints, ext_arrays, ext_arrays_from_base
+    from ohra.original.keypoints import canonical_keypoints, ext_arrays, ext_arrays_from_base
 
     arr = ext_arrays_from_base(params.to_vector(), params.present_joints) if isinstance(params, BaseParams) else ext_arrays(params)
     return lambda Q: canonical_keypoints(arr, params.present_joints, Q)
@@ -98,4 +98,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    import argparse
+
+    argparse.ArgumentParser(description=__doc__.split("\n\n")[0]).parse_args()  # --help; no options
     main()
