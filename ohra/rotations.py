@@ -52,6 +52,8 @@ def pose_to_matrix(t: np.ndarray, R: np.ndarray) -> np.ndarray:
 def grasp_to_pose(g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(...,31) grasps -> ((...,4,4) palm pose in the object frame, (...,22) joints)."""
     g = np.asarray(g, dtype=float)
+    if g.ndim == 0 or g.shape[-1] != 31:
+        raise GraspError(f"a grasp is 31 numbers (palm position [m] 3, rot6d 6, joints 22), got shape {g.shape}")
     return pose_to_matrix(g[..., :3], rot6d_to_matrix(g[..., 3:9])), g[..., 9:]
 
 

@@ -80,6 +80,10 @@ def test_errors_name_the_problem():
         _map().to_canonical(np.zeros(4))
     with pytest.raises(MappingError, match=r"shape \(22,\)"):
         _map().to_original(np.zeros(21))
+    with pytest.raises(MappingError, match=r"holds nan at index \(1, 2\) \(2 non-finite"):  # NaN mapped to NaN targets
+        _map().to_canonical(np.array([[0.0, 0.1, 0.2], [0.0, 0.1, np.nan], [np.inf, 0.0, 0.0]]))
+    with pytest.raises(MappingError, match="holds inf at index"):
+        _map().to_original(np.full(22, np.inf))
     with pytest.raises(MappingError, match="both mapped and fixed"):
         _map(fixed={"index_joint2": 0.1})
     with pytest.raises(MappingError, match="sign"):

@@ -128,3 +128,24 @@ def test_a_file_that_is_not_numpy_and_a_variant_replayed_on_its_original_say_wha
     np.savez(grasps, grasps=np.zeros((1, 31)))
     rc, _, err = _run(capsys, grasps, "--hand", "leap_3303", "--object", "builtin:box", "--original")
     assert rc == 2 and "leap_3303 is a LEAP variant, a canonical hand with no original URDF" in err
+
+
+def test_the_meshcat_scene_draws_the_form_that_was_simulated(setup, capsys, monkeypatch):
+    """``--form extended --meshcat`` drew the name's default (base) hand beside the extended hand simulated."""
+    from ohra.canonical.params import ExtendedParams
+    from ohra import viz
+
+    tmp, _, mesh, _ = setup
+    drawn = []
+    monkeypatch.setattr(viz, "add_grasp", lambda vis, hand, *a, **k: drawn.append(hand.params))
+    monkeypatch.setattr(viz, "save_html", lambda vis, path: None)
+    monkeypatch.setattr(viz, "new_visualizer", lambda: None)  # no meshcat server
+    grasps = tmp / "a.npz"
+    g = np.zeros((1, 31))
+    g[0, 0], g[0, 3], g[0, 7] = 0.2, 1.0, 1.0  # palm 20 cm away, identity rotation: nothing to hold
+    np.savez(grasps, grasps=g)
+    for form, kind in (("extended", ExtendedParams), ("base", type(None))):
+        rc, _, err = _run(capsys, grasps, "--hand", "allegro_hand_left", "--form", form, "--object", mesh, "--meshcat",
+                          tmp / "m.html")
+        assert rc == 0, err
+        assert isinstance(drawn[-1], ExtendedParams) == (kind is ExtendedParams)

@@ -218,26 +218,31 @@ def test_every_hand_argument_says_it_takes_a_spec_yaml_or_params_json(action):
     assert ("leap_XXXX" in arg.help) == (action != "compare")  # compare needs the original hand
 
 
-def test_extended_params_asked_for_in_base_form_suggest_extended(spec, capsys):
-    # compare's default is the base form; extended params that have none fail in one line, saying what to do
+def test_compare_takes_a_params_json_in_its_own_form(spec, capsys):
+    # compare (and show) take a hand in its natural form, as info and render do: extended params with no base
+    # form compare in the extended form (they failed asking for --extended), a base params JSON in the base form
     from ohra.canonical.couplings import params_json
     from ohra.canonical.params import ExtendedParams
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ParseWarning)
         res = parse(spec, "extended", fit_params=False)
+        base = parse(spec, "base", fit_params=False)
     d = res.params.to_dict()
     d["finger_radii"][1] = 0.006  # unequal radii: no base form
     path = spec.with_suffix(".json")  # beside its spec, so compare finds the original
-    path.write_text(params_json(ExtendedParams.from_dict(d), res.couplings))
-    rc, _, err = _hand_cli(["compare", str(path), "--samples", "5", "--no-surface"], capsys)
-    assert rc == 2 and len(err.strip().splitlines()) == 1
-    assert "not representable in base form" in err and "--extended" in err
+    for extra in ([], ["--extended"]):
+        path.write_text(params_json(ExtendedParams.from_dict(d), res.couplings))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ParseWarning)
+            rc, out, err = _hand_cli(["compare", str(path), *extra, "--samples", "5", "--no-surface"], capsys)
+        assert rc == 0, err
+        assert out.startswith("toy_two_finger (extended)")
+    path.write_text(params_json(base.params, base.couplings))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ParseWarning)
-        rc, out, err = _hand_cli(["compare", str(path), "--extended", "--samples", "5", "--no-surface"], capsys)
-    assert rc == 0, err
-    assert out.startswith("toy_two_finger (extended)")
+        rc, out, err = _hand_cli(["compare", str(path), "--samples", "5", "--no-surface"], capsys)
+    assert rc == 0 and out.startswith("toy_two_finger (base)"), err
 
 
 def test_form_defaults_of_a_spec_are_stated_where_the_user_picks_the_hand(spec, tmp_path):

@@ -54,3 +54,10 @@ def test_non_rotations_are_rejected(r6, match):
     g[1, 3:9] = r6
     with pytest.raises(GraspError, match="grasp 1"):
         check_grasps(g)
+
+
+def test_a_grasp_of_the_wrong_length_is_named_as_such():
+    with pytest.raises(GraspError, match=r"a grasp is 31 numbers .* got shape \(30,\)"):
+        grasp_to_pose(np.zeros(30))
+    T, q = grasp_to_pose(np.concatenate([np.zeros(3), [1, 0, 0, 0, 1, 0], np.zeros(22)]))
+    assert np.allclose(T, np.eye(4)) and q.shape == (22,)

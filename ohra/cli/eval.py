@@ -189,5 +189,7 @@ def _meshcat(args: argparse.Namespace, hand, obj, grasp: np.ndarray) -> None:
     from ohra.viz import add_grasp, new_visualizer, save_html
 
     vis = new_visualizer()
-    add_grasp(vis, HandModel.from_params(get_hand(args.hand)), grasp, np.asarray(obj.mesh.vertices), np.asarray(obj.mesh.faces))
+    # the hand that was simulated: its form (--form), not the name's default one
+    add_grasp(vis, HandModel.from_params(get_hand(args.hand, args.form)), grasp, np.asarray(obj.mesh.vertices),
+              np.asarray(obj.mesh.faces))
     save_html(vis, args.meshcat)

@@ -92,6 +92,12 @@ def _form(args: argparse.Namespace) -> str:
     return "extended" if args.extended else "base"
 
 
+def _natural_form(args: argparse.Namespace) -> str | None:
+    """``--extended``, else None: the hand's own form (base for a registered hand that has one; a LEAP variant's or
+    an extended params JSON's extended form), as ``info`` and ``render`` take it."""
+    return "extended" if args.extended else None
+
+
 def _resolve(name: str, extended: bool):
     """Params of ``name``; with ``extended`` a base-form hand is converted to the extended form."""
     from ohra.canonical.params import BaseParams
@@ -250,16 +256,18 @@ def _cmd_parse(args: argparse.Namespace) -> int:
 
 
 def _cmd_compare(args: argparse.Namespace) -> int:
+    from ohra.hands.resolve import resolve_hand
     from ohra.original.fidelity import compare
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the original URDF's mesh warnings are not this command's output
-        rep = compare(args.hand, _form(args), samples=args.samples, surface=not args.no_surface)
+        ref = resolve_hand(args.hand, _natural_form(args))
+        rep = compare(ref, ref.form, samples=args.samples, surface=not args.no_surface)
     print(json.dumps(rep.to_dict(), indent=2) if args.json else rep.table(surface_hint="--no-surface skipped it"))
     if args.html:
         from ohra import viz
 
-        path = viz.compare_html(args.hand, _form(args), args.html)
+        path = viz.compare_html(ref, ref.form, args.html)
         print(f"wrote {path}", file=sys.stderr)
     return 0
 
@@ -276,9 +284,9 @@ def _cmd_show(args: argparse.Namespace) -> int:  # pragma: no cover - starts a s
             raise OhraError(f"--q: expected 22 numbers separated by commas or spaces, got {args.q!r}") from None
     from ohra.hands.resolve import resolve_hand
 
-    ref = resolve_hand(args.hand, _form(args))  # a bad name fails here, before a meshcat server starts
+    ref = resolve_hand(args.hand, _natural_form(args))  # a bad name fails here, before a meshcat server starts
     vis = viz.new_visualizer()
-    viz.show_hand(vis, ref, _form(args), q=q, original=args.original)
+    viz.show_hand(vis, ref, ref.form, q=q, original=args.original)
     print(vis.url())
     if not args.no_wait:
         input("press Enter to stop the viewer ")

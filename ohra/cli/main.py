@@ -94,7 +94,10 @@ def _one_line_warnings(previous):
     packages' warnings go to ``previous`` (Python's format, with file and line)."""
 
     def show(message, category, filename, lineno, file=None, line=None) -> None:
-        ours = category.__module__.startswith("ohra") or Path(filename).resolve().is_relative_to(_PACKAGE)
+        where = Path(filename).resolve()
+        # ohra's warnings point at the caller's frame (user_stacklevel): under the CLI, the console script itself
+        ours = (category.__module__.startswith("ohra") or where.is_relative_to(_PACKAGE)
+                or (bool(sys.argv[0]) and where == Path(sys.argv[0]).resolve()) or where.name == "runpy.py")
         if not ours:
             return previous(message, category, filename, lineno, file, line)
         try:

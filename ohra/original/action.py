@@ -293,6 +293,10 @@ class ActionMap:
         q = np.asarray(q, dtype=float)
         if q.ndim not in (1, 2) or q.shape[-1] != n:
             raise MappingError(f"{what} vector must have shape ({n},) or (N, {n}), got {q.shape}")
+        bad = np.argwhere(~np.isfinite(q))
+        if len(bad):  # NaN would map to NaN joint targets silently
+            raise MappingError(f"{what} vector holds {q[tuple(bad[0])]} at index {tuple(int(i) for i in bad[0])} "
+                               f"({len(bad)} non-finite value(s)); joint values must be finite")
         return q
 
     def to_canonical(self, q_orig: np.ndarray) -> np.ndarray:
