@@ -35,7 +35,8 @@ def umask_mode() -> int:
 
 def check_output(path: str | Path, folder: bool = False) -> Path:
     """``path`` if a file (``folder=True``: a folder) can be written there, checked before any work is done:
-    not an existing folder (a file) and no parent component that is a file.
+    not an existing folder (a file), no parent component that is a file, and the nearest existing folder
+    writable.
 
     Raises:
         OutputPathError: naming the path as given (not a temporary file beside it).
@@ -51,6 +52,8 @@ def check_output(path: str | Path, folder: bool = False) -> Path:
         if parent.exists():
             if not parent.is_dir():
                 raise OutputPathError(f"{path}: {parent} is a file, not a folder")
+            if not os.access(parent, os.W_OK | os.X_OK):  # found now, not after minutes of work
+                raise OutputPathError(f"{path}: cannot write into {parent} (permission denied)")
             break
     return path
 

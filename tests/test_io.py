@@ -202,3 +202,23 @@ def test_an_output_path_that_is_a_folder_or_under_a_file_is_named_as_given(tmp_p
         check_output(tmp_path / "afile", folder=True)
     assert check_output(tmp_path / "new" / "deeper" / "x.json") == tmp_path / "new" / "deeper" / "x.json"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"]  # nothing was created by the checks
+
+
+def test_an_output_folder_that_cannot_be_written_is_named_before_the_work(tmp_path, monkeypatch, capsys):
+    """A read-only folder was found only when the result was written, after minutes of simulation, and the error
+    named the hidden temporary file. (As root a 0555 folder stays writable, so the permission is simulated.)"""
+    from ohra.cli.main import main
+    from ohra.errors import OutputPathError
+    from ohra.io import check_output
+
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    real = os.access
+    monkeypatch.setattr(os, "access", lambda p, mode, **kw: False if str(p) == str(ro) else real(p, mode, **kw))
+    with pytest.raises(OutputPathError, match=r"ro/r.json: cannot write into .*ro \(permission denied\)"):
+        check_output(ro / "r.json")
+    with pytest.raises(OutputPathError, match=r"cannot write into .*ro"):
+        check_output(ro / "new" / "deeper", folder=True)  # the nearest existing folder decides
+    assert check_output(tmp_path / "ok.json") == tmp_path / "ok.json"
+    assert main(["rotate", "eval", "leap_canonical", "--episodes", "1", "-o", str(ro / "out")]) == 2
+    assert "permission denied" in capsys.readouterr().err

@@ -394,3 +394,24 @@ def test_vae_api_counts_and_hands_of_the_wrong_type_are_named(vae):
     mu, _ = vae.encode(names)
     for iterable in (np.array(names), (n for n in names), dict.fromkeys(names).keys()):  # any iterable of hands
         np.testing.assert_array_equal(vae.encode(iterable)[0], mu)
+
+
+def test_a_vae_run_another_process_is_training_is_refused_and_left_alone(tmp_path):
+    """Two processes training into one folder mixed their files (one's config, the other's model): the second
+    fails at once, as synth and the grasp and rotation trainings do."""
+    import subprocess
+    import sys
+
+    from ohra.errors import FolderInUseError
+
+    run = tmp_path / "run"
+    hold = "import sys, time\nfrom ohra.io import folder_lock\nwith folder_lock(sys.argv[1]):\n    print('held', flush=True); time.sleep(120)"
+    p = subprocess.Popen([sys.executable, "-c", hold, str(run)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert p.stdout.readline().strip() == "held"
+        with pytest.raises(FolderInUseError, match=f"pid {p.pid}.*VAE training run"):
+            train(SMALL, run, progress=False)
+    finally:
+        p.kill()
+        p.wait()
+    assert not (run / "config.json").exists() and not (run / "model.pt").exists()

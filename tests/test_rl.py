@@ -623,3 +623,47 @@ def test_a_damaged_policy_or_statistics_file_is_a_checkpoint_error_naming_it(raw
         assert not (tmp_path / "fine" / "config.json").exists()
     else:
         assert main(["rotate", "eval", str(bad), "--episodes", "1"]) == 2
+
+
+class _RecordingVis:
+    """A meshcat Visualizer stand-in keeping each path's static transform and what set_animation saw."""
+
+    def __init__(self, path=None, shared=None):
+        from meshcat.path import Path as MPath
+
+        self.path = path or MPath(("meshcat",))
+        self.shared = shared if shared is not None else {"static": {}, "at_animation": None,
+                                                         "window": type("Window", (), {})()}
+        self.window = self.shared["window"]
+
+    def __getitem__(self, name):
+        return _RecordingVis(self.path.append(name), self.shared)
+
+    def set_object(self, *args, **kw):
+        pass
+
+    def set_transform(self, T):
+        self.shared["static"][self.path.lower()] = np.array(T)
+
+    def set_animation(self, anim, play=True):
+        self.shared["at_animation"] = dict(self.shared["static"])
+
+    def static_html(self) -> str:
+        return "<html><body><script>var viewer;</script></body></html>"
+
+
+def test_a_replay_page_opens_on_the_episodes_first_frame(raw_obs_run, tmp_path, monkeypatch):
+    """Every hand link and the object are posed at frame 0 before the animation is attached: the page opened
+    with every link piled at the origin and the object in the palm until played."""
+    from ohra.learn.rl.evaluate import Policy, record_episode, replay_html
+
+    run, cache, _ = raw_obs_run
+    monkeypatch.setenv("OHRA_CACHE_DIR", str(cache))
+    ep = record_episode(run, tmp_path / "ep", seed=0, every=100, strip_frames=1, size=64)
+    vis = _RecordingVis()
+    replay_html(Policy(run).env_cfg, ep["trajectory"], tmp_path / "replay.html", vis=vis)
+    static = vis.shared["at_animation"]
+    links = {k: T for k, T in static.items() if "/replay/hand/" in k}
+    assert links and all(not np.allclose(T, np.eye(4)) for T in links.values())
+    traj = dict(np.load(ep["trajectory"]))
+    np.testing.assert_allclose(static["/meshcat/replay/object"][:3, 3], traj["obj_pos"][0])

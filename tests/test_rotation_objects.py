@@ -193,3 +193,27 @@ def test_an_object_no_hand_can_hold_is_refused_with_the_fix(tmp_path, extent, si
             make_object(str(path), size, 500.0)
     with pytest.raises(ObjectError, match="outside the graspable range"):
         make_object("cube", 0.6, 500.0)
+
+
+@pytest.mark.parametrize("damage", [b"", b"PK\x03\x04 not really a zip", None])
+def test_a_damaged_starting_state_cache_is_regenerated_with_the_umask_mode(tmp_path, monkeypatch, damage):
+    """An empty or truncated cache file (an interrupted copy) made gym.make and ohra rotate fail with a zipfile
+    or EOF error; it is regenerated, and the new file's mode follows the umask (it was always 0644)."""
+    import os
+
+    from ohra.sim.rotation.grasps import load_or_generate
+
+    monkeypatch.setenv("OHRA_CACHE_DIR", str(tmp_path))
+    task = resolve(RotationConfig(grasp_count=2))
+    good = load_or_generate(task)
+    path = cache_path(task)
+    if damage is None:
+        damage = path.read_bytes()[: path.stat().st_size // 2]
+    path.write_bytes(damage)
+    old = os.umask(0o027)
+    try:
+        again = load_or_generate(task)
+    finally:
+        os.umask(old)
+    np.testing.assert_array_equal(again.q, good.q)
+    assert path.stat().st_mode & 0o777 == 0o640

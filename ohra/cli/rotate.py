@@ -227,6 +227,9 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     run = policy_dir(args.run)
     # a shipped policy lives in the package: its results go beside the user, not into site-packages
     dest = Path(args.out) if args.out else (Path(run.name) if is_shipped(run) else run)
+    from ohra.io import check_output
+
+    check_output(dest, folder=True)  # a file there, or no permission: one line now, not after the episodes
     res = evaluate_run(run, args.episodes, args.seed, args.checkpoint, urdf=args.on_urdf, out_dir=dest)
     own = load_run(run)[0]
     cfg, suffix = on_urdf(own, args.on_urdf), output_suffix(own, args.on_urdf)

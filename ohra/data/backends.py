@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import importlib.util
 import multiprocessing as mp
+import signal
 from typing import Callable, Iterable, Iterator
 
 from ohra.errors import OhraError
@@ -53,8 +54,14 @@ def _pool(fn: Callable, tasks: list, workers: int) -> Iterable:
             yield fn(t)
         return
     # fork: workers start with the driver's imports and caches (objects' bodies already settled)
-    with mp.get_context("fork").Pool(min(workers, len(tasks))) as pool:
+    with mp.get_context("fork").Pool(min(workers, len(tasks)), initializer=_ignore_sigint) as pool:
         yield from pool.imap_unordered(fn, tasks)
+
+
+def _ignore_sigint() -> None:
+    """Pool workers leave Ctrl-C to the driver, which stops them: each printed its own KeyboardInterrupt
+    traceback ("Process ForkPoolWorker-7: ...") before the driver's one-line ``ohra: interrupted``."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _ray(fn: Callable, tasks: list, workers: int, address: str | None) -> Iterable:

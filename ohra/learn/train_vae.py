@@ -30,7 +30,7 @@ import numpy as np
 import torch
 
 from ohra.errors import CheckpointError
-from ohra.io import atomic_write, check_output, write_text
+from ohra.io import atomic_write, check_output, folder_lock, write_text
 from ohra.learn.config import TrainConfig
 from ohra.learn.encoding import Standardizer
 from ohra.learn.encodings import DEFAULT_ENCODING, get_encoding
@@ -274,7 +274,9 @@ def train(config: TrainConfig = TrainConfig(), run_dir: str | Path | None = None
         check_output(run, folder=True)  # before the minutes of training, not at the first write
     ckpt_path = run / "checkpoints" / "last.pt" if run is not None else None
     t_start = time.perf_counter()
-    with torch_settings(cfg.threads):
+    # one writer per run folder: a second process in the same folder would mix two runs' files
+    lock = folder_lock(run, "VAE training run") if run is not None else contextlib.nullcontext()
+    with lock, torch_settings(cfg.threads):
         vc = cfg.vae_config()
         data = make_dataset(cfg.samples, cfg.seed, encoding=vc.encoding)
         std = data.standardizer
@@ -313,8 +315,8 @@ def train(config: TrainConfig = TrainConfig(), run_dir: str | Path | None = None
         this_run = float(history[-1]["elapsed_s"]) - elapsed_before if len(history) > done_before else 0.0
         metrics = _final_metrics(model, std, cfg, step, history, this_run)
         metrics["wall_seconds"] = time.perf_counter() - t_start
-    if run is not None:
-        atomic_save(model_payload(model, std), run / "model.pt")
-        write_text(run / "metrics.json", json.dumps(metrics, indent=2) + "\n")
+        if run is not None:
+            atomic_save(model_payload(model, std), run / "model.pt")
+            write_text(run / "metrics.json", json.dumps(metrics, indent=2) + "\n")
     model.eval()
     return TrainResult(model, std, metrics, run)

@@ -223,6 +223,9 @@ _WORKER: dict = {}
 
 
 def _worker_init(hand: SimHand, obj: ObjectModel, protocol: Protocol) -> None:
+    from ohra.data.backends import _ignore_sigint
+
+    _ignore_sigint()  # Ctrl-C is the driver's to handle (one line), not each worker's traceback
     _WORKER["world"] = World(hand, obj, protocol)
 
 

@@ -493,14 +493,22 @@ def replay_html(env_cfg: RotationConfig, trajectory: dict | str | Path, path: st
         add_mesh(vis, m.vertices, m.faces, path=f"replay/hand/{n}", color=0x66BFFF, opacity=0.9)
     add_mesh(vis, task.obj.mesh.vertices, task.obj.mesh.faces, path="replay/object")
     poses = model.link_poses(np.asarray(traj["q"])[:, order], links)  # (T, L, 4, 4) in the root frame
+
+    def object_pose(t: int) -> np.ndarray:
+        To = np.eye(4)
+        To[:3, :3] = quat_to_matrix(traj["obj_quat"][t])
+        To[:3, 3] = traj["obj_pos"][t]
+        return To
+
+    # the page opens on the episode's first frame (without this every link sat at the origin until played)
+    for k, n in enumerate(links):
+        vis[f"replay/hand/{n}"].set_transform(T0 @ poses[0, k])
+    vis["replay/object"].set_transform(object_pose(0))
     anim = meshcat.animation.Animation(default_framerate=int(env_cfg.control_hz))
     for t in range(len(poses)):
         with anim.at_frame(vis, t) as frame:
             for k, n in enumerate(links):
                 frame[f"replay/hand/{n}"].set_transform(T0 @ poses[t, k])
-            To = np.eye(4)
-            To[:3, :3] = quat_to_matrix(traj["obj_quat"][t])
-            To[:3, 3] = traj["obj_pos"][t]
-            frame["replay/object"].set_transform(To)
+            frame["replay/object"].set_transform(object_pose(t))
     vis.set_animation(anim, play=False)
     return save_html(vis, path)

@@ -32,6 +32,7 @@ import re
 import sys
 import tempfile
 import warnings
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -39,6 +40,7 @@ import numpy as np
 import pybullet as pb
 
 from ohra.errors import OhraError, user_stacklevel
+from ohra.io import umask_mode
 from ohra.paths import cache_dir
 from ohra.sim.rotation.rewards import delta_yaw
 from ohra.sim.rotation.scene import R_WORLD_PALM, RotationScene, _quat_mul, yaw_quat
@@ -90,7 +92,7 @@ class GraspSet:
         try:
             np.savez_compressed(tmp, q=self.q, target=self.target, obj_pos=self.obj_pos, obj_quat=self.obj_quat,
                                 hold=self.hold, attempts=self.attempts, key=self.key)
-            os.chmod(tmp, 0o644)  # mkstemp makes it private; the file is shared data
+            os.chmod(tmp, umask_mode())  # mkstemp makes it private; a new file's mode is 0666 minus the umask
             os.replace(tmp, path)
         except BaseException:
             Path(tmp).unlink(missing_ok=True)
@@ -311,8 +313,8 @@ def load_or_generate(task: Task, progress: bool | None = None) -> GraspSet:
             gs = GraspSet.load(path)
             if gs.key == cache_key(task):
                 return gs
-        except (OSError, ValueError, KeyError):
-            pass  # unreadable or foreign file: regenerate
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+            pass  # unreadable (truncated, empty) or foreign file: regenerate
     gs = generate(task, progress)
     gs.save(path)
     return gs

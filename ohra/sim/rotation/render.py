@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pybullet as pb
 
+from ohra.io import umask_mode
 from ohra.sim.rotation.scene import RotationScene
 
 
@@ -49,7 +50,7 @@ def write_gif(frames: list[np.ndarray] | np.ndarray, path: str | Path, fps: floa
     os.close(fd)
     try:
         images[0].save(tmp, save_all=True, append_images=images[1:], duration=int(round(1000 / fps)), loop=0)
-        os.chmod(tmp, 0o644)  # mkstemp makes it private
+        os.chmod(tmp, umask_mode())  # mkstemp makes it private; a new file's mode is 0666 minus the umask
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
