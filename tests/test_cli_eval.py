@@ -149,3 +149,26 @@ def test_the_meshcat_scene_draws_the_form_that_was_simulated(setup, capsys, monk
                           tmp / "m.html")
         assert rc == 0, err
         assert isinstance(drawn[-1], ExtendedParams) == (kind is ExtendedParams)
+
+
+def test_a_sampled_grasp_file_says_which_hand_and_form_it_was_made_for(tmp_path, capsys, monkeypatch):
+    """``ohra grasp sample`` records hand, form and model beside the grasps; ``ohra eval`` of that hand takes the
+    form from the file (evaluating base-form grasps on the extended hand changed the outcome silently) and says
+    so when --form asks for another one."""
+    pytest.importorskip("torch", reason="sampling needs the learn extra")
+    import ohra.cli.eval as cli_eval
+
+    out = tmp_path / "g.npz"
+    assert main(["grasp", "sample", "--hand", "allegro_hand_left", "--object", "builtin:box", "-n", "2", "-o", str(out)]) == 0
+    with np.load(out) as d:
+        assert (str(d["hand"]), str(d["form"]), str(d["model"])) == ("allegro_hand_left", "base", "default")
+        assert d["grasps"].shape == (2, 31)
+    forms = []
+    real = cli_eval.eval_hand
+    monkeypatch.setattr(cli_eval, "eval_hand", lambda name, original, form, inertials: forms.append(form) or
+                        real(name, original, form, inertials))
+    capsys.readouterr()
+    rc, _, err = _run(capsys, out, "--hand", "allegro_hand_left", "--object", "builtin:box")
+    assert rc == 0 and forms[-1] == "base" and "note" not in err
+    rc, _, err = _run(capsys, out, "--hand", "allegro_hand_left", "--object", "builtin:box", "--form", "extended")
+    assert rc == 0 and forms[-1] == "extended" and "sampled for the base form of allegro_hand_left" in err

@@ -372,3 +372,19 @@ def test_start_pose_noise_follows_the_hand_not_the_folders_its_file_lies_in():
     assert noise("shadow_hand_right") == noise("allegro_hand_left") == 0.1
     assert noise("/data/leap_runs/allegro_mod.json") == noise("leap_exp\\allegro.yaml") == 0.1
     assert RotationConfig(hand="leap_hand_right", grasp_noise=0.05).resolved_grasp_noise == 0.05
+
+
+def test_an_original_urdf_without_a_palm_collision_shape_names_the_hybrid_way_out(hands_dir, tmp_path, monkeypatch):
+    """Gaia's palm mesh is missing from its original URDF: the palm-up scene has nothing to rest the object on.
+    That was a bare RuntimeError (a traceback from ohra rotate); it is an ohra error naming the hybrid hand, which
+    works."""
+    from ohra.cli.main import main
+
+    monkeypatch.setenv("OHRA_CACHE_DIR", str(tmp_path))
+    with pytest.raises(R.SceneError, match=r"gaia_hand_right:original: the ray down the palm centre hits no .*"
+                                           r"collisions=\"canonical\""):
+        InHandRotateEnv(hand="gaia_hand_right", urdf="original", grasp_count=2)
+    assert main(["rotate", "grasps", "--hand", "gaia_hand_right", "--urdf", "original", "--grasps", "2"]) == 2
+    env = InHandRotateEnv(hand="gaia_hand_right", urdf="original", collisions="canonical", grasp_count=2)
+    env.reset(seed=0)
+    env.close()

@@ -110,6 +110,18 @@ def load_grasp_file(path: str | Path, key: str | None = None) -> np.ndarray:
         return np.asarray(data[key])
 
 
+def grasp_file_info(path: str | Path) -> dict[str, str]:
+    """The ``hand``, ``form`` and ``model`` a grasp file records (``ohra grasp sample`` writes them beside
+    ``grasps``); empty for other files."""
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            if isinstance(data, np.ndarray):
+                return {}
+            return {k: str(data[k]) for k in ("hand", "form", "model") if k in data.files and data[k].ndim == 0}
+    except Exception:  # load_grasp_file has said what is wrong with an unreadable file
+        return {}
+
+
 def run(args: argparse.Namespace) -> int:
     from ohra.hands import get_couplings, get_hand
     from ohra.objects.model import resolve_objects
@@ -131,6 +143,13 @@ def run(args: argparse.Namespace) -> int:
         if out:
             check_output(out)
     grasps = load_grasp_file(args.grasps, args.key)
+    made = grasp_file_info(args.grasps)  # what `ohra grasp sample` recorded beside the grasps, if anything
+    if made.get("hand") == str(args.hand) and made.get("form"):
+        if args.form is None:
+            args.form = made["form"]  # the canonical hand the grasps were sampled for
+        elif args.form != made["form"]:
+            print(f"ohra: note: {args.grasps} was sampled for the {made['form']} form of {args.hand}; evaluating on the "
+                  f"{args.form} form as --form asks", file=sys.stderr)
     if args.limit is not None:
         grasps = grasps[: args.limit]
     objs = resolve_objects(args.object, scale=args.scale)

@@ -256,7 +256,13 @@ def _cmd_sample(args: argparse.Namespace) -> int:
     timing: dict = {}
     g = model.sample(params, obj, args.n, seed=args.seed, timing=timing, refine=_refine(args.refine), centre=args.centre,
                      condition_hand=args.condition_hand, candidates=args.candidates)
-    atomic_write_npz(out, {"grasps": g.astype(np.float64)})
+    from ohra.canonical.params import ExtendedParams
+
+    # what the grasps were made for: ohra eval takes the form from here (the base and extended canonical hands of
+    # one registered hand differ, and so do their outcomes)
+    atomic_write_npz(out, {"grasps": g.astype(np.float64), "hand": np.array(str(args.hand)),
+                           "form": np.array("extended" if isinstance(params, ExtendedParams) else "base"),
+                           "model": np.array(str(args.model or ("leap" if note else "default")))})
     if note:
         print(note, file=sys.stderr)
     fingers = params.num_fingers

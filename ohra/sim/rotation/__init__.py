@@ -25,6 +25,7 @@ except ImportError as exc:  # pragma: no cover - exercised only without gymnasiu
 from ohra.sim.rotation.config import GRASP_NOISE, RewardWeights, RotationConfig, RotationConfigError
 from ohra.sim.rotation.env import InHandRotateEnv
 from ohra.sim.rotation.grasps import GraspGenerationError, GraspSet, load_or_generate
+from ohra.sim.rotation.scene import SceneError
 from ohra.sim.rotation.task import JointSpace, Task, resolve
 
 ENV_ID = "ohra/InHandRotate-v0"
@@ -34,5 +35,5 @@ if ENV_ID not in gymnasium.registry:
 
 __all__ = [
     "ENV_ID", "InHandRotateEnv", "RotationConfig", "RewardWeights", "RotationConfigError", "GraspSet",
-    "GraspGenerationError", "load_or_generate", "resolve", "Task", "JointSpace", "GRASP_NOISE",
+    "GraspGenerationError", "SceneError", "load_or_generate", "resolve", "Task", "JointSpace", "GRASP_NOISE",
 ]

@@ -23,11 +23,16 @@ from dataclasses import dataclass
 import numpy as np
 import pybullet as pb
 
+from ohra.errors import OhraError
 from ohra.sim.bullet import convex_pieces_shape, load_hand
 from ohra.sim.hands import SimHand
 from ohra.sim.rotation.config import RotationConfig
 from ohra.sim.rotation.objects import ObjectShape
 from ohra.sim.world import FINGER_BITS, OBJECT_BIT, PALM_BIT, _mask_of
+
+class SceneError(OhraError, RuntimeError):
+    """The hand cannot hold the task's scene (e.g. it has no palm collision shape to rest the object on)."""
+
 
 # rotation of the palm frame in the world: columns are the palm x, y, z axes in world coordinates
 R_WORLD_PALM = np.array([[0.0, 0.0, 1.0], [0.0, -1.0, 0.0], [1.0, 0.0, 0.0]])
@@ -160,7 +165,10 @@ class RotationScene:
         pb.performCollisionDetection(physicsClientId=c)  # the ray uses the broadphase bounds: bring them up to date
         hit = pb.rayTest([p[0], p[1], 1.0], [p[0], p[1], -1.0], physicsClientId=c)[0]
         if hit[0] != b:
-            raise RuntimeError(f"{self.hand.name}: the ray down the palm centre does not hit the hand")
+            hint = ("" if self.hand.canonical else "; on an original URDF whose palm collision mesh is missing, simulate "
+                    "it with the canonical collision shapes: collisions=\"canonical\" (--set 'collisions=\"canonical\"')")
+            raise SceneError(f"{self.hand.name}: the ray down the palm centre hits no collision shape of the hand (no "
+                             f"palm to rest the object on){hint}")
         return float(hit[3][2])
 
     def palm_centre_world(self) -> np.ndarray:
