@@ -287,7 +287,10 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     from ohra.objects.model import resolve_objects
 
     objs = resolve_objects(args.objects, scale=args.scale)
-    rep = evaluate_model(model, args.hands, objs, n=args.n, seed=args.seed, original=args.original,
+    # with a report file, finished pairs are kept beside it until the report is written: a rerun of an
+    # interrupted evaluation continues where it stopped
+    pairs_dir = Path(args.output).with_suffix(".pairs") if args.output else None
+    rep = evaluate_model(model, args.hands, objs, n=args.n, seed=args.seed, original=args.original, resume_dir=pairs_dir,
                          workers=args.workers, progress=not args.quiet, allow_seen=args.allow_seen,
                          protocol=replace(Protocol.preset(args.protocol), object_point=args.object_point), inertials=args.inertials,
                          condition_hand=args.condition_hand, refine=_refine(args.refine), collisions=args.collisions, centre=args.centre,
@@ -296,6 +299,12 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         from ohra.data.dataset import atomic_write_json
 
         atomic_write_json(args.output, rep.to_dict())
+        import shutil
+
+        shutil.rmtree(pairs_dir, ignore_errors=True)
+        if rep.meta.get("resumed_pairs"):
+            print(f"ohra: note: {rep.meta['resumed_pairs']} of {len(rep.pairs)} pairs came from the interrupted run's "
+                  f"{pairs_dir}", file=sys.stderr)
     for p in rep.pairs:
         d = p.diversity_all or {}
         print(f"{p.hand:20s} {p.object:16s} {int(p.success.sum()):4d}/{len(p.success):<4d} "

@@ -161,7 +161,8 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
                    seed: int = 0, original: bool = False, workers: int = 1, protocol: Any = None,
                    progress: bool = False, allow_seen: bool = False, inertials: str = "capsule",
                    condition_hand: HandLike | None = None, refine: bool | RefineSettings = False,
-                   collisions: str = "own", centre: bool = False, candidates: int = 1) -> GraspEvalReport:
+                   collisions: str = "own", centre: bool = False, candidates: int = 1,
+                   resume_dir: str | Path | None = None) -> GraspEvalReport:
     """Sample ``n`` grasps per (hand, object) and run the six-direction test (module docstring).
 
     Every hand and object is checked before the first simulation.
@@ -194,6 +195,9 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
             grasps and the simulation stay in the mesh frame.
         candidates: draw this many grasps per wrist rotation and keep the one whose fingers lie nearest
             the object's surface (:meth:`GraspModel.sample`); 1: the first draw.
+        resume_dir: a folder where each finished pair is stored (atomically, keyed by the model's weights, the
+            hand, the object and every setting); a pair found there is taken as it is instead of sampled and
+            simulated again, so an interrupted evaluation continues where it stopped with the same result.
 
     Returns:
         :class:`GraspEvalReport`: one :class:`PairResult` per (hand, object), hand-major, labelled by
@@ -267,6 +271,10 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
     if twice:
         raise GraspError(f"hand(s) {twice} given more than once")
     pairs = []
+    resume = Path(resume_dir) if resume_dir is not None else None
+    resumed = 0
+    settings = _resume_settings(model, n, original, inertials, collisions, protocol, refine, centre, candidates,
+                                condition_hand) if resume is not None else None
     for name, params, couplings in resolved:
         movable = np.asarray(params.movable_joints)
         hybrid = None
@@ -276,6 +284,14 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
             hybrid, _ = with_canonical_collisions(SimHand.registered_original(name), SimHand.from_params(params, name=str(name)))
         for obj in objs:
             s = pair_seed(seed, str(name), obj.mesh_hash)
+            if resume is not None:
+                told = model.condition.vector(params if condition_hand is None else resolve_hand(condition_hand))
+                path = resume / f"{_pair_key(settings, str(name), params, obj, s, told)}.npz"
+                done = _load_pair(path)
+                if done is not None:
+                    pairs.append(done)
+                    resumed += 1
+                    continue
             timing: dict = {}
             grasps = model.sample(params, obj, int(n), seed=s, timing=timing, condition_hand=condition_hand, refine=refine,
                                   centre=centre, candidates=candidates)
@@ -295,14 +311,68 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
             pairs.append(PairResult(str(name), obj.name, obj.mesh_hash, bool(original), s, ok, grasps,
                                     timing["seconds"], time.perf_counter() - t0,
                                     diversity(grasps[ok], movable), diversity(grasps, movable), timing.get("refine_seconds", 0.0)))
+            if resume is not None:
+                _save_pair(path, pairs[-1])
     cond = None if condition_hand is None else (condition_hand if isinstance(condition_hand, str) else hand_key(resolve_hand(condition_hand)))
     ref = None if (rs := as_refine_settings(refine)) is None else asdict(rs)
     meta = {"n_per_pair": int(n), "seed": int(seed), "original": bool(original), "inertials": inertials, "collisions": collisions,
             "condition_hand": cond,
             "refine": ref, "centre": bool(centre), "candidates": int(candidates),
             "model": str(model.path),
-            "model_meta": model.meta, "protocol": protocol.__dict__ if protocol is not None else "default"}
+            "model_meta": model.meta, "protocol": protocol.__dict__ if protocol is not None else "default",
+            "resumed_pairs": resumed}
     return GraspEvalReport(pairs, meta)
+
+
+def _resume_settings(model: GraspModel, n: int, original: bool, inertials: str, collisions: str, protocol: Any,
+                     refine: Any, centre: bool, candidates: int, condition_hand: Any) -> dict:
+    """Everything a pair's outcome depends on besides its hand, object and seed (the resume key)."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for k, v in model.net.state_dict().items():  # the weights themselves, not the path they came from
+        h.update(k.encode())
+        h.update(v.detach().cpu().numpy().tobytes())
+    rs = as_refine_settings(refine)
+    cond = None if condition_hand is None else hand_key(resolve_hand(condition_hand))
+    return {"model": h.hexdigest()[:16], "t_scale": float(model.t_scale), "n": int(n), "original": bool(original), "inertials": inertials, "collisions": collisions,
+            "protocol": json.dumps(protocol.__dict__ if protocol is not None else "default", sort_keys=True, default=str),
+            "refine": None if rs is None else json.dumps(asdict(rs), sort_keys=True, default=str), "centre": bool(centre),
+            "candidates": int(candidates), "condition_hand": cond, "format": 1}
+
+
+def _pair_key(settings: dict, name: str, params: Any, obj: Any, seed: int, condition: np.ndarray) -> str:
+    import hashlib
+
+    body = json.dumps({**settings, "hand": name, "params": hand_key(params), "mesh": obj.mesh_hash,
+                       # what the model was told of the hand (its VAE latent or normalised parameters)
+                       "condition": hashlib.sha256(np.asarray(condition, dtype=np.float64).tobytes()).hexdigest(),
+                       "body": getattr(obj, "body_hash", ""), "seed": int(seed)}, sort_keys=True, default=str)
+    return hashlib.sha256(body.encode()).hexdigest()[:20]
+
+
+def _save_pair(path: Path, p: PairResult) -> None:
+    from ohra.data.dataset import atomic_write_npz
+
+    info = {k: getattr(p, k) for k in ("hand", "object", "object_hash", "original", "seed", "sample_seconds",
+                                        "sim_seconds", "diversity_success", "diversity_all", "refine_seconds")}
+    atomic_write_npz(path, {"success": np.asarray(p.success, dtype=bool), "grasps": np.asarray(p.grasps),
+                            "info": np.array(json.dumps(info, default=float))})
+
+
+def _load_pair(path: Path) -> PairResult | None:
+    """A pair stored by :func:`_save_pair`, or None when absent or unreadable (it is then evaluated again)."""
+    if not path.is_file():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as d:
+            info = json.loads(str(d["info"]))
+            return PairResult(info["hand"], info["object"], info["object_hash"], bool(info["original"]), int(info["seed"]),
+                              np.asarray(d["success"], dtype=bool), np.asarray(d["grasps"]), float(info["sample_seconds"]),
+                              float(info["sim_seconds"]), info["diversity_success"], info["diversity_all"],
+                              float(info.get("refine_seconds", 0.0)))
+    except Exception:  # a damaged or foreign file: evaluate the pair again
+        return None
 
 
 def _as_protocol(protocol: Any):

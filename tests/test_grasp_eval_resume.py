@@ -1,0 +1,85 @@
+"""An interrupted grasp-model evaluation continues where it stopped, with the result of an uninterrupted one."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("torch", reason="the grasp model needs the learn extra")
+
+from ohra.learn import load_grasp_model  # noqa: E402
+from ohra.learn.grasp.evaluate import evaluate_model  # noqa: E402
+from ohra.sim import GraspEvaluator  # noqa: E402
+
+HANDS = ["leap_2211", "leap_3333"]
+OBJECTS = ["procedural:box:1234", "procedural:capsule:1234"]
+
+
+@pytest.fixture(scope="module")
+def leap():
+    return load_grasp_model("leap")
+
+
+def _count_evaluations(monkeypatch, stop_at: int | None = None) -> list:
+    calls = []
+    real = GraspEvaluator.evaluate
+
+    def counted(self, *a, **k):
+        calls.append(1)
+        if stop_at is not None and len(calls) == stop_at:
+            raise KeyboardInterrupt
+        return real(self, *a, **k)
+
+    monkeypatch.setattr(GraspEvaluator, "evaluate", counted)
+    return calls
+
+
+def test_an_interrupted_evaluation_resumes_its_finished_pairs_and_ends_as_an_uninterrupted_one(leap, tmp_path,
+                                                                                                  monkeypatch):
+    full = evaluate_model(leap, HANDS, OBJECTS, n=3)
+    calls = _count_evaluations(monkeypatch, stop_at=3)
+    with pytest.raises(KeyboardInterrupt):
+        evaluate_model(leap, HANDS, OBJECTS, n=3, resume_dir=tmp_path / "pairs")
+    assert len(list((tmp_path / "pairs").glob("*.npz"))) == 2  # the two pairs finished before the interruption
+    calls.clear()
+    monkeypatch.undo()
+    calls = _count_evaluations(monkeypatch)
+    again = evaluate_model(leap, HANDS, OBJECTS, n=3, resume_dir=tmp_path / "pairs")
+    assert len(calls) == 2 and again.meta["resumed_pairs"] == 2  # only the two that had not finished
+    for p, q in zip(full.pairs, again.pairs):
+        assert (p.hand, p.object) == (q.hand, q.object)
+        np.testing.assert_array_equal(p.success, q.success)
+        np.testing.assert_array_equal(p.grasps, q.grasps)
+    rates = lambda rep: {h: (r["n"], r["success_rate"], r["pair_rates"]) for h, r in rep.per_hand().items()}  # noqa: E731
+    assert rates(full) == rates(again)  # timings aside
+
+
+def test_stored_pairs_are_reused_only_under_the_same_settings_and_when_readable(leap, tmp_path, monkeypatch):
+    evaluate_model(leap, HANDS[:1], OBJECTS[:1], n=2, resume_dir=tmp_path)
+    calls = _count_evaluations(monkeypatch)
+    evaluate_model(leap, HANDS[:1], OBJECTS[:1], n=2, resume_dir=tmp_path)
+    assert len(calls) == 0
+    evaluate_model(leap, HANDS[:1], OBJECTS[:1], n=2, seed=1, resume_dir=tmp_path)  # another seed
+    evaluate_model(leap, HANDS[:1], OBJECTS[:1], n=2, refine=True, resume_dir=tmp_path)  # another setting
+    evaluate_model(leap, HANDS[:1], OBJECTS[:1], n=2, condition_hand="leap_3333", resume_dir=tmp_path)
+    assert len(calls) == 3
+    for f in tmp_path.glob("*.npz"):
+        f.write_bytes(f.read_bytes()[:40])  # damaged: evaluated again, not an error
+    evaluate_model(leap, HANDS[:1], OBJECTS[:1], n=2, resume_dir=tmp_path)
+    assert len(calls) == 4
+
+
+def test_the_cli_keeps_finished_pairs_beside_the_report_until_it_is_written(tmp_path, monkeypatch, capsys):
+    from ohra.cli.main import main
+
+    out = tmp_path / "report.json"
+    argv = ["grasp", "eval", "--model", "leap", "--hands", *HANDS, "--objects", *OBJECTS, "-n", "2", "-o", str(out),
+            "--quiet"]
+    _count_evaluations(monkeypatch, stop_at=2)
+    assert main(argv) == 130  # interrupted
+    assert not out.exists() and len(list((tmp_path / "report.pairs").glob("*.npz"))) == 1
+    monkeypatch.undo()
+    capsys.readouterr()
+    assert main(argv) == 0
+    assert "1 of 4 pairs came from the interrupted run" in capsys.readouterr().err
+    assert out.is_file() and not (tmp_path / "report.pairs").exists()
