@@ -217,3 +217,35 @@ def test_a_damaged_starting_state_cache_is_regenerated_with_the_umask_mode(tmp_p
         os.umask(old)
     np.testing.assert_array_equal(again.q, good.q)
     assert path.stat().st_mode & 0o777 == 0o640
+
+
+def test_an_interrupted_starting_state_generation_continues_to_the_same_states(tmp_path, monkeypatch):
+    """The first use of a hand generates 1,000 states (minutes); interrupted, it kept nothing. The unfinished set is
+    saved every few kept states with the random generator's state, and the next use continues from it to the
+    states an uninterrupted generation gives."""
+    from ohra.sim.rotation import grasps as G
+
+    monkeypatch.setenv("OHRA_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(G, "PARTIAL_EVERY", 2)
+    task = resolve(RotationConfig(grasp_count=5))
+    whole = G.generate(task)
+    calls, real_keep = [], G._keep
+
+    def keep_then_stop(*a, **k):
+        calls.append(1)
+        if len(calls) >= max(3, 2 * whole.attempts // 3):  # past the first saves
+            raise KeyboardInterrupt
+        return real_keep(*a, **k)
+
+    monkeypatch.setattr(G, "_keep", keep_then_stop)
+    with pytest.raises(KeyboardInterrupt):
+        G.load_or_generate(task)
+    partial = cache_path(task).with_name(f".{cache_path(task).stem}.partial.npz")
+    assert partial.is_file() and not cache_path(task).exists()
+    counted = []
+    monkeypatch.setattr(G, "_keep", lambda *a, **k: counted.append(1) or real_keep(*a, **k))
+    again = G.load_or_generate(task)
+    assert 0 < len(counted) < whole.attempts  # continued, not started again
+    for a, b in ((whole.q, again.q), (whole.target, again.target), (whole.obj_pos, again.obj_pos)):
+        np.testing.assert_array_equal(a, b)
+    assert again.attempts == whole.attempts and not partial.exists()

@@ -19,7 +19,8 @@ Procedure (HORA's grasp cache, made hand-agnostic):
    the settle (joints, motor targets, object pose) is a starting state.
 
 The result depends only on the hand's URDF, the object, the physics settings and the seed; it is
-stored under ``ohra.paths.cache_dir()/rotation/`` keyed by a hash of all of them (atomic write).
+stored under ``ohra.paths.cache_dir()/rotation/`` keyed by a hash of all of them (atomic write); an unfinished
+generation is saved beside it every ``PARTIAL_EVERY`` kept states and continued by the next use.
 """
 
 from __future__ import annotations
@@ -258,8 +259,16 @@ def _keep(scene: RotationScene, start: np.ndarray, before) -> bool:
     return scene.hand_contacts() >= cfg.min_contacts
 
 
-def generate(task: Task, progress: bool | None = False) -> GraspSet:
-    """Generate ``task.cfg.grasp_count`` starting states (see module doc); seeded by ``grasp_seed``."""
+PARTIAL_EVERY = 25  # kept states between two saves of an unfinished generation
+
+
+def generate(task: Task, progress: bool | None = False, partial: Path | None = None) -> GraspSet:
+    """Generate ``task.cfg.grasp_count`` starting states (see module doc); seeded by ``grasp_seed``.
+
+    ``partial``: a file where the unfinished set is saved every ``PARTIAL_EVERY`` kept states (with the random
+    generator's state) and from which an interrupted generation continues; the result equals an uninterrupted
+    one (each attempt starts from a reset scene: ``RotationScene``).
+    """
     cfg, hand = task.cfg, task.hand
     scene = RotationScene(hand, task.obj, cfg, task.palm_radius)
     try:
@@ -272,7 +281,11 @@ def generate(task: Task, progress: bool | None = False) -> GraspSet:
         check = steps - int(round(STILL_TIME * cfg.control_hz))
         Q, T, P, O = [], [], [], []
         attempts = 0
+        key = cache_key(task)
+        if partial is not None:
+            attempts = _resume_partial(partial, key, hold, rng, (Q, T, P, O))
         bar = _bar(cfg.grasp_count, f"grasps {hand.name}", progress)
+        bar.update(len(Q))
         while len(Q) < cfg.grasp_count and attempts < MAX_ATTEMPTS_PER_GRASP * cfg.grasp_count:
             attempts += 1
             q = np.clip(hold + rng.uniform(-r, r, size=hold.shape), hand.lower, hand.upper)
@@ -291,6 +304,8 @@ def generate(task: Task, progress: bool | None = False) -> GraspSet:
                 P.append(s.obj_pos)
                 O.append(s.obj_quat)
                 bar.update(1)
+                if partial is not None and len(Q) % PARTIAL_EVERY == 0 and len(Q) < cfg.grasp_count:
+                    _save_partial(partial, key, hold, rng, attempts, (Q, T, P, O))
         bar.close()
     finally:
         scene.close()
@@ -300,7 +315,33 @@ def generate(task: Task, progress: bool | None = False) -> GraspSet:
     if len(Q) < cfg.grasp_count:
         warnings.warn(f"{hand.name}: only {len(Q)} of {cfg.grasp_count} starting states after {attempts} attempts",
                       stacklevel=user_stacklevel())
-    return GraspSet(np.array(Q), np.array(T), np.array(P), np.array(O), hold, attempts, cache_key(task))
+    return GraspSet(np.array(Q), np.array(T), np.array(P), np.array(O), hold, attempts, key)
+
+
+def _save_partial(path: Path, key: str, hold: np.ndarray, rng: np.random.Generator, attempts: int, lists) -> None:
+    from ohra.data.dataset import atomic_write_npz
+
+    Q, T, P, O = (np.array(x) for x in lists)
+    atomic_write_npz(path, {"q": Q, "target": T, "obj_pos": P, "obj_quat": O, "hold": hold, "attempts": attempts,
+                            "key": key, "rng": json.dumps(rng.bit_generator.state)})
+
+
+def _resume_partial(path: Path, key: str, hold: np.ndarray, rng: np.random.Generator, lists) -> int:
+    """Fill ``lists`` and ``rng`` from an unfinished generation of the same key; returns its attempts (0: none)."""
+    if not path.is_file():
+        return 0
+    try:
+        with np.load(path, allow_pickle=False) as d:
+            if str(d["key"]) != key or not np.array_equal(d["hold"], hold):
+                return 0
+            arrays = [np.asarray(d[k]) for k in ("q", "target", "obj_pos", "obj_quat")]
+            attempts, state = int(d["attempts"]), json.loads(str(d["rng"]))
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+        return 0  # unreadable: start again
+    rng.bit_generator.state = state
+    for lst, a in zip(lists, arrays):
+        lst.extend(list(a))
+    return attempts
 
 
 def load_or_generate(task: Task, progress: bool | None = None) -> GraspSet:
@@ -315,8 +356,10 @@ def load_or_generate(task: Task, progress: bool | None = None) -> GraspSet:
                 return gs
         except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
             pass  # unreadable (truncated, empty) or foreign file: regenerate
-    gs = generate(task, progress)
+    partial = path.with_name(f".{path.stem}.partial.npz")  # an interrupted generation continues from here
+    gs = generate(task, progress, partial=partial)
     gs.save(path)
+    partial.unlink(missing_ok=True)
     return gs
 
 
