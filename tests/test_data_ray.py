@@ -13,7 +13,6 @@ from ohra.synth.robust import RobustnessSettings
 ray = pytest.importorskip("ray", reason="the ray extra is not installed (pip install -e '.[ray]')")
 
 
-@pytest.mark.slow
 def test_ray_and_the_process_pool_write_byte_identical_shards(tmp_path):
     hands = [("leap_2200", get_hand("leap_2200"))]
     objs = [ObjectModel.builtin("box"), ObjectModel.procedural("capsule", 1)]
@@ -29,7 +28,6 @@ def test_ray_and_the_process_pool_write_byte_identical_shards(tmp_path):
     assert {k: s["timing"] for k, s in again["hands"]["leap_2200"]["shards"].items()} == {k: s["timing"] for k, s in b.items()}
 
 
-@pytest.mark.slow
 def test_ray_evaluation_matches_the_process_pool():
     import numpy as np
 
