@@ -98,3 +98,23 @@ def test_replacing_the_shard_that_describes_an_object_keeps_the_other_hands_desc
     back = read_manifest(tmp_path / "manifest.json")
     assert back["hands"]["leap_0303"]["shards"]["box-0"]["object"] == _shard(0)["object"]
     assert back["hands"]["leap_3333"]["shards"]["box-0"]["object"]["mesh_hash"] == "changed"
+
+
+def test_merged_datasets_must_be_read_alike(tmp_path):
+    """Merging a post-test reading into a pre-test one read every shard as pre-test, silently."""
+    import pytest
+
+    from ohra.data.dataset import GraspDataset
+    from ohra.errors import DatasetError
+    from grasp_fixtures import write_dataset
+
+    root = write_dataset(tmp_path / "d", hands=("barrett_hand", "shadow_hand_right"), objects=("box",), per_pair=3)
+    a, b = GraspDataset(root, hands=["barrett_hand"]), GraspDataset(root, hands=["shadow_hand_right"])
+    both = GraspDataset.merge(a, b)
+    assert both.which == "pre" and len(both.grasps()) == 6
+    with pytest.raises(DatasetError, match=r"different which \(\['pre', 'post'\]\)"):
+        GraspDataset.merge(a, GraspDataset(root, hands=["shadow_hand_right"], which="post"))
+    with pytest.raises(DatasetError, match="different max_per_pair"):
+        GraspDataset.merge(a, GraspDataset(root, hands=["shadow_hand_right"], max_per_pair=1))
+    with pytest.raises(DatasetError, match="at least one"):
+        GraspDataset.merge()

@@ -122,11 +122,23 @@ class GraspDataset:
 
     @classmethod
     def merge(cls, *datasets: "GraspDataset") -> "GraspDataset":
+        """One dataset over the shards of several, read alike: their ``which`` and ``max_per_pair`` must agree
+        (a merged dataset reads every shard one way; taking the first's silently changed the others').
+
+        Raises:
+            DatasetError: no datasets, or datasets read with different ``which`` or ``max_per_pair``.
+        """
+        if not datasets:
+            raise DatasetError("merge needs at least one dataset")
+        for attr in ("which", "max_per_pair"):
+            values = [getattr(d, attr) for d in datasets]
+            if any(v != values[0] for v in values):
+                raise DatasetError(f"merge: the datasets are read with different {attr} ({values}); open them alike")
         out = cls.__new__(cls)
         out.roots = [r for d in datasets for r in d.roots]
         out.entries = [e for d in datasets for e in d.entries]
-        out.max_per_pair = min((d.max_per_pair for d in datasets if d.max_per_pair), default=None)
-        out.which = datasets[0].which if datasets else "pre"
+        out.max_per_pair = datasets[0].max_per_pair
+        out.which = datasets[0].which
         return out
 
     @property
