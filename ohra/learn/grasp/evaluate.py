@@ -149,12 +149,44 @@ def hand_label(hand: HandLike, params: Any) -> str:
 
 
 def check_unseen(model: GraspModel, objects: Sequence[Any]) -> None:
-    """Refuse objects the model was trained on (by name or mesh hash)."""
+    """Refuse objects the model was trained on: by name, by mesh hash, or, for its procedural training objects
+    (``family-seed``, which can be made again), by shape: a copy exported to a mesh file (vertices off by float
+    rounding) has another name and hash but is the same object."""
     train = model.meta.get("train_objects", {})
+    shapes = None
     for o in objects:
-        if o.name in train or o.mesh_hash in set(train.values()):
-            raise DatasetError(f"object {o.name!r} (mesh {o.mesh_hash}) is in the model's training set; "
+        seen = o.name if o.name in train else next((n for n, h in train.items() if h == o.mesh_hash), None)
+        if seen is None:
+            if shapes is None:
+                shapes = _procedural_shapes(train)
+            sig = _shape_signature(o)
+            seen = next((n for n, t in shapes.items() if _same_shape(sig, t)), None)
+        if seen is not None:
+            raise DatasetError(f"object {o.name!r} (mesh {o.mesh_hash}) is the model's training object {seen!r}; "
                                "evaluation needs unseen objects (allow_seen=True, or --allow-seen, to override)")
+
+
+def _procedural_shapes(train: dict) -> dict[str, np.ndarray]:
+    """Shape signatures of the training objects named ``family-seed`` of a procedural family."""
+    from ohra.objects.model import ObjectModel
+    from ohra.objects.procedural import FAMILIES
+
+    out = {}
+    for name in train:
+        family, _, seed = name.rpartition("-")
+        if family in FAMILIES and seed.isdigit():
+            out[name] = _shape_signature(ObjectModel.procedural(family, int(seed)))
+    return out
+
+
+def _shape_signature(obj: Any) -> np.ndarray:
+    """Sorted bounding-box extents [m] and surface area [m^2]: equal for a mesh and its re-export."""
+    m = obj.mesh
+    return np.concatenate([np.sort(np.asarray(m.extents, dtype=float)), [float(m.area)]])
+
+
+def _same_shape(a: np.ndarray, b: np.ndarray) -> bool:
+    return bool(np.allclose(a, b, rtol=1e-5, atol=1e-7))
 
 
 def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequence[ObjectLike], n: int = 100,
