@@ -98,6 +98,6 @@ def test_a_procedural_training_object_exported_to_a_mesh_file_is_still_refused(t
     for suffix in (".stl", ".obj"):
         path = tmp_path / f"my_box{suffix}"
         ObjectModel.procedural("box", 1).mesh.export(path)
-        with pytest.raises(DatasetError, match=r"'my_box' .* is the model's training object 'box-1'"):
+        with pytest.raises(DatasetError, match=r"'my_box' .* is in the model's training set \(as 'box-1'\)"):
             check_unseen(model, [ObjectModel.load(path)])
     check_unseen(model, [ObjectModel.procedural("box", 1001), ObjectModel.builtin("box")])

@@ -162,7 +162,8 @@ def check_unseen(model: GraspModel, objects: Sequence[Any]) -> None:
             sig = _shape_signature(o)
             seen = next((n for n, t in shapes.items() if _same_shape(sig, t)), None)
         if seen is not None:
-            raise DatasetError(f"object {o.name!r} (mesh {o.mesh_hash}) is the model's training object {seen!r}; "
+            alias = f" (as {seen!r})" if seen != o.name else ""
+            raise DatasetError(f"object {o.name!r} (mesh {o.mesh_hash}) is in the model's training set{alias}; "
                                "evaluation needs unseen objects (allow_seen=True, or --allow-seen, to override)")
 
 
