@@ -78,8 +78,9 @@ def eval_hand(name: str, original: bool = False, form: str | None = None, inerti
     return hand
 
 
-def load_grasp_file(path: str | Path, key: str | None = None) -> np.ndarray:
-    """The (N, 31) array of a grasp file; :class:`GraspError` naming the file when unusable."""
+def load_grasp_file(path: str | Path, key: str | None = None) -> tuple[np.ndarray, dict[str, str]]:
+    """The (N, 31) array of a grasp file and the ``hand``, ``form`` and ``model`` it records beside it (``ohra
+    grasp sample`` writes them; empty for other files); :class:`GraspError` naming the file when unusable."""
     path = Path(path)
     if path.is_dir():
         shards = sorted(str(p.relative_to(path)) for p in path.glob("*/*.npz"))[:3]
@@ -96,7 +97,7 @@ def load_grasp_file(path: str | Path, key: str | None = None) -> np.ndarray:
         raise GraspError(f"{path}: cannot read grasps: {why} (expected an (N, 31) array, e.g. a shard or "
                          "`ohra grasp sample` output)") from None
     if isinstance(data, np.ndarray):
-        return data
+        return data, {}
     with data:
         names = list(data.keys())
         if any(n.endswith(".rows") for n in names):  # ohra.data.pack's per-hand file: every object's grasps in a row
@@ -107,19 +108,8 @@ def load_grasp_file(path: str | Path, key: str | None = None) -> np.ndarray:
             key = "grasps" if "grasps" in names else (names[0] if len(names) == 1 else None)
         if key is None or key not in names:
             raise GraspError(f"{path}: no array {key or 'grasps'!r} (arrays: {', '.join(names) or 'none'}); use --key")
-        return np.asarray(data[key])
-
-
-def grasp_file_info(path: str | Path) -> dict[str, str]:
-    """The ``hand``, ``form`` and ``model`` a grasp file records (``ohra grasp sample`` writes them beside
-    ``grasps``); empty for other files."""
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            if isinstance(data, np.ndarray):
-                return {}
-            return {k: str(data[k]) for k in ("hand", "form", "model") if k in data.files and data[k].ndim == 0}
-    except Exception:  # load_grasp_file has said what is wrong with an unreadable file
-        return {}
+        info = {k: str(data[k]) for k in ("hand", "form", "model") if k in names and data[k].ndim == 0}
+        return np.asarray(data[key]), info
 
 
 def run(args: argparse.Namespace) -> int:
@@ -142,8 +132,7 @@ def run(args: argparse.Namespace) -> int:
     for out in (args.output, args.render, args.meshcat):  # all checked before anything is simulated or written
         if out:
             check_output(out)
-    grasps = load_grasp_file(args.grasps, args.key)
-    made = grasp_file_info(args.grasps)  # what `ohra grasp sample` recorded beside the grasps, if anything
+    grasps, made = load_grasp_file(args.grasps, args.key)  # made: what `ohra grasp sample` recorded, if anything
     if made.get("hand") == str(args.hand) and made.get("form"):
         if args.form is None:
             args.form = made["form"]  # the canonical hand the grasps were sampled for

@@ -153,13 +153,15 @@ class Recipe:
     def _entries(self) -> dict[str, tuple]:
         """Hand name -> (name, params[, couplings]); the same hand reached twice (a name and a pattern) counts
         once, two different hands under one name (two files called grip.json) are refused."""
+        from ohra.synth.pipeline import params_hash  # the manifest's own test of "the same hand"
+
         out: dict[str, tuple] = {}
         first: dict[str, int] = {}
         for i, h in enumerate(self.hands):
             for entry in self._hand(h, f"{self.source or '<recipe>'}: hands[{i}]"):
                 name = entry[0]
                 if name in out:
-                    if not _same_params(out[name][1], entry[1]):
+                    if params_hash(out[name][1]) != params_hash(entry[1]):
                         raise RecipeError(f"{self.source or '<recipe>'}: hands[{first[name]}] and hands[{i}] are two "
                                           f"different hands named {name!r} (a dataset keys its hands by name): rename "
                                           "one (its file, or the spec's name)")
@@ -260,14 +262,6 @@ class Recipe:
                               "name fewer in split.test or lower split.test_fraction")
         given = {**sp, "test": [sp["test"]]} if isinstance(sp.get("test"), str) else sp
         return {"train": [k for k in keys if k not in test], "test": [k for k in keys if k in test], **given}
-
-
-def _same_params(a: Any, b: Any) -> bool:
-    """Two hands' canonical parameters are the same hand (values equal to 1e-9)."""
-    if type(a) is not type(b):
-        return False
-    va, vb = np.asarray(a.to_vector(), dtype=float), np.asarray(b.to_vector(), dtype=float)
-    return va.shape == vb.shape and bool(np.allclose(va, vb, rtol=0.0, atol=1e-9))
 
 
 HAND_KEYS = {"pattern": ("pattern", "digit_sum"), "params": ("params",), "spec": ("spec", "form")}

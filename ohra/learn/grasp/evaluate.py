@@ -385,12 +385,12 @@ def _pair_key(settings: dict, name: str, params: Any, obj: Any, seed: int, condi
 
 
 def _save_pair(path: Path, p: PairResult) -> None:
-    from ohra.data.dataset import atomic_write_npz
+    from ohra.io import write_npz
 
     info = {k: getattr(p, k) for k in ("hand", "object", "object_hash", "original", "seed", "sample_seconds",
                                         "sim_seconds", "diversity_success", "diversity_all", "refine_seconds")}
-    atomic_write_npz(path, {"success": np.asarray(p.success, dtype=bool), "grasps": np.asarray(p.grasps),
-                            "info": np.array(json.dumps(info, default=float))})
+    write_npz(path, {"success": np.asarray(p.success, dtype=bool), "grasps": np.asarray(p.grasps),
+                     "info": np.array(json.dumps(info, default=float))})
 
 
 def _load_pair(path: Path) -> PairResult | None:

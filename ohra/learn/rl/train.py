@@ -35,7 +35,7 @@ from typing import Any, Iterator
 import numpy as np
 
 from ohra.errors import CheckpointError
-from ohra.io import folder_lock
+from ohra.io import folder_lock, write_bytes
 from ohra.learn.rl.config import POLICIES, PPOSettings, RLConfigError
 from ohra.sim.rotation.config import RotationConfig
 
@@ -222,14 +222,7 @@ def _check_resume(run_dir: Path, env_cfg: RotationConfig, ppo: PPOSettings) -> N
     at the value the run had (``SAVED_BEFORE``) or its default instead of failing the comparison."""
     saved = read_config(run_dir)
     theirs = _plain(RotationConfig.from_saved(_saved_env(run_dir, saved), f"{run_dir}/config.json").to_dict())
-    mine = env_cfg.to_dict()
-    hand, own = Path(env_cfg.hand), Path(run_dir) / Path(env_cfg.hand).name
-    if hand.suffix.lower() in HAND_FILE_SUFFIXES and hand.is_file() and own.is_file() \
-            and hand.read_bytes() == own.read_bytes():  # the same hand file as the run's copy
-        mine["hand"] = str(own.resolve())
-    if _object_file(env_cfg.object):
-        mine["object"] = str(Path(env_cfg.object).expanduser().resolve())
-    mine = _plain(mine)
+    mine = _plain(_portable_env(run_dir, env_cfg, copy=False)[0])
     diff = sorted(k for k in set(theirs) | set(mine) if theirs.get(k) != mine.get(k))
     if diff:
         raise RLConfigError(f"{run_dir}: the environment config differs from the run being resumed: "
@@ -541,23 +534,24 @@ def _write_config(run_dir: Path, env_cfg: RotationConfig, ppo: PPOSettings, init
 HAND_FILE_SUFFIXES = (".json",)  # a params file; a spec YAML names its URDF relative to itself: not copied
 
 
-def _portable_env(run_dir: Path, env_cfg: RotationConfig) -> tuple[dict, str | None]:
+def _portable_env(run_dir: Path, env_cfg: RotationConfig, copy: bool = True) -> tuple[dict, str | None]:
     """The env settings as ``config.json`` stores them: a hand given as a params file is copied into the run
     folder under its own name and named by that (the run keeps the hand it was trained on, wherever it is
     evaluated from and whatever later happens to the file); an object file is named by its absolute path.
-    Returns the settings and the absolute path the hand file was copied from (None: no file)."""
-    import shutil
-
+    Returns the settings and the absolute path the hand file was copied from (None: no file). ``copy=False``
+    (a resume's comparison, against :func:`_saved_env`): the hand is named by the run's copy, as a path, only when
+    the file still holds the same hand."""
     d, source = env_cfg.to_dict(), None
     hand = Path(env_cfg.hand)
     if hand.suffix.lower() in HAND_FILE_SUFFIXES and hand.is_file():
-        source = str(hand.resolve())
-        copy = run_dir / hand.name
-        if hand.resolve() != copy.resolve():
-            tmp = run_dir / f".{hand.name}.tmp"
-            shutil.copyfile(hand, tmp)
-            os.replace(tmp, copy)
-        d["hand"] = hand.name
+        own = Path(run_dir) / hand.name
+        if copy:
+            source = str(hand.resolve())
+            if hand.resolve() != own.resolve():
+                write_bytes(own, hand.read_bytes())
+            d["hand"] = hand.name
+        elif own.is_file() and hand.read_bytes() == own.read_bytes():
+            d["hand"] = str(own.resolve())
     if _object_file(env_cfg.object):
         d["object"] = str(Path(env_cfg.object).expanduser().resolve())
     return d, source

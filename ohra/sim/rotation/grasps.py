@@ -28,10 +28,8 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import os
 import re
 import sys
-import tempfile
 import warnings
 import zipfile
 from dataclasses import dataclass
@@ -41,7 +39,7 @@ import numpy as np
 import pybullet as pb
 
 from ohra.errors import OhraError, user_stacklevel
-from ohra.io import umask_mode
+from ohra.io import write_npz
 from ohra.paths import cache_dir
 from ohra.sim.rotation.rewards import delta_yaw
 from ohra.sim.rotation.scene import R_WORLD_PALM, RotationScene, _quat_mul, yaw_quat
@@ -87,18 +85,8 @@ class GraspSet:
         return len(self.q)
 
     def save(self, path: Path) -> Path:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=str(path.parent), prefix=f".{path.name}.", suffix=".npz")
-        os.close(fd)
-        try:
-            np.savez_compressed(tmp, q=self.q, target=self.target, obj_pos=self.obj_pos, obj_quat=self.obj_quat,
-                                hold=self.hold, attempts=self.attempts, key=self.key)
-            os.chmod(tmp, umask_mode())  # mkstemp makes it private; a new file's mode is 0666 minus the umask
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
-        return path
+        return write_npz(path, {"q": self.q, "target": self.target, "obj_pos": self.obj_pos, "obj_quat": self.obj_quat,
+                                "hold": self.hold, "attempts": self.attempts, "key": self.key})
 
     @classmethod
     def load(cls, path: Path) -> "GraspSet":
@@ -319,10 +307,8 @@ def generate(task: Task, progress: bool | None = False, partial: Path | None = N
 
 
 def _save_partial(path: Path, key: str, hold: np.ndarray, rng: np.random.Generator, attempts: int, lists) -> None:
-    from ohra.data.dataset import atomic_write_npz
-
     Q, T, P, O = (np.array(x) for x in lists)
-    atomic_write_npz(path, {"q": Q, "target": T, "obj_pos": P, "obj_quat": O, "hold": hold, "attempts": attempts,
+    write_npz(path, {"q": Q, "target": T, "obj_pos": P, "obj_quat": O, "hold": hold, "attempts": attempts,
                             "key": key, "rng": json.dumps(rng.bit_generator.state)})
 
 

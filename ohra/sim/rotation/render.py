@@ -6,14 +6,12 @@ camera looks at the palm centre from above and the side (world +z is up in the p
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 import pybullet as pb
 
-from ohra.io import umask_mode
+from ohra.io import atomic_path
 from ohra.sim.rotation.scene import RotationScene
 
 
@@ -43,16 +41,7 @@ def write_gif(frames: list[np.ndarray] | np.ndarray, path: str | Path, fps: floa
     """Write an animated GIF (Pillow) atomically."""
     from PIL import Image
 
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     images = [Image.fromarray(np.asarray(f, dtype=np.uint8)) for f in frames]
-    fd, tmp = tempfile.mkstemp(dir=str(path.parent), prefix=f".{path.name}.", suffix=".gif")
-    os.close(fd)
-    try:
+    with atomic_path(path, suffix=".gif") as tmp:
         images[0].save(tmp, save_all=True, append_images=images[1:], duration=int(round(1000 / fps)), loop=0)
-        os.chmod(tmp, umask_mode())  # mkstemp makes it private; a new file's mode is 0666 minus the umask
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    return Path(path)
