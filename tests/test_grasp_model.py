@@ -187,21 +187,35 @@ def test_joints_within_limits_absent_zero_params(params_model, capsule, hand, bi
 
 
 def _check_limits(model, hand, obj, bias):
-    state = {k: v.clone() for k, v in model.net.joints.state_dict().items()}
-    try:
-        _push_joints(model, bias)
-        g = model.sample(hand, obj, 16, seed=0)
-    finally:
-        model.net.joints.load_state_dict(state)
+    """Clamped to the hand's limits, absent joints exactly 0, sampled as it is and as its mirror image (whose
+    reversed joints saturate at the other limit)."""
+    from ohra.canonical.mirror import mirror_params
+
     p = get_hand(hand)
-    q = g[:, 9:]
     lo, up = np.asarray(p.joint_lowers), np.asarray(p.joint_uppers)
-    assert np.all(q >= lo) and np.all(q <= up)
-    absent = ~np.asarray(p.present_joints)
-    assert absent.any() == (hand != "shadow_hand_right")  # every other hand here lacks some joints
-    assert np.all(q[:, absent] == 0.0)
-    movable = np.asarray(p.movable_joints)
-    np.testing.assert_allclose(q[:, movable], np.broadcast_to(up if bias > 0 else lo, q.shape)[:, movable], atol=1e-6)
+    signs = mirror_params(from_base if (from_base := _vae_form(model, p)) is not None else p).signs
+    for mirror in (False, True):
+        state = {k: v.clone() for k, v in model.net.joints.state_dict().items()}
+        try:
+            _push_joints(model, bias)
+            g = model.sample(hand, obj, 16, seed=0, mirror=mirror)
+        finally:
+            model.net.joints.load_state_dict(state)
+        q = g[:, 9:]
+        assert np.all(q >= lo) and np.all(q <= up)
+        absent = ~np.asarray(p.present_joints)
+        assert absent.any() == (hand != "shadow_hand_right")  # every other hand here lacks some joints
+        assert np.all(q[:, absent] == 0.0) and not np.signbit(q[:, absent]).any()
+        movable = np.asarray(p.movable_joints)
+        high = (bias > 0) == (signs > 0) if mirror else np.full(22, bias > 0)
+        np.testing.assert_allclose(q[:, movable], np.broadcast_to(np.where(high, up, lo), q.shape)[:, movable], atol=1e-6)
+
+
+def _vae_form(model, p):
+    """The form a VAE-conditioned model mirrors (the base form), else None."""
+    from ohra.learn.encoding import as_base
+
+    return as_base(p) if model.condition.kind == "vae" else None
 
 
 def test_vae_condition_refuses_hands_without_base_form(vae_model, capsule):

@@ -3,8 +3,8 @@
     ohra train grasp --data DIR [DIR ...] [--hands H ...] [--test-objects O ...] --condition vae|params
                      [--encoder pointnet|dgcnn] [--steps N] [--batch-size B] [--seed S] [--threads T]
                      -o RUN [--resume]
-    ohra grasp sample --hand H --object O [-n 100] [--seed S] [--refine [open|touch]] [--centre] [--candidates K] [--condition-hand H] [--model RUN] -o grasps.npz
-    ohra grasp eval --hands H ... --objects O ... [-n 100] [--seed S] [--original [--collisions canonical] | --inertials original] [--condition-hand H] [--refine [open|touch]] [--centre] [--candidates K] [--model RUN] [-o report.json]
+    ohra grasp sample --hand H --object O [-n 100] [--seed S] [--refine [open|touch]] [--centre] [--candidates K] [--mirror auto|on|off] [--condition-hand H] [--model RUN] -o grasps.npz
+    ohra grasp eval --hands H ... --objects O ... [-n 100] [--seed S] [--original [--collisions canonical] | --inertials original] [--condition-hand H] [--refine [open|touch]] [--centre] [--candidates K] [--mirror auto|on|off] [--model RUN] [-o report.json]
 
 Plugged into :mod:`ohra.cli.main` by ``register(subparsers)`` (adds the ``grasp`` group and
 ``grasp`` under the ``train`` group, creating ``train`` if no other plugin did). torch is imported
@@ -32,9 +32,16 @@ CENTRE_HELP = ("sample on the object centred on its bounding box, grasps moved b
                "whose frame origin lies away from the object, e.g. exported in scene coordinates)")
 CANDIDATES_HELP = ("draw K grasps per wrist rotation and keep the one whose fingers lie nearest the object's surface "
                    "(default 1: the first draw)")
+MIRROR_HELP = ("sample the hand as its mirror image on the mirrored object and mirror the grasps back: 'auto' (default) "
+               "when the mirror image lies nearer the model's training hands (a left twin of a right training hand), 'on', 'off'")
 REFINE_HELP = ("refine the fingers after sampling (ohra.learn.grasp.refine; tens of ms per grasp): 'open' (the flag "
                "alone) opens sunk fingers just enough to clear the object; 'touch' also closes hovering fingers onto "
                "its surface (+7.8 points over 'open' for the shipped model on unseen objects)")
+
+
+def _mirror(choice: str) -> bool | str:
+    """The ``mirror=`` argument of ``--mirror auto|on|off``."""
+    return {"on": True, "off": False}.get(choice, choice)
 
 
 def _refine(choice: str | None) -> Any:
@@ -65,6 +72,7 @@ def register(sub: Any) -> None:
     p.add_argument("--refine", nargs="?", const="open", choices=("open", "touch"), help=REFINE_HELP)
     p.add_argument("--centre", action="store_true", help=CENTRE_HELP)
     p.add_argument("--candidates", type=int, default=1, help=CANDIDATES_HELP)
+    p.add_argument("--mirror", choices=("auto", "on", "off"), default="auto", help=MIRROR_HELP)
     p.add_argument("--condition-hand", help="condition the model on this hand instead (paper Table 9); the joints stay "
                    "within --hand's limits")
     p.add_argument("-o", "--output", required=True, help="output .npz")
@@ -90,6 +98,7 @@ def register(sub: Any) -> None:
     p.add_argument("--refine", nargs="?", const="open", choices=("open", "touch"), help=REFINE_HELP)
     p.add_argument("--centre", action="store_true", help=CENTRE_HELP)
     p.add_argument("--candidates", type=int, default=1, help=CANDIDATES_HELP)
+    p.add_argument("--mirror", choices=("auto", "on", "off"), default="auto", help=MIRROR_HELP)
     p.add_argument("--condition-hand", help="condition the model on this hand instead (paper Table 9); the grasps run on "
                    "the true hand, within its joint limits")
     p.add_argument("--workers", type=int, default=1, help="simulation processes (default 1)")
@@ -254,15 +263,17 @@ def _cmd_sample(args: argparse.Namespace) -> int:
     obj = resolve_object(args.object, scale=args.scale)
     warn_if_ungraspable(obj)
     timing: dict = {}
+    mirrored = model.mirrors(args.condition_hand or params, _mirror(args.mirror))
     g = model.sample(params, obj, args.n, seed=args.seed, timing=timing, refine=_refine(args.refine), centre=args.centre,
-                     condition_hand=args.condition_hand, candidates=args.candidates)
+                     condition_hand=args.condition_hand, candidates=args.candidates, mirror=mirrored)
     from ohra.canonical.params import ExtendedParams
 
     # what the grasps were made for: ohra eval takes the form from here (the base and extended canonical hands of
     # one registered hand differ, and so do their outcomes)
     atomic_write_npz(out, {"grasps": g.astype(np.float64), "hand": np.array(str(args.hand)),
                            "form": np.array("extended" if isinstance(params, ExtendedParams) else "base"),
-                           "model": np.array(str(args.model or ("leap" if note else "default")))})
+                           "model": np.array(str(args.model or ("leap" if note else "default"))),
+                           "mirrored": np.array(bool(mirrored))})
     if note:
         print(note, file=sys.stderr)
     fingers = params.num_fingers
@@ -270,7 +281,8 @@ def _cmd_sample(args: argparse.Namespace) -> int:
         print(f"ohra: note: {args.hand} has {fingers} finger(s): its grasps cannot hold an object "
               "(grasp synthesis refuses such hands)", file=sys.stderr)
     extra = f", refinement {1e3 * timing['refine_seconds'] / len(g):.1f} ms per grasp" if args.refine else ""
-    print(f"wrote {len(g)} grasps of {args.hand} on {args.object} to {out} ({1e3 * timing['seconds'] / len(g):.2f} ms per grasp{extra})")
+    how = " (sampled as its mirror image)" if mirrored else ""
+    print(f"wrote {len(g)} grasps of {args.hand}{how} on {args.object} to {out} ({1e3 * timing['seconds'] / len(g):.2f} ms per grasp{extra})")
     return 0
 
 
@@ -294,7 +306,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
                          workers=args.workers, progress=not args.quiet, allow_seen=args.allow_seen,
                          protocol=replace(Protocol.preset(args.protocol), object_point=args.object_point), inertials=args.inertials,
                          condition_hand=args.condition_hand, refine=_refine(args.refine), collisions=args.collisions, centre=args.centre,
-                         candidates=args.candidates)
+                         candidates=args.candidates, mirror=_mirror(args.mirror))
     if args.output:
         from ohra.data.dataset import atomic_write_json
 
@@ -310,8 +322,9 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         print(f"{p.hand:20s} {p.object:16s} {int(p.success.sum()):4d}/{len(p.success):<4d} "
               f"({100 * p.success_rate:5.1f} %)  {1e3 * p.sample_seconds / len(p.success):6.2f} ms/grasp  "
               f"approach spread {d.get('approach_spread', float('nan')):.2f}")
+    mirrored = set(rep.meta.get("mirrored_hands", []))
     for h, r in rep.per_hand().items():
-        print(f"{h}: {100 * r['success_rate']:.1f} % of {r['n']} grasps{(' (original URDF, canonical collision shapes)' if args.collisions == 'canonical' else ' (original URDF)') if args.original else ''}"
+        print(f"{h}: {100 * r['success_rate']:.1f} % of {r['n']} grasps{' (sampled as its mirror image)' if h in mirrored else ''}{(' (original URDF, canonical collision shapes)' if args.collisions == 'canonical' else ' (original URDF)') if args.original else ''}"
               f"{' (canonical, original finger masses)' if args.inertials == 'original' and not args.original else ''}"
               f"{f' (model told {args.condition_hand})' if args.condition_hand else ''}")
     if note:

@@ -84,6 +84,7 @@ class PairResult:
     diversity_success: dict | None
     diversity_all: dict | None
     refine_seconds: float = 0.0  # test-time refinement of the n grasps (0 when off)
+    mirrored: bool = False  # sampled as the hand's mirror image on the mirrored object (GraspModel.sample)
 
     @property
     def success_rate(self) -> float:
@@ -99,7 +100,7 @@ class PairResult:
                 "seed": self.seed, "n": n, "successes": int(self.success.sum()), "success_rate": self.success_rate,
                 "sample_ms_per_grasp": 1e3 * self.sample_seconds / max(n, 1),
                 "refine_ms_per_grasp": 1e3 * self.refine_seconds / max(n, 1), "sim_seconds": self.sim_seconds,
-                "diversity_success": self.diversity_success, "diversity_all": self.diversity_all}
+                "diversity_success": self.diversity_success, "diversity_all": self.diversity_all, "mirrored": self.mirrored}
 
 
 @dataclass
@@ -195,7 +196,7 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
                    progress: bool = False, allow_seen: bool = False, inertials: str = "capsule",
                    condition_hand: HandLike | None = None, refine: bool | RefineSettings = False,
                    collisions: str = "own", centre: bool = False, candidates: int = 1,
-                   resume_dir: str | Path | None = None) -> GraspEvalReport:
+                   resume_dir: str | Path | None = None, mirror: bool | str = "auto") -> GraspEvalReport:
     """Sample ``n`` grasps per (hand, object) and run the six-direction test (module docstring).
 
     Every hand and object is checked before the first simulation.
@@ -309,6 +310,7 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
     settings = _resume_settings(model, n, original, inertials, collisions, protocol, refine, centre, candidates,
                                 condition_hand) if resume is not None else None
     for name, params, couplings in resolved:
+        flip = model.mirrors(params if condition_hand is None else resolve_hand(condition_hand), mirror)
         movable = np.asarray(params.movable_joints)
         hybrid = None
         if original and collisions == "canonical":  # one fit per hand, shared by its objects
@@ -319,7 +321,7 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
             s = pair_seed(seed, str(name), obj.mesh_hash)
             if resume is not None:
                 told = model.condition.vector(params if condition_hand is None else resolve_hand(condition_hand))
-                path = resume / f"{_pair_key(settings, str(name), params, obj, s, told)}.npz"
+                path = resume / f"{_pair_key(settings, str(name), params, obj, s, told, flip)}.npz"
                 done = _load_pair(path)
                 if done is not None:
                     pairs.append(done)
@@ -327,7 +329,7 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
                     continue
             timing: dict = {}
             grasps = model.sample(params, obj, int(n), seed=s, timing=timing, condition_hand=condition_hand, refine=refine,
-                                  centre=centre, candidates=candidates)
+                                  centre=centre, candidates=candidates, mirror=flip)
             if hybrid is not None:
                 sim_hand = hybrid
             else:
@@ -343,7 +345,8 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
             ok = rep.success
             pairs.append(PairResult(str(name), obj.name, obj.mesh_hash, bool(original), s, ok, grasps,
                                     timing["seconds"], time.perf_counter() - t0,
-                                    diversity(grasps[ok], movable), diversity(grasps, movable), timing.get("refine_seconds", 0.0)))
+                                    diversity(grasps[ok], movable), diversity(grasps, movable), timing.get("refine_seconds", 0.0),
+                                    flip))
             if resume is not None:
                 _save_pair(path, pairs[-1])
     cond = None if condition_hand is None else (condition_hand if isinstance(condition_hand, str) else hand_key(resolve_hand(condition_hand)))
@@ -351,6 +354,8 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
     meta = {"n_per_pair": int(n), "seed": int(seed), "original": bool(original), "inertials": inertials, "collisions": collisions,
             "condition_hand": cond,
             "refine": ref, "centre": bool(centre), "candidates": int(candidates),
+            "mirror": mirror if isinstance(mirror, str) else bool(mirror),
+            "mirrored_hands": sorted({p.hand for p in pairs if p.mirrored}),
             "model": str(model.path),
             "model_meta": model.meta, "protocol": protocol.__dict__ if protocol is not None else "default",
             "resumed_pairs": resumed}
@@ -374,10 +379,12 @@ def _resume_settings(model: GraspModel, n: int, original: bool, inertials: str, 
             "candidates": int(candidates), "condition_hand": cond, "format": 1}
 
 
-def _pair_key(settings: dict, name: str, params: Any, obj: Any, seed: int, condition: np.ndarray) -> str:
+def _pair_key(settings: dict, name: str, params: Any, obj: Any, seed: int, condition: np.ndarray,
+              mirrored: bool = False) -> str:
     import hashlib
 
-    body = json.dumps({**settings, "hand": name, "params": hand_key(params), "mesh": obj.mesh_hash,
+    # "mirrored" only when true: pairs stored before the option keep their keys (they were not mirrored)
+    body = json.dumps({**settings, **({"mirrored": True} if mirrored else {}), "hand": name, "params": hand_key(params), "mesh": obj.mesh_hash,
                        # what the model was told of the hand (its VAE latent or normalised parameters)
                        "condition": hashlib.sha256(np.asarray(condition, dtype=np.float64).tobytes()).hexdigest(),
                        "body": getattr(obj, "body_hash", ""), "seed": int(seed)}, sort_keys=True, default=str)
@@ -388,7 +395,7 @@ def _save_pair(path: Path, p: PairResult) -> None:
     from ohra.io import write_npz
 
     info = {k: getattr(p, k) for k in ("hand", "object", "object_hash", "original", "seed", "sample_seconds",
-                                        "sim_seconds", "diversity_success", "diversity_all", "refine_seconds")}
+                                        "sim_seconds", "diversity_success", "diversity_all", "refine_seconds", "mirrored")}
     write_npz(path, {"success": np.asarray(p.success, dtype=bool), "grasps": np.asarray(p.grasps),
                      "info": np.array(json.dumps(info, default=float))})
 
@@ -403,7 +410,7 @@ def _load_pair(path: Path) -> PairResult | None:
             return PairResult(info["hand"], info["object"], info["object_hash"], bool(info["original"]), int(info["seed"]),
                               np.asarray(d["success"], dtype=bool), np.asarray(d["grasps"]), float(info["sample_seconds"]),
                               float(info["sim_seconds"]), info["diversity_success"], info["diversity_all"],
-                              float(info.get("refine_seconds", 0.0)))
+                              float(info.get("refine_seconds", 0.0)), bool(info.get("mirrored", False)))
     except Exception:  # a damaged or foreign file: evaluate the pair again
         return None
 

@@ -28,7 +28,8 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from ohra.errors import CheckpointError, GraspError, ObjectWarning, require_seed, user_stacklevel
+from ohra.canonical.mirror import mirror_grasps, mirror_params
+from ohra.errors import CheckpointError, GraspError, ObjectWarning, OhraError, ParamsError, require_seed, user_stacklevel
 from ohra.learn.grasp.condition import HandCondition, HandLike, resolve_hand
 from ohra.learn.grasp.config import GraspModelConfig
 from ohra.learn.grasp.diffusion import DDIMScheduler, Denoiser
@@ -42,6 +43,7 @@ MODEL_FORMAT = "ohra-grasp-model"
 CHECKPOINT_FORMAT = "ohra-grasp-checkpoint"
 DEFAULT_MODEL = "grasp_default"
 CLOUD_SEED = 0  # surface sample of an object at inference (fixed: same object, same cloud)
+_Y_FLIP = np.array([1.0, -1.0, 1.0])  # the reflection through an x-z plane (S = M = diag(1, -1, 1))
 ObjectLike = Union[ObjectModel, str, Path]
 
 
@@ -161,6 +163,7 @@ class GraspModel:
     # machine: 50-1500 ms for 100 grasps; 1 thread: 30-60 ms)
     threads: int = 1
     _clouds: dict[str, torch.Tensor] = field(default_factory=dict, repr=False)
+    _cache: dict[str, Any] = field(default_factory=dict, repr=False)  # derived values (training-hand conditions)
 
     def __post_init__(self) -> None:
         self.net.eval()
@@ -184,7 +187,8 @@ class GraspModel:
     # -- sampling -------------------------------------------------------------------------------------
     def sample(self, hand: HandLike, obj: ObjectLike, n: int, rotations: Any = None, seed: int = 0,
                timing: dict | None = None, condition_hand: HandLike | None = None,
-               refine: bool | RefineSettings = False, centre: bool = False, candidates: int = 1) -> np.ndarray:
+               refine: bool | RefineSettings = False, centre: bool = False, candidates: int = 1,
+               mirror: bool | str = "auto") -> np.ndarray:
         """``n`` grasps of ``hand`` on ``obj`` (see the module docstring).
 
         Args:
@@ -214,6 +218,13 @@ class GraspModel:
                 :func:`~ohra.learn.grasp.refine.refine_grasps`), so neither sunk nor hovering. For a
                 rotation the model's translations spread by ~1 cm, and sunk fingers fail the test
                 (README, *Grasp model*). 1 (default): the first draw, as before the option existed.
+            mirror: sample the hand's mirror image on the mirrored object and mirror the grasps back
+                (:mod:`ohra.canonical.mirror`; physics is mirror-symmetric, so a right-hand grasp of the
+                mirrored object is a left-hand grasp of the object): True, False, or ``"auto"`` (default):
+                mirror when the mirror image lies nearer the model's training hands than the hand itself
+                (:meth:`mirrors`), so a model trained on right hands grasps with their left twins. Hands
+                the model trained on, and hands more like them than their mirror images, are sampled as
+                they are. With ``condition_hand`` the decision is made on that hand, and both are mirrored.
 
         Returns:
             (n, 31) float64 grasps ``[t (3), rot6d (6), q (22)]``: ``t`` the palm-frame origin in the
@@ -248,9 +259,15 @@ class GraspModel:
         rots = random_rotations(n, rng) if rotations is None else as_rotations(rotations, n)
         t0 = time.perf_counter()
         cond_params = params if condition_hand is None else resolve_hand(condition_hand)
+        flip = self.mirrors(cond_params, mirror)
+        net_params, signs = params, None
+        if flip:  # the networks see the mirror images; the grasps are mirrored back below
+            net_params, signs, cond_params = self._mirrored(params, cond_params)
+            rots = rots * _Y_FLIP[:, None] * _Y_FLIP  # S R M
+            shift = shift * _Y_FLIP
         hand_vec = torch.from_numpy(self.condition.vector(cond_params).astype(np.float32))
-        lower = torch.from_numpy(np.asarray(params.joint_lowers, dtype=np.float32))
-        upper = torch.from_numpy(np.asarray(params.joint_uppers, dtype=np.float32))
+        lower = torch.from_numpy(np.asarray(net_params.joint_lowers, dtype=np.float32))
+        upper = torch.from_numpy(np.asarray(net_params.joint_uppers, dtype=np.float32))
         r6 = np.concatenate([rots[:, :, 0], rots[:, :, 1]], axis=1)
         if k > 1:  # rotation-major: the candidates of rotation i are rows i*k .. i*k+k-1
             r6 = np.repeat(r6, k, axis=0)
@@ -259,13 +276,15 @@ class GraspModel:
         if self.threads and self.threads != old_threads:
             torch.set_num_threads(int(self.threads))
         try:
-            feat, x, q = self._run(obj, hand_vec, r6, lower, upper, gen, shift)
+            feat, x, q = self._run(obj, hand_vec, r6, lower, upper, gen, shift, mirror=flip)
         finally:
             if torch.get_num_threads() != old_threads:
                 torch.set_num_threads(old_threads)
+        out = np.concatenate([x.double().numpy() * self.t_scale + shift, r6, q.double().numpy()], axis=1)  # in the mesh frame
+        if signs is not None:
+            out = mirror_grasps(out, signs)
         # clamp again in float64: a float32 limit can lie a hair outside the float64 one
-        q64 = np.clip(q.double().numpy(), params.joint_lowers, params.joint_uppers)
-        out = np.concatenate([x.double().numpy() * self.t_scale + shift, r6, q64], axis=1)  # in the mesh frame
+        out[:, 9:] = np.clip(out[:, 9:], params.joint_lowers, params.joint_uppers)
         if k > 1:
             out = nearest_surface(params, obj, out.reshape(n, k, 31))
         if timing is not None:
@@ -278,11 +297,14 @@ class GraspModel:
         return out
 
     def _run(self, obj: ObjectModel, hand_vec: torch.Tensor, r6: np.ndarray, lower: torch.Tensor, upper: torch.Tensor,
-             gen: torch.Generator, shift: np.ndarray | None = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+             gen: torch.Generator, shift: np.ndarray | None = None, mirror: bool = False) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """The networks: object feature, normalised translations (n, 3), clamped joints (n, 22); the
-        object's surface points are seen moved by ``-shift`` [m] (translations come out in that frame)."""
+        object's surface points are seen reflected through the mesh frame's x-z plane when ``mirror``, then
+        moved by ``-shift`` [m] (translations come out in that frame)."""
         n = len(r6)
         cloud = self.object_cloud(obj)
+        if mirror:
+            cloud = cloud * torch.tensor(_Y_FLIP, dtype=cloud.dtype)
         if shift is not None and np.any(shift):
             cloud = cloud - torch.from_numpy(np.asarray(shift, dtype=np.float32))
         with torch.inference_mode():
@@ -291,6 +313,60 @@ class GraspModel:
             x = self.net.sample_translation(cond, gen)
             q = clamp_joints(self.net.joints(torch.cat([cond, x], dim=-1)), lower, upper)
         return feat, x, q
+
+    # -- handedness -------------------------------------------------------------------------------------
+    def mirrors(self, hand: HandLike, mirror: bool | str = "auto") -> bool:
+        """Whether :meth:`sample` (``mirror=``) samples ``hand`` as its mirror image.
+
+        ``"auto"``: when the mirror image's condition vector lies strictly nearer (Euclidean) the nearest
+        training hand's than the hand's own; never when none of the training hands in ``meta["hands"]``
+        resolves here (a hand by a path that is gone) or the mirror image cannot be conditioned on.
+
+        Raises:
+            GraspError: ``mirror`` is none of True, False, ``"auto"``.
+        """
+        if mirror is True or mirror is False:
+            return mirror
+        if mirror != "auto":
+            raise GraspError(f"mirror: expected True, False or 'auto', got {mirror!r}")
+        train = self._training_conditions()
+        if train is None:
+            return False
+        params = resolve_hand(hand)
+        try:
+            own = self.condition.vector(params)
+            image = self.condition.vector(self._mirrored(params, params)[2])
+        except ParamsError:
+            return False
+        nearest = lambda c: float(np.min(np.linalg.norm(train - c, axis=1)))  # noqa: E731
+        return nearest(image) < nearest(own)
+
+    def _mirrored(self, params: Any, cond_params: Any) -> tuple[Any, np.ndarray, Any]:
+        """Mirror images of the hand and of the condition hand, and the hand's joint signs. A VAE-conditioned
+        model mirrors the base form when there is one: the VAE reads base-form hands, and the mirror image of
+        an extended hand need not have a base form."""
+        if self.condition.kind == "vae":
+            from ohra.learn.encoding import as_base
+
+            try:
+                params = as_base(params)
+            except ParamsError:
+                pass
+            cond_params = as_base(cond_params)
+        image = mirror_params(params)
+        return image.params, image.signs, (image.params if cond_params is params else mirror_params(cond_params).params)
+
+    def _training_conditions(self) -> np.ndarray | None:
+        """(H, dim) condition vectors of the training hands named in ``meta["hands"]`` that resolve here."""
+        if "_train_conditions" not in self._cache:
+            rows = []
+            for name in (self.meta.get("hands") or []) if isinstance(self.meta, dict) else []:
+                try:
+                    rows.append(self.condition.vector(resolve_hand(name)))
+                except OhraError:
+                    continue
+            self._cache["_train_conditions"] = np.stack(rows) if rows else None
+        return self._cache["_train_conditions"]
 
     # -- persistence ----------------------------------------------------------------------------------
     def payload(self) -> dict[str, Any]:

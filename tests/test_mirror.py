@@ -1,0 +1,276 @@
+"""Mirror images of hands and grasps (``ohra.canonical.mirror``) and the grasp model's ``mirror=`` option:
+a mirrored hand at mirrored joint angles is the reflected hand, link by link; a mirrored grasp on the
+mirrored object touches the object where the reflected grasp does; a model samples a hand as its mirror
+image exactly as it samples that image on the mirrored object; in simulation a mirrored grasp on a
+mirror-symmetric object has the same outcome as the grasp."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ohra.canonical import HandModel
+from ohra.canonical.mirror import BASE_FLIPPED_JOINTS, PALM_MIRROR, mirror_grasps, mirror_params
+from ohra.canonical.params import BaseParams, ExtendedParams
+from ohra.errors import GraspError, ParamsError
+from ohra.hands import get_hand
+from ohra.hands.leap.variants import variant_names
+from ohra.hands.registry import registered_hands
+from ohra.rotations import rot6d_to_matrix
+
+H = np.eye(4)
+H[:3, :3] = PALM_MIRROR
+
+
+def _forms(name: str) -> list:
+    p = get_hand(name)
+    return [p, p.to_extended()] if isinstance(p, BaseParams) else [p]
+
+
+def _assert_reflected(params, seed: int = 0, n: int = 16) -> None:
+    """Every frame of the mirror image at ``signs * q`` is ``M T M`` of the hand's at ``q``."""
+    image = mirror_params(params)
+    a, b = HandModel.from_params(params), HandModel.from_params(image.params)
+    assert a.frame_names == b.frame_names
+    lo, up = np.asarray(params.joint_lowers), np.asarray(params.joint_uppers)
+    q = np.random.default_rng(seed).uniform(lo, up, (n, 22))
+    qm = image.joints(q)
+    # the mirrored angles lie within the image's limits
+    assert np.all(qm >= np.asarray(image.params.joint_lowers) - 1e-12) and np.all(qm <= np.asarray(image.params.joint_uppers) + 1e-12)
+    np.testing.assert_allclose(b.frame_poses(qm), np.einsum("ij,nfjk,kl->nfil", H, a.frame_poses(q), H), atol=1e-12)
+
+
+@pytest.mark.parametrize("name", sorted(registered_hands()))
+def test_a_mirror_image_at_mirrored_angles_is_the_reflected_hand_for_every_registered_hand(name):
+    for params in _forms(name):
+        _assert_reflected(params)
+
+
+def test_mirror_images_of_every_leap_variant_and_of_sampled_hands_are_exact():
+    from ohra.learn.sampler import sample_params
+
+    for name in variant_names()[::5]:  # 52 of the 256 variants: every digit appears in every place
+        _assert_reflected(get_hand(name), n=4)
+    for k, params in enumerate(sample_params(12, seed=3)):
+        _assert_reflected(params, seed=k, n=4)
+        _assert_reflected(params.to_extended(), seed=k, n=4)
+
+
+def test_mirroring_twice_gives_the_hand_back_and_turns_its_handedness():
+    for name in ("shadow_hand_right", "allegro_hand_left", "leap_3303", "inspire_hand_right"):
+        for params in _forms(name):
+            image = mirror_params(params)
+            assert type(image.params) is type(params)
+            assert getattr(image.params, "template", None) == getattr(params, "template", None)
+            assert image.params.handedness != params.handedness
+            assert mirror_params(image.params).params == params
+            np.testing.assert_array_equal(mirror_params(image.params).signs, image.signs)
+
+
+def test_the_mirror_image_of_a_right_hand_reads_like_its_parsed_left_twin():
+    """The registered Shadow pair is a near-exact mirror pair (each hand parsed from its own URDF): the right
+    hand's mirror image lies within 0.06 of the parsed left hand in every number (metres, radians, axis
+    components; the largest gaps are the little metacarpal's frame angles, fitted on each hand apart), in
+    both forms; the abduction joints turn the other way; fingertips agree within 3 mm."""
+    for form in ("base", "extended"):
+        right, left = (get_hand(f"shadow_hand_{s}") for s in ("right", "left"))
+        if form == "extended":
+            right, left = right.to_extended(), left.to_extended()
+        image = mirror_params(right)
+        assert np.abs(image.params.to_vector() - left.to_vector()).max() < 0.06
+        np.testing.assert_array_equal(np.flatnonzero(image.signs < 0), BASE_FLIPPED_JOINTS)
+        q = np.random.default_rng(0).uniform(right.joint_lowers, right.joint_uppers, (8, 22))
+        tips_left = HandModel.from_params(left).fingertips(image.joints(q))
+        tips_image = HandModel.from_params(image.params).fingertips(image.joints(q))
+        assert np.abs(tips_left - tips_image).max() < 0.003  # m
+
+
+def test_mirror_params_refuses_what_is_not_params():
+    with pytest.raises(ParamsError, match="BaseParams or ExtendedParams"):
+        mirror_params({"palm_radius": 0.05})
+
+
+# -- grasps ---------------------------------------------------------------------------------------
+def _world_capsules(params, grasp: np.ndarray) -> np.ndarray:
+    """(K, 2, 3) capsule end points of the hand at ``grasp`` in the object frame."""
+    caps = HandModel.from_params(params).capsules(grasp[9:])
+    R, t = rot6d_to_matrix(grasp[3:9][None])[0], grasp[:3]
+    return np.stack([caps.p0 @ R.T + t, caps.p1 @ R.T + t], axis=1)
+
+
+@pytest.mark.parametrize("name", ["shadow_hand_right", "barrett_hand", "leap_3033"])
+def test_a_mirrored_grasp_places_the_mirror_image_where_the_reflected_hand_would_be(name):
+    params = get_hand(name)
+    image = mirror_params(params)
+    rng = np.random.default_rng(1)
+    from scipy.spatial.transform import Rotation
+
+    for k in range(5):
+        R = Rotation.random(random_state=k).as_matrix()
+        q = rng.uniform(params.joint_lowers, params.joint_uppers)
+        g = np.concatenate([rng.normal(scale=0.05, size=3), R[:, 0], R[:, 1], q])
+        gm = mirror_grasps(g, image.signs)
+        Rm = rot6d_to_matrix(gm[3:9][None])[0]
+        assert np.linalg.det(Rm) == pytest.approx(1.0)  # a rotation, not a reflection
+        expected = _world_capsules(params, g) * [1.0, -1.0, 1.0]
+        np.testing.assert_allclose(_world_capsules(image.params, gm), expected, atol=1e-12)
+        np.testing.assert_array_equal(mirror_grasps(gm, image.signs), g)  # its own inverse
+
+
+def test_mirror_grasps_refuses_wrong_shapes():
+    with pytest.raises(GraspError, match=r"\(31,\) or \(n, 31\)"):
+        mirror_grasps(np.zeros((2, 30)), np.ones(22))
+    with pytest.raises(GraspError, match="22 joint signs"):
+        mirror_grasps(np.zeros(31), np.ones(21))
+
+
+# -- the grasp model ------------------------------------------------------------------------------
+torch = pytest.importorskip("torch")
+
+
+@pytest.fixture(scope="module")
+def models(tmp_path_factory):
+    from grasp_fixtures import tiny_model_config, tiny_train_config, write_dataset
+
+    from ohra.learn.grasp.train import train_grasp
+
+    data = write_dataset(tmp_path_factory.mktemp("grasps"), hands=("shadow_hand_right", "barrett_hand"))
+    return {c: train_grasp(data, tiny_model_config(condition=c), tiny_train_config(), progress=False).model
+            for c in ("vae", "params")}
+
+
+def _mirrored_object(obj):
+    import trimesh
+
+    from ohra.objects.model import ObjectModel
+
+    mesh = obj.mesh.copy()
+    mesh.apply_transform(H)
+    return ObjectModel(mesh, obj.name + "-mirrored")
+
+
+@pytest.mark.parametrize("condition", ["vae", "params"])
+def test_sampling_as_the_mirror_image_is_sampling_the_image_on_the_mirrored_object(models, condition):
+    """``mirror=True`` for a hand = the model sampling the hand's mirror image on the mirrored object (its
+    surface points exactly reflected), with the reflected wrist rotations, then mirrored back."""
+    from scipy.spatial.transform import Rotation
+
+    from ohra.objects.model import ObjectModel
+
+    model = models[condition]
+    hand = get_hand("shadow_hand_left")
+    image = mirror_params(hand)
+    obj = ObjectModel.procedural("superquadric", 7)  # no symmetry to hide a wrong reflection
+    twin = _mirrored_object(obj)
+    model._clouds[twin.mesh_hash] = model.object_cloud(obj) * torch.tensor([1.0, -1.0, 1.0])
+    R = Rotation.random(6, random_state=4).as_matrix()
+    got = model.sample(hand, obj, 6, rotations=R, seed=5, mirror=True)
+    np.testing.assert_allclose(got[:, 3:6], R[:, :, 0], atol=1e-12)  # the wrist rotations asked for
+    np.testing.assert_allclose(got[:, 6:9], R[:, :, 1], atol=1e-12)
+    Rm = PALM_MIRROR @ R @ PALM_MIRROR
+    direct = model.sample(image.params, twin, 6, rotations=Rm, seed=5, mirror=False)
+    np.testing.assert_allclose(got, mirror_grasps(direct, image.signs), atol=1e-6)
+    assert np.all(got[:, 9:] >= hand.joint_lowers) and np.all(got[:, 9:] <= hand.joint_uppers)
+    assert not np.allclose(got, model.sample(hand, obj, 6, rotations=R, seed=5, mirror=False))
+
+
+def test_in_simulation_robust_grasps_mirrored_hold_with_the_mirror_image_and_not_with_the_hand():
+    """Physics is mirror-symmetric: robust grasps of the committed data (they hold under small perturbations;
+    single outcomes of marginal grasps flip under a microradian, so only robust ones can be compared) on
+    procedural objects (symmetric through their x-z planes) still hold when hand and grasp are mirrored;
+    the mirrored grasps given to the unmirrored hand do not."""
+    import sys
+    from pathlib import Path
+
+    from ohra.data import GraspDataset
+    from ohra.objects.model import ObjectModel
+    from ohra.sim import GraspEvaluator, SimHand
+
+    root = Path(__file__).resolve().parents[1]
+    sys.path.insert(0, str(root / "benchmarks"))
+    from grasp_study import data_protocol
+
+    data = root / "datasets" / "grasp_unified_s0"
+    protocol = data_protocol([str(data)])
+    ds = GraspDataset([data], hands=["shadow_hand_right"])
+    right = get_hand("shadow_hand_right")
+    image = mirror_params(right)
+    picked = []
+    for hand, name in ds.pairs:
+        family = name.split("-")[0]
+        if family in ("cylinder", "ellipsoid", "box") and len(picked) < 3:
+            g = ds.load_shard(hand, name)["grasps"]
+            if len(g):
+                picked.append((ObjectModel.procedural(family, int(name.split("-")[1])), g[:1].astype(float)))
+    assert len(picked) == 3
+    for obj, g in picked:
+        with GraspEvaluator(SimHand.from_params(right, name="right"), obj, protocol) as ev:
+            assert ev.evaluate(g).success.all()
+            assert not ev.evaluate(mirror_grasps(g, image.signs)).success.any()  # control: the wrong hand drops it
+        with GraspEvaluator(SimHand.from_params(image.params, name="image"), obj, protocol) as ev:
+            assert ev.evaluate(mirror_grasps(g, image.signs)).success.all()
+
+
+def test_auto_mirrors_a_hand_whose_mirror_image_is_nearer_the_training_hands(models):
+    for model in models.values():
+        assert not model.mirrors("shadow_hand_right") and not model.mirrors("barrett_hand")  # trained on
+        assert model.mirrors("shadow_hand_left")  # the left twin of a training hand
+        assert model.mirrors("shadow_hand_left", False) is False and model.mirrors("shadow_hand_right", True) is True
+        with pytest.raises(GraspError, match="mirror: expected True, False or 'auto'"):
+            model.mirrors("shadow_hand_left", "yes")
+    # auto = the decision: the default sample of a left hand is the mirrored one, of a training hand the plain one
+    m = models["params"]
+    np.testing.assert_array_equal(m.sample("shadow_hand_left", "builtin:capsule", 3, seed=1),
+                                  m.sample("shadow_hand_left", "builtin:capsule", 3, seed=1, mirror=True))
+    np.testing.assert_array_equal(m.sample("shadow_hand_right", "builtin:capsule", 3, seed=1),
+                                  m.sample("shadow_hand_right", "builtin:capsule", 3, seed=1, mirror=False))
+
+
+def test_auto_never_mirrors_when_no_training_hand_resolves(models):
+    import copy
+
+    m = copy.copy(models["params"])
+    m.meta = {**m.meta, "hands": ["/gone/hand.json"]}
+    m._cache = {}
+    assert not m.mirrors("shadow_hand_left")
+
+
+def test_the_shipped_models_mirror_left_twins_of_their_training_hands():
+    from ohra.learn.grasp.model import load_grasp_model
+
+    default = load_grasp_model()
+    for h in ("allegro_hand_left", "barrett_hand", "shadow_hand_right"):
+        assert not default.mirrors(h)
+    assert default.mirrors("shadow_hand_left") and default.mirrors("allegro_hand_right")
+    leap = load_grasp_model("leap")
+    assert not leap.mirrors("leap_3303") and leap.mirrors(mirror_params(get_hand("leap_3303")).params)
+
+
+def test_evaluation_records_mirrored_pairs_and_keeps_them_apart_when_resumed(models, tmp_path):
+    from ohra.learn.grasp.evaluate import evaluate_model
+
+    m = models["params"]
+    kw = dict(n=2, seed=0, protocol="reference", resume_dir=tmp_path)
+    on = evaluate_model(m, ["shadow_hand_left"], ["builtin:capsule"], mirror="auto", **kw)
+    assert on.pairs[0].mirrored and on.meta["mirrored_hands"] == ["shadow_hand_left"]
+    off = evaluate_model(m, ["shadow_hand_left"], ["builtin:capsule"], mirror=False, **kw)
+    assert not off.pairs[0].mirrored and off.meta["resumed_pairs"] == 0  # not the mirrored pair stored above
+    assert not np.allclose(on.pairs[0].grasps, off.pairs[0].grasps)
+    again = evaluate_model(m, ["shadow_hand_left"], ["builtin:capsule"], mirror=True, **kw)
+    assert again.meta["resumed_pairs"] == 1 and again.pairs[0].mirrored
+    np.testing.assert_array_equal(again.pairs[0].grasps, on.pairs[0].grasps)
+
+
+def test_cli_sample_mirror_flag_and_record(tmp_path, capsys):
+    from ohra.cli.main import main
+
+    assert main(["grasp", "sample", "--hand", "shadow_hand_left", "--object", "builtin:capsule", "-n", "3",
+                 "-o", str(tmp_path / "a.npz")]) == 0
+    assert "sampled as its mirror image" in capsys.readouterr().out
+    with np.load(tmp_path / "a.npz") as d:
+        assert bool(d["mirrored"]) and d["grasps"].shape == (3, 31)
+    assert main(["grasp", "sample", "--hand", "shadow_hand_left", "--object", "builtin:capsule", "-n", "3", "--mirror", "off",
+                 "-o", str(tmp_path / "b.npz")]) == 0
+    assert "mirror image" not in capsys.readouterr().out
+    with np.load(tmp_path / "b.npz") as d:
+        assert not bool(d["mirrored"])
