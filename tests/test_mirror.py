@@ -40,7 +40,16 @@ def _assert_reflected(params, seed: int = 0, n: int = 16) -> None:
     np.testing.assert_allclose(b.frame_poses(qm), np.einsum("ij,nfjk,kl->nfil", H, a.frame_poses(q), H), atol=1e-12)
 
 
-@pytest.mark.parametrize("name", sorted(registered_hands()))
+REGISTERED = ("allegro_hand_left", "allegro_hand_right", "barrett_hand", "dex3_left", "dex3_right", "gaia_hand_left",
+              "gaia_hand_right", "inspire_hand_left", "inspire_hand_right", "leap_hand_left", "leap_hand_right", "mano",
+              "shadow_hand_left", "shadow_hand_right", "sharpa_wave_left", "sharpa_wave_right")
+
+
+def test_the_hand_list_is_the_registry():
+    assert sorted(REGISTERED) == sorted(registered_hands())
+
+
+@pytest.mark.parametrize("name", REGISTERED)
 def test_a_mirror_image_at_mirrored_angles_is_the_reflected_hand_for_every_registered_hand(name):
     for params in _forms(name):
         _assert_reflected(params)
