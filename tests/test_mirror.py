@@ -283,3 +283,24 @@ def test_cli_sample_mirror_flag_and_record(tmp_path, capsys):
     assert "mirror image" not in capsys.readouterr().out
     with np.load(tmp_path / "b.npz") as d:
         assert not bool(d["mirrored"])
+
+
+def test_a_mirrored_sample_follows_a_mesh_whose_origin_lies_beside_it_with_centre_and_candidates(models):
+    """``centre=True`` and ``candidates=K`` work on the mirrored path too: moving the mesh's origin only moves
+    the grasps, and the kept draw lies in the hand's own limits."""
+    import trimesh
+
+    from ohra.objects.model import ObjectModel
+
+    def box(shift):
+        mesh = trimesh.creation.box(extents=(0.05, 0.07, 0.09))
+        mesh.apply_translation(shift)
+        return ObjectModel(mesh, "box")
+
+    m = models["vae"]
+    shift = np.array([0.15, -0.02, 0.04])
+    for k in (1, 3):
+        at_origin = m.sample("shadow_hand_left", box((0, 0, 0)), 6, seed=3, mirror=True, candidates=k)
+        moved = m.sample("shadow_hand_left", box(shift), 6, seed=3, centre=True, mirror=True, candidates=k)
+        np.testing.assert_allclose(moved[:, :3] - shift, at_origin[:, :3], atol=1e-6)
+        np.testing.assert_allclose(moved[:, 3:], at_origin[:, 3:], atol=1e-6)

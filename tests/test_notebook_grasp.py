@@ -38,3 +38,9 @@ def test_grasp_model_notebook_executes(tmp_path):
     assert pct["touch"][0] == 0 == pct["opened"][0] and pct["sampled"][0] > 0  # nothing sunk after either
     shown = "\n".join(o.get("data", {}).get("text/markdown", "") for o in code[7].outputs)
     assert "penetration weight" in shown and "hovering ones closed" in shown
+    # ... and left twins through their mirror images (stop 48): the left Shadow holds more often as its mirror image
+    text = "".join(o.get("text", "") for o in code[8].outputs)
+    assert "shadow_hand_left   sampled as its mirror image: True" in text
+    assert "shadow_hand_right  sampled as its mirror image: False" in text
+    held = {ln.split("mirror=")[1][:5].strip(): int(ln.split(": ")[1].split("/")[0]) for ln in text.splitlines() if "mirror=" in ln}
+    assert held["True"] > held["False"]
