@@ -30,7 +30,7 @@ from torch.nn import functional as F
 
 from ohra.canonical.mirror import mirror_grasps, mirror_params
 from ohra.errors import CheckpointError, GraspError, ObjectWarning, OhraError, ParamsError, require_seed, user_stacklevel
-from ohra.learn.grasp.condition import HandCondition, HandLike, resolve_hand
+from ohra.learn.grasp.condition import HandCondition, HandLike, hand_key, resolve_hand
 from ohra.learn.grasp.config import GraspModelConfig
 from ohra.learn.grasp.diffusion import DDIMScheduler, Denoiser
 from ohra.learn.grasp.encoder import make_encoder
@@ -333,13 +333,17 @@ class GraspModel:
         if train is None:
             return False
         params = resolve_hand(hand)
-        try:
-            own = self.condition.vector(params)
-            image = self.condition.vector(self._mirrored(params, params)[2])
-        except ParamsError:
-            return False
-        nearest = lambda c: float(np.min(np.linalg.norm(train - c, axis=1)))  # noqa: E731
-        return nearest(image) < nearest(own)
+        key = "mirrors:" + hand_key(params)  # the decision is a function of the parameters: made once per hand
+        if key not in self._cache:
+            try:
+                own = self.condition.vector(params)
+                image = self.condition.vector(self._mirrored(params, params)[2])
+            except ParamsError:
+                self._cache[key] = False
+            else:
+                nearest = lambda c: float(np.min(np.linalg.norm(train - c, axis=1)))  # noqa: E731
+                self._cache[key] = nearest(image) < nearest(own)
+        return self._cache[key]
 
     def _mirrored(self, params: Any, cond_params: Any) -> tuple[Any, np.ndarray, Any]:
         """Mirror images of the hand and of the condition hand, and the hand's joint signs. A VAE-conditioned
