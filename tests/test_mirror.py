@@ -304,3 +304,35 @@ def test_a_mirrored_sample_follows_a_mesh_whose_origin_lies_beside_it_with_centr
         moved = m.sample("shadow_hand_left", box(shift), 6, seed=3, centre=True, mirror=True, candidates=k)
         np.testing.assert_allclose(moved[:, :3] - shift, at_origin[:, :3], atol=1e-6)
         np.testing.assert_allclose(moved[:, 3:], at_origin[:, 3:], atol=1e-6)
+
+
+def test_bad_signs_and_joint_angles_are_grasp_errors_naming_the_problem():
+    image = mirror_params(get_hand("shadow_hand_right"))
+    with pytest.raises(GraspError, match="numeric grasps and signs"):
+        mirror_grasps("abc", image.signs)
+    with pytest.raises(GraspError, match=r"signs\[0\] = 0"):
+        mirror_grasps(np.zeros(31), np.zeros(22))
+    with pytest.raises(GraspError, match=r"signs\[3\] = 2"):
+        mirror_grasps(np.zeros(31), np.r_[1.0, -1.0, 1.0, 2.0, np.ones(18)])
+    with pytest.raises(GraspError, match=r"expected shape \(22,\) or \(\.\.\., 22\), got \(5,\)"):
+        image.joints(np.zeros(5))
+
+
+def test_mirror_takes_the_recorded_numpy_bool_and_keeps_the_hint_for_hands_without_base_form(models, tmp_path):
+    m = models["vae"]
+    assert m.mirrors("shadow_hand_right", np.True_) is True and m.mirrors("shadow_hand_left", np.array(False)) is False
+    for mirror in (False, True, "auto"):  # the same way out is named whatever the mirror setting
+        with pytest.raises(ParamsError, match="condition='params' can use such hands"):
+            m.sample("leap_3303", "builtin:capsule", 2, mirror=mirror)
+
+
+def test_ohra_eval_notes_grasps_sampled_for_another_hand(tmp_path, capsys):
+    from ohra.cli.main import main
+
+    f = tmp_path / "left.npz"
+    assert main(["grasp", "sample", "--hand", "shadow_hand_left", "--object", "builtin:box", "-n", "2", "-o", str(f)]) == 0
+    capsys.readouterr()
+    assert main(["eval", str(f), "--hand", "shadow_hand_right", "--object", "builtin:box", "--quiet"]) == 0
+    assert f"{f} was sampled for shadow_hand_left; evaluating it on --hand shadow_hand_right" in capsys.readouterr().err
+    assert main(["eval", str(f), "--hand", "shadow_hand_left", "--object", "builtin:box", "--quiet"]) == 0
+    assert "was sampled for" not in capsys.readouterr().err

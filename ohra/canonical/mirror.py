@@ -59,8 +59,18 @@ class MirroredHand:
     signs: np.ndarray
 
     def joints(self, q: np.ndarray) -> np.ndarray:
-        """Joint angles [rad] (..., 22) of one hand as the other's (the map is its own inverse)."""
-        return np.asarray(q, dtype=float) * self.signs
+        """Joint angles [rad] (..., 22) of one hand as the other's (the map is its own inverse).
+
+        Raises:
+            GraspError: ``q`` is not numbers with 22 in its last axis.
+        """
+        try:
+            q = np.asarray(q, dtype=float)
+        except (TypeError, ValueError):
+            raise GraspError(f"joint angles: expected numbers, got {type(q).__name__}") from None
+        if q.shape[-1:] != (22,):
+            raise GraspError(f"joint angles: expected shape (22,) or (..., 22), got {q.shape}")
+        return q * self.signs
 
 
 def mirror_params(params: Params) -> MirroredHand:
@@ -117,14 +127,21 @@ def mirror_grasps(grasps: np.ndarray, signs: np.ndarray) -> np.ndarray:
         Same shape: ``[S t, rot6d(S R M), signs * q]``.
 
     Raises:
-        GraspError: a grasp is not 31 numbers, or ``signs`` not 22.
+        GraspError: grasps that are not numbers or not 31 each; ``signs`` not 22 values of +1 / -1.
     """
-    g = np.asarray(grasps, dtype=float)
-    s = np.asarray(signs, dtype=float)
+    try:
+        g = np.asarray(grasps, dtype=float)
+        s = np.asarray(signs, dtype=float)
+    except (TypeError, ValueError):
+        raise GraspError(f"mirror_grasps: expected numeric grasps and signs, got {type(grasps).__name__} and "
+                         f"{type(signs).__name__}") from None
     if g.shape[-1:] != (31,) or g.ndim not in (1, 2):
         raise GraspError(f"mirror_grasps: expected grasps of shape (31,) or (n, 31), got {g.shape}")
     if s.shape != (22,):
         raise GraspError(f"mirror_grasps: expected 22 joint signs, got shape {s.shape}")
+    if not np.all(np.abs(s) == 1.0):
+        bad = int(np.flatnonzero(np.abs(s) != 1.0)[0])
+        raise GraspError(f"mirror_grasps: joint signs are +1 or -1 (MirroredHand.signs), got signs[{bad}] = {s[bad]:g}")
     out = g.copy()
     # S R M: columns S c1 (M e1 = e1) and -S c2 (M e2 = -e2); S negates the y entry of each
     out[..., 0:3] *= [1.0, -1.0, 1.0]

@@ -31,7 +31,8 @@ def register(subparsers) -> None:
                               description=__doc__.split("\n\n")[0], epilog=EPILOG)
     p.add_argument("grasps", help="grasp file: .npz (key 'grasps' or its only array) or .npy, shape (N, 31)")
     p.add_argument("--hand", required=True, help="registered hand, leap_XXXX, or a params JSON file")
-    p.add_argument("--object", required=True, help="mesh (.obj/.stl/.ply), object URDF or folder, or builtin:NAME")
+    p.add_argument("--object", required=True, help="mesh (.obj/.stl/.ply/.off/.glb), object URDF or folder, builtin:NAME "
+                   "or procedural:FAMILY:SEED")
     p.add_argument("--scale", type=float, default=None, help="multiply the coordinates of object files (0.001 for millimetre meshes)")
     p.add_argument("--key", default=None, help="array name inside the .npz (default: 'grasps' or the only array)")
     p.add_argument("--workers", type=int, default=1, help="processes (default 1)")
@@ -133,6 +134,9 @@ def run(args: argparse.Namespace) -> int:
         if out:
             check_output(out)
     grasps, made = load_grasp_file(args.grasps, args.key)  # made: what `ohra grasp sample` recorded, if anything
+    if made.get("hand") and made["hand"] != str(args.hand):
+        print(f"ohra: note: {args.grasps} was sampled for {made['hand']}; evaluating it on --hand {args.hand}",
+              file=sys.stderr)
     if made.get("hand") == str(args.hand) and made.get("form"):
         if args.form is None:
             args.form = made["form"]  # the canonical hand the grasps were sampled for

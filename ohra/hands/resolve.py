@@ -104,7 +104,7 @@ def _in_form(params: Params, form: str | None, where: str) -> Params:
             return params.to_base()
         except ParamsError as exc:
             raise HandNotFoundError(f"{where}: {exc}; these are extended-form params: ask for the extended form "
-                                    "(--extended on the command line, form='extended' in Python)") from None
+                                    "(--extended for ohra hand, --form extended for ohra eval, form='extended' in Python)") from None
     return params
 
 

@@ -118,19 +118,24 @@ class HandCondition:
         return int(self.vae.latent_dim) if self.kind == "vae" else PARAMS_DIM
 
     # -- use -------------------------------------------------------------------------------------------
+    @staticmethod
+    def vae_form(params: Params) -> BaseParams:
+        """The base form the VAE reads; a hand without one is a :class:`ParamsError` naming the way out."""
+        from ohra.learn.encoding import as_base
+
+        try:
+            return as_base(params)
+        except ParamsError as exc:
+            raise ParamsError(f"{exc}; a grasp model with condition='params' can use such hands "
+                              "(the shipped one: load_grasp_model('leap'), --model leap)") from None
+
     def vector(self, hand: HandLike) -> np.ndarray:
         """(dim,) condition of one hand (cached by parameter content)."""
         params = resolve_hand(hand)
         key = hand_key(params)
         if key not in self._cache:
             if self.kind == "vae":
-                from ohra.learn.encoding import as_base
-
-                try:
-                    base = as_base(params)
-                except ParamsError as exc:
-                    raise ParamsError(f"{exc}; a grasp model with condition='params' can use such hands "
-                                      "(the shipped one: load_grasp_model('leap'), --model leap)") from None
+                base = self.vae_form(params)
                 # the VAE's own encoding (rot6d70 or reference66); fitted hands carry thumb axes a few
                 # degrees off the basis axes: it snaps them without a warning per hand
                 x = self.vae.encoding.encode_vectors(base.to_vector()[None], warn=False)

@@ -229,6 +229,10 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
             grasps and the simulation stay in the mesh frame.
         candidates: draw this many grasps per wrist rotation and keep the one whose fingers lie nearest
             the object's surface (:meth:`GraspModel.sample`); 1: the first draw.
+        mirror: sample a hand as its mirror image on the mirrored object and mirror the grasps back
+            (:meth:`GraspModel.sample`): True, False or ``"auto"`` (default: when the mirror image lies nearer the
+            model's training hands); decided for every hand before the first simulation and recorded per pair
+            (``PairResult.mirrored``, ``meta["mirrored_hands"]``).
         resume_dir: a folder where each finished pair is stored (atomically, keyed by the model's weights, the
             hand, the object and every setting); a pair found there is taken as it is instead of sampled and
             simulated again, so an interrupted evaluation continues where it stopped with the same result.
@@ -244,7 +248,7 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
             Protocol nor a preset name; a hand or object given twice; no hands or no objects; an unknown ``inertials`` or
             ``collisions``; ``collisions="canonical"`` without ``original``; ``original`` or
             ``inertials="original"`` with a hand that is not a registered name; ``workers`` not an
-            integer >= 1.
+            integer >= 1; ``mirror`` none of True, False, ``"auto"``.
         ObjectError: an object cannot be resolved to one object.
         DatasetError: an object is in the model's training set (by name or mesh hash) and not
             ``allow_seen``.
@@ -300,7 +304,8 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
         except ParamsError as exc:
             who = hand if condition_hand is None else condition_hand
             raise ParamsError(f"hand {str(who) if isinstance(who, (str, Path)) else type(who).__name__!r}: {exc}") from None
-        resolved.append((hand_label(hand, params), params, _couplings(hand)))
+        flip = model.mirrors(params if condition_hand is None else resolve_hand(condition_hand), mirror)
+        resolved.append((hand_label(hand, params), params, _couplings(hand), flip))
     twice = sorted(name for name, k in Counter(name for name, *_ in resolved).items() if k > 1)
     if twice:
         raise GraspError(f"hand(s) {twice} given more than once")
@@ -309,8 +314,7 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
     resumed = 0
     settings = _resume_settings(model, n, original, inertials, collisions, protocol, refine, centre, candidates,
                                 condition_hand) if resume is not None else None
-    for name, params, couplings in resolved:
-        flip = model.mirrors(params if condition_hand is None else resolve_hand(condition_hand), mirror)
+    for name, params, couplings, flip in resolved:
         movable = np.asarray(params.movable_joints)
         hybrid = None
         if original and collisions == "canonical":  # one fit per hand, shared by its objects

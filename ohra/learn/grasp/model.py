@@ -233,7 +233,8 @@ class GraspModel:
 
         Raises:
             GraspError: ``n`` or ``candidates`` is not a positive integer; ``seed`` not a whole number >= 0;
-                ``rotations`` of the wrong shape, non-finite, or not rotations.
+                ``rotations`` of the wrong shape, non-finite, or not rotations; ``mirror`` none of True, False,
+                ``"auto"``.
             ObjectError: ``obj`` cannot be resolved to one object.
             HandNotFoundError: an unknown hand name or a missing params file.
             ParamsError: ``hand`` (or ``condition_hand``) of another type, or without a base form for a
@@ -323,11 +324,12 @@ class GraspModel:
         resolves here (a hand by a path that is gone) or the mirror image cannot be conditioned on.
 
         Raises:
-            GraspError: ``mirror`` is none of True, False, ``"auto"``.
+            GraspError: ``mirror`` is none of True, False (numpy bools too), ``"auto"``.
         """
-        if mirror is True or mirror is False:
-            return mirror
-        if mirror != "auto":
+        if isinstance(mirror, (bool, np.bool_)) or (isinstance(mirror, np.ndarray) and mirror.shape == ()
+                                                     and mirror.dtype == bool):  # e.g. the `mirrored` of a grasp file
+            return bool(mirror)
+        if not (isinstance(mirror, str) and mirror == "auto"):
             raise GraspError(f"mirror: expected True, False or 'auto', got {mirror!r}")
         train = self._training_conditions()
         if train is None:
@@ -350,13 +352,11 @@ class GraspModel:
         model mirrors the base form when there is one: the VAE reads base-form hands, and the mirror image of
         an extended hand need not have a base form."""
         if self.condition.kind == "vae":
-            from ohra.learn.encoding import as_base
-
             try:
-                params = as_base(params)
-            except ParamsError:
+                params = self.condition.vae_form(params)
+            except ParamsError:  # told another hand (condition_hand): the true one keeps its own form
                 pass
-            cond_params = as_base(cond_params)
+            cond_params = self.condition.vae_form(cond_params)
         image = mirror_params(params)
         return image.params, image.signs, (image.params if cond_params is params else mirror_params(cond_params).params)
 
