@@ -336,3 +336,44 @@ def test_ohra_eval_notes_grasps_sampled_for_another_hand(tmp_path, capsys):
     assert f"{f} was sampled for shadow_hand_left; evaluating it on --hand shadow_hand_right" in capsys.readouterr().err
     assert main(["eval", str(f), "--hand", "shadow_hand_left", "--object", "builtin:box", "--quiet"]) == 0
     assert "was sampled for" not in capsys.readouterr().err
+
+
+def test_couplings_of_the_mirror_image_hold_at_the_mirrored_angles():
+    from ohra.canonical.couplings import Coupling, project, residual
+    from ohra.canonical.mirror import mirror_couplings
+    from ohra.hands import get_couplings
+
+    params = get_hand("inspire_hand_right")
+    image = mirror_params(params)
+    # the registered mimic couplings (flexion: same sign) and two across reversed joints, with offsets
+    cs = tuple(get_couplings("inspire_hand_right")) + (Coupling("index_joint1", "thumb_joint3", 0.5, 0.1),
+                                                       Coupling("middle_joint1", "index_joint2", -2.0, 0.2))
+    q = project(cs, np.random.default_rng(0).uniform(-1, 1, (5, 22)))
+    assert np.abs(residual(cs, q)).max() < 1e-12
+    mirrored = mirror_couplings(cs, image.signs)
+    assert np.abs(residual(mirrored, image.joints(q))).max() < 1e-12
+    assert np.abs(residual(cs, image.joints(q))).max() > 0.1  # the unmirrored couplings do not hold there
+
+
+def test_cli_hand_mirror_writes_the_image_with_its_couplings_and_mirrors_back(tmp_path, capsys):
+    from ohra.canonical.couplings import read_couplings
+    from ohra.canonical.mirror import mirror_couplings
+    from ohra.canonical.params import load_params
+    from ohra.cli.main import main
+    from ohra.hands import get_couplings
+
+    out = tmp_path / "inspire_left.json"
+    assert main(["hand", "mirror", "inspire_hand_right", "-o", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "the mirror image of inspire_hand_right (right -> left hand)" in err
+    image = mirror_params(get_hand("inspire_hand_right"))
+    assert load_params(out) == image.params
+    assert read_couplings(out) == mirror_couplings(get_couplings("inspire_hand_right"), image.signs)
+    back = tmp_path / "back.json"
+    assert main(["hand", "mirror", str(out), "-o", str(back)]) == 0
+    assert load_params(back).isclose(get_hand("inspire_hand_right"), atol=1e-12)
+    assert main(["hand", "mirror", "shadow_hand_right"]) == 0  # to stdout; the reversed joints named on stderr
+    cap = capsys.readouterr()
+    assert load_params(cap.out) == image.params.__class__.from_dict(mirror_params(get_hand("shadow_hand_right")).params.to_dict())
+    assert "index_joint1" in cap.err and "thumb_joint3" in cap.err
+    assert main(["hand", "mirror", "no_such_hand"]) == 2

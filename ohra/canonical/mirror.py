@@ -115,6 +115,19 @@ def mirror_params(params: Params) -> MirroredHand:
     return MirroredHand(out, signs)
 
 
+def mirror_couplings(couplings, signs: np.ndarray) -> tuple:
+    """Joint couplings (``q[slot] = m * q[driver] + b``, :class:`ohra.canonical.couplings.Coupling`) of a hand as
+    couplings of its mirror image, whose angles are ``signs * q``: ``m`` becomes ``s_slot * s_driver * m`` and ``b``
+    becomes ``s_slot * b``."""
+    from dataclasses import replace
+
+    from ohra.canonical.params import JOINT_INDEX
+
+    s = np.asarray(signs, dtype=float)
+    return tuple(replace(c, multiplier=float(s[JOINT_INDEX[c.slot]] * s[JOINT_INDEX[c.driver]] * c.multiplier),
+                         offset=float(s[JOINT_INDEX[c.slot]] * c.offset) + 0.0) for c in couplings)
+
+
 def mirror_grasps(grasps: np.ndarray, signs: np.ndarray) -> np.ndarray:
     """Grasps ``[t (3), rot6d (6), q (22)]`` (n, 31) of a hand on an object as grasps of its mirror image
     on the mirrored object (both reflected through their frames' x-z planes; the map is its own inverse).
@@ -151,4 +164,4 @@ def mirror_grasps(grasps: np.ndarray, signs: np.ndarray) -> np.ndarray:
     return out
 
 
-__all__ = ["PALM_MIRROR", "BASE_FLIPPED_JOINTS", "MirroredHand", "mirror_params", "mirror_grasps"]
+__all__ = ["PALM_MIRROR", "BASE_FLIPPED_JOINTS", "MirroredHand", "mirror_params", "mirror_couplings", "mirror_grasps"]

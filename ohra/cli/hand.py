@@ -7,6 +7,7 @@
     ohra hand parse SPEC.yaml [-o PARAMS.json] [--extended] [--fit] [--no-fidelity] [--surface]
     ohra hand compare HAND [--extended] [--samples N] [--no-surface] [--json] [--html OUT.html]
     ohra hand show HAND [--extended] [--original] [--q Q] [--no-wait]
+    ohra hand mirror HAND [-o PARAMS.json] [--extended]
 
 ``HAND`` is a registered hand, a LEAP variant ``leap_XXXX``, a hand spec YAML (parsed with the fit)
 or a params JSON file (see :func:`ohra.hands.resolve_hand`); ``compare`` and ``show --original`` need
@@ -31,8 +32,8 @@ ORIGINAL_HAND_HELP = ("registered hand, hand spec YAML (parsed with the fit), or
 
 def register(sub) -> None:
     """Add ``hand`` and its actions to the top-level subparsers ``sub``."""
-    hand = sub.add_parser("hand", help="canonical hands: list, render, info, check, parse, compare, show",
-                          description="List, render, inspect, check, parse, compare and show canonical hands.")
+    hand = sub.add_parser("hand", help="canonical hands: list, render, info, check, parse, compare, show, mirror",
+                          description="List, render, inspect, check, parse, compare, show and mirror canonical hands.")
     hsub = hand.add_subparsers(dest="hand_command", metavar="ACTION", parser_class=type(hand))
     hsub.required = True
 
@@ -86,6 +87,12 @@ def register(sub) -> None:
     p.add_argument("--q", help="22 canonical joint values (comma or space separated)")
     p.add_argument("--no-wait", action="store_true", help="print the URL and exit")
     p.set_defaults(func=_cmd_show)
+
+    p = hsub.add_parser("mirror", help="the hand's mirror image (left <-> right) as params JSON")
+    p.add_argument("hand", help=HAND_HELP)
+    p.add_argument("-o", "--output", help="write params JSON here (default: stdout)")
+    p.add_argument("--extended", action="store_true", help="mirror the extended form (default: the hand's own form)")
+    p.set_defaults(func=_cmd_mirror)
 
 
 def _form(args: argparse.Namespace) -> str:
@@ -151,6 +158,29 @@ def _cmd_render(args: argparse.Namespace) -> int:
         print(f"wrote {path}", file=sys.stderr)
     else:
         sys.stdout.write(render(params))
+    return 0
+
+
+def _cmd_mirror(args: argparse.Namespace) -> int:
+    from ohra.canonical.couplings import params_json
+    from ohra.canonical.mirror import mirror_couplings, mirror_params
+    from ohra.canonical.params import JOINT_NAMES, BaseParams
+    from ohra.hands.resolve import resolve_hand
+
+    ref = resolve_hand(args.hand, "extended" if args.extended else None)
+    params = ref.params.to_extended() if args.extended and isinstance(ref.params, BaseParams) else ref.params
+    image = mirror_params(params)
+    text = params_json(image.params, mirror_couplings(ref.couplings, image.signs))
+    if args.output:
+        from ohra.io import write_text
+
+        write_text(args.output, text)
+    else:
+        sys.stdout.write(text)
+    reversed_ = [JOINT_NAMES[i] for i in np.flatnonzero((image.signs < 0) & np.asarray(params.movable_joints))]
+    print(f"{'wrote ' + args.output + ': ' if args.output else ''}the mirror image of {ref.name} "
+          f"({params.handedness} -> {image.params.handedness} hand); joints turning the other way "
+          f"(angle -q, limits [-upper, -lower]): {', '.join(reversed_) or 'none'}", file=sys.stderr)
     return 0
 
 
