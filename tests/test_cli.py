@@ -123,7 +123,7 @@ def test_every_command_module_is_registered():
     sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
     assert list(sub.choices) == ["hand", "eval", "synth", "data", "train", "vae", "grasp", "rotate"]
     hand = next(a for a in sub.choices["hand"]._actions if isinstance(a, argparse._SubParsersAction))
-    assert list(hand.choices) == ["list", "render", "info", "check", "parse", "compare", "show"]
+    assert list(hand.choices) == ["list", "render", "info", "check", "parse", "compare", "show", "mirror"]
 
 
 def test_the_train_group_names_every_model_it_trains():
