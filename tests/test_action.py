@@ -88,3 +88,15 @@ def test_errors_name_the_problem():
         _map(fixed={"index_joint2": 0.1})
     with pytest.raises(MappingError, match="sign"):
         SlotMap("f1", sign=2)
+
+
+@pytest.mark.assets
+def test_from_urdf_takes_a_slot_as_a_spec_writes_it_and_names_unknown_keys():
+    from ohra.errors import MappingError
+    from ohra.hands import registry
+
+    urdf = registry.spec("inspire_hand_right").urdf_path()
+    am = ActionMap.from_urdf(urdf, {"index_joint2": {"joint": "index_proximal_joint", "sign": 1}})
+    assert am.slots["index_joint2"].name == "index_proximal_joint"
+    with pytest.raises(MappingError, match="unknown: jont"):
+        ActionMap.from_urdf(urdf, {"index_joint2": {"jont": "index_proximal_joint"}})

@@ -449,3 +449,23 @@ def test_lazy_exports():
     with pytest.raises(AttributeError):
         ohra.learn.grasp.no_such_name  # noqa: B018
     assert issubclass(GraspConfigError, OhraError)
+
+
+def test_sampled_grasps_of_a_coupled_hand_hold_its_couplings_as_simulation_runs_them(tmp_path, capsys):
+    """The network does not know a hand's couplings (Inspire's mimic joints): `ohra grasp sample` and evaluation
+    set coupled joints from their drivers, so a stored grasp is the simulated one."""
+    from ohra.canonical.couplings import residual
+    from ohra.cli.main import main
+    from ohra.hands import get_couplings
+    from ohra.learn.grasp.evaluate import evaluate_model
+
+    cs = get_couplings("inspire_hand_right")
+    raw = load_grasp_model().sample("inspire_hand_right", "builtin:box", 4, seed=0)
+    assert np.abs(residual(cs, raw[:, 9:])).max() > 0.01  # what the network gives
+    f = tmp_path / "g.npz"
+    assert main(["grasp", "sample", "--hand", "inspire_hand_right", "--object", "builtin:box", "-n", "4", "-o", str(f)]) == 0
+    assert "6 coupled joint(s) of inspire_hand_right set from their drivers" in capsys.readouterr().err
+    with np.load(f) as d:
+        assert np.abs(residual(cs, d["grasps"][:, 9:])).max() < 1e-12
+    rep = evaluate_model(load_grasp_model(), ["inspire_hand_right"], ["builtin:box"], n=2, protocol="reference")
+    assert np.abs(residual(cs, rep.pairs[0].grasps[:, 9:])).max() < 1e-12

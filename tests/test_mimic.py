@@ -236,6 +236,31 @@ def test_a_mirrored_palm_frame_is_named_not_hidden_by_sign_advice(hands_dir, tmp
 
 
 @pytest.mark.assets
+@pytest.mark.parametrize("yaw", [np.pi / 2, -np.pi / 2, 0.85, 0.6])
+def test_a_palm_frame_turned_about_z_is_named_with_its_fix(hands_dir, tmp_path, yaw):
+    """Turned by ~90 deg the fingers still point along +z and flex positively, but curl toward +-y: an error
+    naming the turn that undoes it (also past 45 deg, 0.85 rad); 0.6 rad (34 deg) is left to the axis notes."""
+    import yaml
+
+    d = yaml.safe_load(registry.spec_path("inspire_hand_right").read_text())
+    d["palm_origin"]["rpy"] = [0.0, 0.0, float(yaw)]
+    d["urdf"] = str(hands_dir / d["urdf"])
+    spec = tmp_path / "turned.yaml"
+    spec.write_text(yaml.safe_dump(d))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        if yaw == 0.6:
+            parse(spec, "extended", fit_params=False)
+            return
+        with pytest.raises(SpecError, match=r"curl \d+ deg away from \+x.*palm_origin is rotated about z") as exc:
+            parse(spec, "extended", fit_params=False)
+    import re
+
+    deg, fix = re.search(r"curl (\d+) deg away.*yaw ([+-][\d.]+)\)", str(exc.value)).groups()
+    assert abs(int(deg) - np.degrees(abs(yaw))) <= 3 and abs(float(fix) + yaw) < 0.05  # the turn that undoes it
+
+
+@pytest.mark.assets
 def test_a_relative_urdf_path_resolves_against_the_spec_file(hands_dir, tmp_path, monkeypatch):
     rel = os.path.relpath(hands_dir / "inspire_hand" / "inspire_hand_right.urdf", tmp_path)
     spec = tmp_path / "mine.yaml"

@@ -30,7 +30,7 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("eval", help="evaluate grasps with the six-direction PyBullet test",
                               description=__doc__.split("\n\n")[0], epilog=EPILOG)
     p.add_argument("grasps", help="grasp file: .npz (key 'grasps' or its only array) or .npy, shape (N, 31)")
-    p.add_argument("--hand", required=True, help="registered hand, leap_XXXX, or a params JSON file")
+    p.add_argument("--hand", required=True, help="registered hand, leap_XXXX, hand spec YAML, or a params JSON file")
     p.add_argument("--object", required=True, help="mesh (.obj/.stl/.ply/.off/.glb), object URDF or folder, builtin:NAME "
                    "or procedural:FAMILY:SEED")
     p.add_argument("--scale", type=float, default=None, help="multiply the coordinates of object files (0.001 for millimetre meshes)")

@@ -266,6 +266,15 @@ def _cmd_sample(args: argparse.Namespace) -> int:
     mirrored = model.mirrors(args.condition_hand or params, _mirror(args.mirror))
     g = model.sample(params, obj, args.n, seed=args.seed, timing=timing, refine=_refine(args.refine), centre=args.centre,
                      condition_hand=args.condition_hand, candidates=args.candidates, mirror=mirrored)
+    from ohra.hands import get_couplings
+
+    couplings = get_couplings(args.hand)
+    if couplings:  # the network does not know them: coupled joints follow their drivers, as simulation runs them
+        from ohra.canonical.couplings import project
+
+        g[:, 9:] = project(couplings, g[:, 9:])
+        print(f"ohra: note: {len(couplings)} coupled joint(s) of {args.hand} set from their drivers "
+              "(ohra.canonical.couplings.project), as simulation drives them", file=sys.stderr)
     from ohra.canonical.params import ExtendedParams
 
     # what the grasps were made for: ohra eval takes the form from here (the base and extended canonical hands of

@@ -47,6 +47,21 @@ class SlotMap:
         if self.sign not in (1.0, -1.0, 1, -1):
             raise MappingError(f"sign of original joint {self.name!r} must be +1 or -1, got {self.sign}")
 
+    @classmethod
+    def from_mapping(cls, d: Mapping) -> "SlotMap":
+        """From ``{"joint" (as in a spec YAML) or "name": ..., "sign": ..., "offset": ...}``; other keys are a
+        :class:`MappingError` naming them."""
+        d = dict(d)
+        if "joint" in d and "name" in d:
+            raise MappingError(f"slot mapping {d}: give the original joint as 'joint' or 'name', not both")
+        if "joint" in d:
+            d["name"] = d.pop("joint")
+        unknown = sorted(set(d) - {"name", "sign", "offset"})
+        if unknown or "name" not in d:
+            raise MappingError(f"slot mapping {d}: expected keys 'joint' (or 'name'), 'sign', 'offset'"
+                               + (f"; unknown: {', '.join(map(str, unknown))}" if unknown else "; 'joint' is missing"))
+        return cls(**d)
+
 
 Mimic = Mapping[str, tuple[str, float, float]]  # mimic joint -> (actuated root joint, multiplier, offset)
 
@@ -54,7 +69,7 @@ Mimic = Mapping[str, tuple[str, float, float]]  # mimic joint -> (actuated root 
 def mimic_relations(slots: Mapping[str, Any], hand: Any) -> dict[str, tuple[str, float, float]]:
     """``{mimic joint: (actuated root, a, b)}`` (``q_J = a q_root + b``, chains composed) for the
     mapped joints of ``slots`` that are ``<mimic>`` joints of ``hand`` (an OriginalHand)."""
-    names = {(sm.name if isinstance(sm, SlotMap) else SlotMap(**sm).name if isinstance(sm, Mapping) else str(sm)) for sm in slots.values()}
+    names = {(sm.name if isinstance(sm, SlotMap) else SlotMap.from_mapping(sm).name if isinstance(sm, Mapping) else str(sm)) for sm in slots.values()}
     return {j: hand.mimic_root(j) for j in hand.mimic_joints if j in names}
 
 
@@ -158,7 +173,7 @@ class ActionMap:
             dup = [n for n in self.original_joints if self.original_joints.count(n) > 1][0]
             raise MappingError(f"original joint {dup!r} appears twice in the original joint order")
         self.mimic = dict(self.mimic)
-        raw = {k: (SlotMap(**v) if isinstance(v, Mapping) else SlotMap(v) if isinstance(v, str) else v) for k, v in dict(self.slots).items()}
+        raw = {k: (SlotMap.from_mapping(v) if isinstance(v, Mapping) else SlotMap(v) if isinstance(v, str) else v) for k, v in dict(self.slots).items()}
         try:
             self.couplings = cpl.resolve(list(self.couplings) + list(mimic_couplings(
                 {k: v for k, v in raw.items() if k in JOINT_INDEX}, self.mimic)))
@@ -207,7 +222,7 @@ class ActionMap:
             if slot not in JOINT_INDEX:
                 raise MappingError(f"unknown canonical slot {slot!r}; expected one of {', '.join(JOINT_NAMES)}")
             if isinstance(sm, Mapping):
-                sm = SlotMap(**sm)
+                sm = SlotMap.from_mapping(sm)
             elif isinstance(sm, str):
                 sm = SlotMap(sm)
             if sm.name not in self.original_joints and sm.name not in self.mimic and slot not in coupled:

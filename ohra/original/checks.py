@@ -8,7 +8,8 @@ mirror image of the convention (a right hand called left, fingers curling toward
 negative). These checks look at the measured fingers (non-thumb fingers with a flexion joint):
 
 * finger direction: fingers must point along ``+z`` of the palm frame;
-* curl direction: flexing a finger into its range must move its tip toward ``+x``;
+* curl direction: flexing a finger into its range must move its tip toward ``+x`` (not ``-x``: a frame turned
+  by pi; nor within 45 deg of ``+-y``: a frame turned by about pi/2 about z);
 * flexion range: the canonical flexion range lies mostly on the positive side (fingers flex far
   more than they hyperextend);
 
@@ -27,6 +28,7 @@ from ohra.original.measure import Measurement
 from ohra.original.spec import HandSpec
 
 MIN_MID = 0.05  # rad: a flexion range whose middle is this close to 0 says nothing about its sign
+CURL_COS = float(np.cos(np.radians(45.0)))  # a finger curling more than 45 deg away from +x (in the x-y plane): frame turned
 
 
 def _flexion_slots(m: Measurement, f: str) -> list[str]:
@@ -74,7 +76,7 @@ def check_palm_frame(m: Measurement, spec: HandSpec, form: str) -> list[str]:
     if fingers and len(back) > len(fingers) / 2:
         raise SpecError(f"{where}: the fingers ({', '.join(back)}) point toward -z of the palm frame: palm_origin "
                         f"is rotated (z must point from the wrist toward the fingertips)")
-    curl, mids = [], []
+    curl, mids, curl_dirs = [], [], []
     for f in fingers:
         slots = _flexion_slots(m, f)
         mid = [0.5 * (m.lower[JOINT_INDEX[s]] + m.upper[JOINT_INDEX[s]]) for s in slots]
@@ -85,9 +87,22 @@ def check_palm_frame(m: Measurement, spec: HandSpec, form: str) -> list[str]:
         mids.append((f, sign))
         x_f = np.cross(m.fingers[f].y, m.fingers[f].z)  # where +flexion moves the tip
         curl.append((f, float(sign * x_f[0])))
+        d = sign * x_f[:2]
+        curl_dirs.append((f, d / max(float(np.linalg.norm(d)), 1e-12)))
     bad_curl = [f for f, c in curl if c < 0]
     neg = [f for f, sgn in mids if sgn < 0]
     named, thumb = _named_side(spec), _thumb_side(m)
+    side = [(f, d) for f, d in curl_dirs if abs(d[0]) < CURL_COS]  # within 45 deg of +-y (not -x: turned by pi)
+    if curl_dirs and len(side) > len(curl_dirs) / 2:
+        # a palm frame turned by ~90 deg about z: the fingers curl toward +-y, which neither check above sees
+        # (each finger still points along +z and flexes into positive angles)
+        phi = float(np.arctan2(np.mean([d[1] for _, d in side]), np.mean([d[0] for _, d in side])))
+        raise SpecError(
+            f"{where}: fingers {', '.join(f for f, _ in side)} curl {np.degrees(abs(phi)):.0f} deg away from +x of the palm "
+            f"frame (toward {'+' if phi > 0 else '-'}y): palm_origin is rotated about z; +x must be the palm normal, the "
+            f"side the fingers curl toward. Rotate palm_origin about its z axis by {phi:+.4f} rad (with rpy [0, 0, yaw]: "
+            f"yaw {phi:+.4f})"
+        )
     if curl and len(bad_curl) > len(curl) / 2:
         if neg and len(neg) == len(bad_curl):
             what = ("the flexion joints' canonical ranges are negative: their signs were flipped to satisfy the axis "

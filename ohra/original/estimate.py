@@ -191,15 +191,21 @@ def _thumb_base(m: Measurement, spec: HandSpec, form: str, fm: FingerMeasure, le
     return stations_filled(fm.stations)[0], matrix_to_rpy(R), thumb_axes, np.array(lens)
 
 
-def _base_radius(m: Measurement, links, thumb_len: np.ndarray, finger_len: np.ndarray) -> float:
+def _base_radius(m: Measurement, links, thumb_len: np.ndarray, finger_len: np.ndarray, spec: HandSpec | None = None) -> float:
     """The shared finger radius: median of the measured ones, capped by the shortest present segment."""
     r = float(np.median([m.finger_radius[f] for f in m.fingers]))
-    present_lens = [thumb_len[k] for k in range(3) if links["thumb"][k]]
-    present_lens += [finger_len[k] for k in range(3) if any(links[f][k] for f in FINGERS[1:])]
-    if present_lens:
-        r = min(r, (min(present_lens) - MIN_CAPSULE_MARGIN) / 2.0)
+    segment = ("proximal", "middle", "distal")
+    present = [(thumb_len[k], f"thumb {segment[k]}") for k in range(3) if links["thumb"][k]]
+    present += [(finger_len[k], f"non-thumb {segment[k]} (shared by the fingers in the base form)")
+                for k in range(3) if any(links[f][k] for f in FINGERS[1:])]
+    if present:
+        length, which = min(present)
+        r = min(r, (length - MIN_CAPSULE_MARGIN) / 2.0)
         if r <= 1e-3:
-            raise ParseError(f"a finger segment is only {min(present_lens) * 1e3:.2f} mm long; check the joint mapping")
+            where = f"{spec.source}: forms.base: " if spec is not None else ""
+            raise ParseError(f"{where}the {which} segment is only {length * 1e3:.2f} mm long: check the joint mapping "
+                             "(a slot mapped to a joint of another finger or station, e.g. the thumb's rotation on "
+                             "thumb_joint3 instead of thumb_joint1)")
     return r
 
 
@@ -237,7 +243,7 @@ def initial_base(m: Measurement, spec: HandSpec, form: str = "base") -> BasePara
     finger_len = np.array([float(np.mean(s)) if s else 0.0 for s in seg_lens])
     return BaseParams(
         palm_radius=m.palm_radius,
-        finger_radius=_base_radius(m, links, thumb_len, finger_len),
+        finger_radius=_base_radius(m, links, thumb_len, finger_len, spec),
         finger_lengths=np.vstack([thumb_len, finger_len]),
         finger_xyz=finger_xyz,
         little_extra_origin=extra,

@@ -294,7 +294,7 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
     resolved = []
     for hand in hands:
         if (original or inertials == "original") and not (isinstance(hand, str) and hand in registered_hands()):
-            what = "original=True" if original else "inertials='original'"
+            what = "original=True (--original)" if original else "inertials='original' (--inertials original)"
             raise GraspError(f"{what} needs a registered hand's original URDF: give the hand by name; "
                              f"{hand if isinstance(hand, str) else type(hand).__name__!r} is not a registered hand "
                              "(a spec of your own registers with ohra --hands DIR or $OHRA_HANDS_PATH)")
@@ -334,6 +334,10 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
             timing: dict = {}
             grasps = model.sample(params, obj, int(n), seed=s, timing=timing, condition_hand=condition_hand, refine=refine,
                                   centre=centre, candidates=candidates, mirror=flip)
+            if couplings:  # what the simulation runs (it drives coupled joints by their drivers), stored as such
+                from ohra.canonical.couplings import project
+
+                grasps[:, 9:] = project(couplings, grasps[:, 9:])
             if hybrid is not None:
                 sim_hand = hybrid
             else:
