@@ -10,6 +10,8 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+
+from ohra.hands import get_hand
 import pytest
 
 from ohra import cli
@@ -258,6 +260,29 @@ def test_a_palm_frame_turned_about_z_is_named_with_its_fix(hands_dir, tmp_path, 
 
     deg, fix = re.search(r"curl (\d+) deg away.*yaw ([+-][\d.]+)\)", str(exc.value)).groups()
     assert abs(int(deg) - np.degrees(abs(yaw))) <= 3 and abs(float(fix) + yaw) < 0.05  # the turn that undoes it
+
+
+@pytest.mark.assets
+@pytest.mark.parametrize("beyond", [True, False])
+def test_a_palm_origin_beyond_the_knuckles_is_an_error_naming_them(hands_dir, tmp_path, beyond):
+    """Placed 5 mm past the knuckles along +z the finger bases lie behind the origin (an error naming them);
+    5 mm short of them it is a valid, if odd, palm frame."""
+    import yaml
+
+    d = yaml.safe_load(registry.spec_path("inspire_hand_right").read_text())
+    assert d["palm_origin"]["xyz"] == [0.0, 0.0, 0.0] and d["palm_origin"]["rpy"] == [0.0, 0.0, 0.0]
+    knuckle = min(float(get_hand("inspire_hand_right", "extended").joint_origins[r][2]) for r in (3, 5, 7))
+    d["palm_origin"]["xyz"] = [0.0, 0.0, knuckle + (0.005 if beyond else -0.005)]
+    d["urdf"] = str(hands_dir / d["urdf"])
+    spec = tmp_path / "far.yaml"
+    spec.write_text(yaml.safe_dump(d))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        if not beyond:
+            parse(spec, "extended", fit_params=False)
+            return
+        with pytest.raises(SpecError, match=r"finger bases \(index z = -5 mm.*lie behind the palm frame's origin"):
+            parse(spec, "extended", fit_params=False)
 
 
 @pytest.mark.assets

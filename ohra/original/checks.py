@@ -76,6 +76,12 @@ def check_palm_frame(m: Measurement, spec: HandSpec, form: str) -> list[str]:
     if fingers and len(back) > len(fingers) / 2:
         raise SpecError(f"{where}: the fingers ({', '.join(back)}) point toward -z of the palm frame: palm_origin "
                         f"is rotated (z must point from the wrist toward the fingertips)")
+    ahead = [(f, float(m.fingers[f].p[m.fingers[f].slots[0]][2])) for f in fingers if m.fingers[f].slots]
+    below = [(f, z) for f, z in ahead if z < 0]
+    if ahead and len(below) > len(ahead) / 2:
+        raise SpecError(f"{where}: the finger bases ({', '.join(f'{f} z = {1e3 * z:.0f} mm' for f, z in below)}) lie behind "
+                        "the palm frame's origin: palm_origin must sit at the wrist end of the palm, below the knuckles "
+                        "along +z (check its xyz, in metres)")
     curl, mids, curl_dirs = [], [], []
     for f in fingers:
         slots = _flexion_slots(m, f)
