@@ -286,6 +286,24 @@ def test_a_palm_origin_beyond_the_knuckles_is_an_error_naming_them(hands_dir, tm
 
 
 @pytest.mark.assets
+def test_a_finger_joint_forgotten_behind_its_mimic_is_named(hands_dir, tmp_path):
+    import yaml
+
+    d = yaml.safe_load(registry.spec_path("inspire_hand_right").read_text())
+    del d["joints"]["index_joint2"]  # the actuated MCP; its mimic PIP (index_joint3) stays mapped
+    d["urdf"] = str(hands_dir / d["urdf"])
+    spec = tmp_path / "forgot.yaml"
+    spec.write_text(yaml.safe_dump(d))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        notes = parse(spec, "extended", fit_params=False).notes
+        full = parse(registry.spec_path("inspire_hand_right"), "extended", fit_params=False).notes
+    named = [n for n in notes if "actuated joint 'index_proximal_joint' has no slot" in n]
+    assert len(named) == 1 and "index_joint3 (mimic 'index_intermediate_joint')" in named[0]
+    assert not any("has no slot; it moves with" in n for n in full)
+
+
+@pytest.mark.assets
 def test_a_relative_urdf_path_resolves_against_the_spec_file(hands_dir, tmp_path, monkeypatch):
     rel = os.path.relpath(hands_dir / "inspire_hand" / "inspire_hand_right.urdf", tmp_path)
     spec = tmp_path / "mine.yaml"

@@ -137,6 +137,22 @@ def load_original_for(spec: HandSpec, hands_root: str | Path | None = None) -> O
     return hand
 
 
+def _unmapped_mimic_drivers(slots, hand: OriginalHand) -> list[str]:
+    """Notes for actuated joints that no slot maps but that mapped ``<mimic>`` joints follow: the mimic's slot
+    then drives them (a palm piece's spread joint), and a finger joint forgotten in the spec shows only as a large
+    fingertip error without this line."""
+    from ohra.original.action import mimic_relations
+
+    rel = mimic_relations(slots, hand)
+    mapped = {sm.name for sm in slots.values()}
+    out = []
+    for root in sorted({r for r, _, _ in rel.values()} - mapped):
+        followers = [f"{slot} (mimic {sm.name!r})" for slot, sm in sorted(slots.items()) if sm.name in rel and rel[sm.name][0] == root]
+        out.append(f"approximation: actuated joint {root!r} has no slot; it moves with {', '.join(followers)}, which drives it: "
+                   f"if it is a finger joint the canonical hand has, map it to its slot (else its motion counts in the errors)")
+    return out
+
+
 def parse(
     spec: HandSpec | str | Path,
     form: str = "base",
@@ -156,6 +172,7 @@ def parse(
         spec.check_joints(hand)
     m = measure(hand, spec, form)
     m.notes.extend(check_palm_frame(m, spec, form))
+    m.notes.extend(_unmapped_mimic_drivers(m.action_map.slots, hand))
     try:
         init = initial_base(m, spec, form) if form == "base" else initial_extended(m, spec, form)
     except ParamsError as exc:
