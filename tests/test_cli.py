@@ -86,6 +86,16 @@ def test_check_command_loads_hands_cleanly(capsys):
     assert "0 failed" in capsys.readouterr().out
 
 
+@pytest.mark.assets
+def test_check_of_a_spec_yaml_checks_every_form_it_declares(capsys):
+    from ohra.hands import registry
+
+    spec = registry.spec_path("inspire_hand_right")
+    assert main(["hand", "check", str(spec)]) == 0
+    forms = [l.split()[1] for l in capsys.readouterr().out.splitlines() if l.split() and l.split()[-1] == "ok"]
+    assert forms == ["base", "extended"]
+
+
 def test_check_without_all_hides_only_leap_variants_and_counts_them(capsys):
     assert main(["hand", "check", "leap_hand_right", "leap_3333", "leap_1111"]) == 0
     rows = [l.split()[0] for l in capsys.readouterr().out.splitlines() if l.split() and l.split()[-1] == "ok"]

@@ -117,7 +117,7 @@ def _resolve(name: str, extended: bool):
 
 
 def _jobs(names: list[str]) -> list[tuple[str, str | None]]:
-    """(hand, form) pairs to check: each registered form of a registered hand, else the hand as named.
+    """(hand, form) pairs to check: each form of a registered hand or a spec YAML, else the hand as named.
 
     An unknown name raises :class:`ohra.HandNotFoundError` here, before anything runs.
     """
@@ -129,6 +129,10 @@ def _jobs(names: list[str]) -> list[tuple[str, str | None]]:
     for n in names:
         if n in registered:
             jobs += [(n, f) for f in registry.registered_forms(n)]
+        elif n.lower().endswith((".yaml", ".yml")):  # a spec: each form it declares, as for a registered hand
+            from ohra.original.spec import load_spec
+
+            jobs += [(n, f) for f in load_spec(n).forms]
         else:
             if not is_variant(n):
                 get_hand(n)  # a params file: fails here on an unknown name, naming it
