@@ -76,8 +76,8 @@ class MirroredHand:
 def mirror_params(params: Params) -> MirroredHand:
     """The mirror image of ``params`` (see the module docstring): a left hand from a right one and back.
 
-    Mirroring twice gives back the same parameters. Couplings between joints (``ohra.canonical.couplings``)
-    are not parameters and are not carried.
+    Mirroring twice gives back the same parameters. Couplings between joints are not parameters:
+    :func:`mirror_couplings` carries them.
 
     Raises:
         ParamsError: ``params`` is not :class:`BaseParams` or :class:`ExtendedParams`.
@@ -86,8 +86,8 @@ def mirror_params(params: Params) -> MirroredHand:
         raise ParamsError(f"mirror_params: expected BaseParams or ExtendedParams, got {type(params).__name__}")
     signs = np.ones(22)
     lo, up = np.asarray(params.joint_lowers, dtype=float), np.asarray(params.joint_uppers, dtype=float)
+    d = params.to_dict()
     if isinstance(params, BaseParams):
-        d = params.to_dict()
         extra = np.asarray(params.little_extra_origin, dtype=float).copy()
         extra[:3] *= _Y_FLIP
         extra[3:] *= _RPY_FLIP
@@ -97,7 +97,6 @@ def mirror_params(params: Params) -> MirroredHand:
                  thumb_axes=(np.asarray(params.thumb_axes, dtype=float) * _AXIS_FLIP).tolist())
         form: type = BaseParams
     else:
-        d = params.to_dict()
         o = np.asarray(params.joint_origins, dtype=float).copy()
         o[:, :3] *= _Y_FLIP
         o[:, 3:] *= _RPY_FLIP
@@ -157,9 +156,9 @@ def mirror_grasps(grasps: np.ndarray, signs: np.ndarray) -> np.ndarray:
         raise GraspError(f"mirror_grasps: joint signs are +1 or -1 (MirroredHand.signs), got signs[{bad}] = {s[bad]:g}")
     out = g.copy()
     # S R M: columns S c1 (M e1 = e1) and -S c2 (M e2 = -e2); S negates the y entry of each
-    out[..., 0:3] *= [1.0, -1.0, 1.0]
-    out[..., 3:6] *= [1.0, -1.0, 1.0]
-    out[..., 6:9] *= [-1.0, 1.0, -1.0]
+    out[..., 0:3] *= _Y_FLIP
+    out[..., 3:6] *= _Y_FLIP
+    out[..., 6:9] *= _AXIS_FLIP
     out[..., 9:] = out[..., 9:] * s + 0.0  # + 0.0: no -0 for an absent joint
     return out
 

@@ -299,13 +299,13 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
                              f"{hand if isinstance(hand, str) else type(hand).__name__!r} is not a registered hand "
                              "(a spec of your own registers with ohra --hands DIR or $OHRA_HANDS_PATH)")
         params = resolve_hand(hand)
+        told = params if condition_hand is None else resolve_hand(condition_hand)  # the hand the model is told
         try:
-            model.condition.vector(params if condition_hand is None else resolve_hand(condition_hand))
+            model.condition.vector(told)
         except ParamsError as exc:
             who = hand if condition_hand is None else condition_hand
             raise ParamsError(f"hand {str(who) if isinstance(who, (str, Path)) else type(who).__name__!r}: {exc}") from None
-        flip = model.mirrors(params if condition_hand is None else resolve_hand(condition_hand), mirror)
-        resolved.append((hand_label(hand, params), params, _couplings(hand), flip))
+        resolved.append((hand_label(hand, params), params, _couplings(hand), told, model.mirrors(told, mirror)))
     twice = sorted(name for name, k in Counter(name for name, *_ in resolved).items() if k > 1)
     if twice:
         raise GraspError(f"hand(s) {twice} given more than once")
@@ -314,7 +314,7 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
     resumed = 0
     settings = _resume_settings(model, n, original, inertials, collisions, protocol, refine, centre, candidates,
                                 condition_hand) if resume is not None else None
-    for name, params, couplings, flip in resolved:
+    for name, params, couplings, told, flip in resolved:
         movable = np.asarray(params.movable_joints)
         hybrid = None
         if original and collisions == "canonical":  # one fit per hand, shared by its objects
@@ -324,8 +324,7 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
         for obj in objs:
             s = pair_seed(seed, str(name), obj.mesh_hash)
             if resume is not None:
-                told = model.condition.vector(params if condition_hand is None else resolve_hand(condition_hand))
-                path = resume / f"{_pair_key(settings, str(name), params, obj, s, told, flip)}.npz"
+                path = resume / f"{_pair_key(settings, str(name), params, obj, s, model.condition.vector(told), flip)}.npz"
                 done = _load_pair(path)
                 if done is not None:
                     pairs.append(done)

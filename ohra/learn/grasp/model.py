@@ -28,7 +28,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from ohra.canonical.mirror import mirror_grasps, mirror_params
+from ohra.canonical.mirror import PALM_MIRROR, mirror_grasps, mirror_params
 from ohra.errors import CheckpointError, GraspError, ObjectWarning, OhraError, ParamsError, require_seed, user_stacklevel
 from ohra.learn.grasp.condition import HandCondition, HandLike, hand_key, resolve_hand
 from ohra.learn.grasp.config import GraspModelConfig
@@ -43,7 +43,7 @@ MODEL_FORMAT = "ohra-grasp-model"
 CHECKPOINT_FORMAT = "ohra-grasp-checkpoint"
 DEFAULT_MODEL = "grasp_default"
 CLOUD_SEED = 0  # surface sample of an object at inference (fixed: same object, same cloud)
-_Y_FLIP = np.array([1.0, -1.0, 1.0])  # the reflection through an x-z plane (S = M = diag(1, -1, 1))
+_Y_FLIP = np.diag(PALM_MIRROR)  # the reflection through an x-z plane as factors (S = M = diag(1, -1, 1))
 ObjectLike = Union[ObjectModel, str, Path]
 
 
@@ -163,7 +163,7 @@ class GraspModel:
     # machine: 50-1500 ms for 100 grasps; 1 thread: 30-60 ms)
     threads: int = 1
     _clouds: dict[str, torch.Tensor] = field(default_factory=dict, repr=False)
-    _cache: dict[str, Any] = field(default_factory=dict, repr=False)  # derived values (training-hand conditions)
+    _cache: dict[str, Any] = field(default_factory=dict, repr=False)  # derived: training-hand conditions, mirror decisions and images
 
     def __post_init__(self) -> None:
         self.net.eval()
@@ -348,9 +348,15 @@ class GraspModel:
         return self._cache[key]
 
     def _mirrored(self, params: Any, cond_params: Any) -> tuple[Any, np.ndarray, Any]:
-        """Mirror images of the hand and of the condition hand, and the hand's joint signs. A VAE-conditioned
-        model mirrors the base form when there is one: the VAE reads base-form hands, and the mirror image of
-        an extended hand need not have a base form."""
+        """Mirror images of the hand and of the condition hand, and the hand's joint signs (cached per pair of
+        hands: :meth:`sample` asks on every call). A VAE-conditioned model mirrors the base form when there is
+        one: the VAE reads base-form hands, and the mirror image of an extended hand need not have a base form."""
+        key = "mirrored:" + hand_key(params) + ":" + hand_key(cond_params)
+        if key not in self._cache:
+            self._cache[key] = self._mirror_images(params, cond_params)
+        return self._cache[key]
+
+    def _mirror_images(self, params: Any, cond_params: Any) -> tuple[Any, np.ndarray, Any]:
         if self.condition.kind == "vae":
             try:
                 params = self.condition.vae_form(params)
