@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 from ohra.errors import SpecError
@@ -56,13 +58,22 @@ def test_shorthand_sign_offset_and_per_form_changes():
         (("    fixed: {index_joint3: 0.1}", "    fixed: {index_joint2: 0.1}"), "both mapped and fixed"),
         (("name: toy", "name: toy\ncolour: red"), "unknown key(s) ['colour']"),
         (("urdf: toy.urdf\n", ""), "missing key 'urdf'"),
+        (("{xyz: [0, 0, 0], rpy: [0, 0, 0]}", "{rpy: [0, 0, 0]}"), "palm_origin: missing 'xyz'"),
+        (("xyz: [0, 0, 0]", "xyz: [0, 0, -95]"), "palm_origin: xyz [0.0, 0.0, -95.0] is 95 m from the root link"),
+        (("xyz: [0, 0, 0]", "xyz: [0, 0.3, -0.41]"), "millimetres?"),  # 0.508 m: just past the bound
+        (("rpy: [0, 0, 0]", "rpy: [0, 0, 90]"), "palm_origin: rpy [0.0, 0.0, 90.0] beyond +-2 pi"),
     ],
 )
 def test_malformed_specs_name_the_problem(change, message):
     text = MINIMAL.replace(*change)
     assert text != MINIMAL
-    with pytest.raises(SpecError, match=message.replace("(", r"\(").replace(")", r"\)").replace("[", r"\[").replace("]", r"\]")):
+    with pytest.raises(SpecError, match=re.escape(message)):
         load_spec(text)
+
+
+def test_a_palm_origin_just_inside_the_bound_loads():
+    sp = load_spec(MINIMAL.replace("xyz: [0, 0, 0], rpy: [0, 0, 0]", "xyz: [0, 0.3, -0.39], rpy: [0, 0, 6.28]"))
+    assert sp.palm_origin.tolist() == [0, 0.3, -0.39, 0, 0, 6.28]
 
 
 def test_override_needs_a_reason():

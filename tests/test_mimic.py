@@ -164,6 +164,33 @@ def test_user_hand_folders_join_the_registry(tmp_path, no_hands_root, monkeypatc
         registry.registered_hands()
 
 
+def test_a_user_hands_written_params_are_used_until_its_spec_is_edited(tmp_path, no_hands_root, monkeypatch):
+    folder = tmp_path / "my_hands"
+    folder.mkdir()
+    spec = _toy(folder)
+    monkeypatch.setenv("OHRA_HANDS_PATH", str(folder))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert registry.main(["toy_mimic"]) == 0  # the documented writer of DIR/params/<form>/<name>.json
+    written = folder / "params" / "extended" / "toy_mimic.json"
+    assert written.is_file() and (folder / "urdf" / "extended" / "toy_mimic.urdf").is_file()
+    os.utime(written, ns=(spec.stat().st_mtime_ns + 10**9,) * 2)  # written after the spec: no fit on use
+    marked = load_params(written).to_dict()
+    marked["palm_radius"] = 0.031  # a value the parser would not give: shows which source was read
+    written.write_text(json.dumps(marked))
+    os.utime(written, ns=(spec.stat().st_mtime_ns + 10**9,) * 2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert registry.registered_params("toy_mimic").palm_radius == pytest.approx(0.031)
+    # the spec edited after the file was written: the file no longer describes the hand
+    spec.write_text(MIMIC_SPEC + "overrides:\n  - {key: palm_radius, value: 0.04, reason: a thicker palm}\n")
+    os.utime(spec, ns=(written.stat().st_mtime_ns + 1,) * 2)  # one nanosecond newer is enough
+    with pytest.warns(UserWarning, match=r"toy_mimic\.json is older than .*toy_mimic\.yaml.*python -m ohra.hands.registry toy_mimic"):
+        fresh = registry.registered_params("toy_mimic")
+    assert fresh.palm_radius == pytest.approx(0.04)
+    assert registry.couplings("toy_mimic") == (Coupling("index_joint3", "index_joint2", 1.2, -0.05),)
+
+
 def test_show_fails_on_a_bad_name_before_starting_meshcat(monkeypatch, capsys):
     from ohra import viz
 

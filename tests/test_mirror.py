@@ -336,6 +336,17 @@ def test_ohra_eval_notes_grasps_sampled_for_another_hand(tmp_path, capsys):
     assert f"{f} was sampled for shadow_hand_left; evaluating it on --hand shadow_hand_right" in capsys.readouterr().err
     assert main(["eval", str(f), "--hand", "shadow_hand_left", "--object", "builtin:box", "--quiet"]) == 0
     assert "was sampled for" not in capsys.readouterr().err
+    # the same hand as a params file: silent in the form the grasps were made for, a note naming the form otherwise
+    from ohra.hands import get_hand
+
+    for form in ("base", "extended"):
+        get_hand("shadow_hand_left", form).to_json(tmp_path / form / "shadow_hand_left.json")
+    assert main(["eval", str(f), "--hand", str(tmp_path / "base" / "shadow_hand_left.json"), "--object", "builtin:box", "--quiet"]) == 0
+    assert "was sampled for" not in capsys.readouterr().err
+    ext = tmp_path / "extended" / "shadow_hand_left.json"
+    assert main(["eval", str(f), "--hand", str(ext), "--object", "builtin:box", "--quiet"]) == 0
+    assert (f"{f} was sampled for the base form of shadow_hand_left; --hand {ext} gives its extended form, evaluated as given "
+            "(--hand shadow_hand_left --form base evaluates") in capsys.readouterr().err
 
 
 def test_couplings_of_the_mirror_image_hold_at_the_mirrored_angles():

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
+from xml.sax.saxutils import escape
 
 import jinja2
 import numpy as np
@@ -189,7 +190,7 @@ def render(params: Params, robot_name: str = "canonical_hand") -> str:
     """
     require_params(params)
     tpl = _environment().get_template(template_name(params))
-    text = tpl.render(**_context(params, robot_name))
+    text = tpl.render(**_context(params, escape(str(robot_name), {'"': "&quot;"})))  # a file stem may hold & < "
     # Blank lines left by conditional blocks carry no meaning; drop them for compact files.
     return "\n".join(line for line in text.splitlines() if line.strip()) + "\n"
 

@@ -135,8 +135,16 @@ def run(args: argparse.Namespace) -> int:
             check_output(out)
     grasps, made = load_grasp_file(args.grasps, args.key)  # made: what `ohra grasp sample` recorded, if anything
     if made.get("hand") and made["hand"] != str(args.hand):
-        print(f"ohra: note: {args.grasps} was sampled for {made['hand']}; evaluating it on --hand {args.hand}",
-              file=sys.stderr)
+        from ohra.hands.resolve import resolve_hand
+
+        told = resolve_hand(args.hand, args.form)  # a file may hold the same hand under another reference
+        if told.name != made["hand"]:
+            print(f"ohra: note: {args.grasps} was sampled for {made['hand']}; evaluating it on --hand {args.hand}",
+                  file=sys.stderr)
+        elif made.get("form") and told.form != made["form"]:
+            print(f"ohra: note: {args.grasps} was sampled for the {made['form']} form of {made['hand']}; --hand "
+                  f"{args.hand} gives its {told.form} form, evaluated as given (--hand {made['hand']} --form "
+                  f"{made['form']} evaluates the hand the grasps were made for)", file=sys.stderr)
     if made.get("hand") == str(args.hand) and made.get("form"):
         if args.form is None:
             args.form = made["form"]  # the canonical hand the grasps were sampled for

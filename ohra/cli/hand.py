@@ -105,17 +105,6 @@ def _natural_form(args: argparse.Namespace) -> str | None:
     return "extended" if args.extended else None
 
 
-def _resolve(name: str, extended: bool):
-    """Params of ``name``; with ``extended`` a base-form hand is converted to the extended form."""
-    from ohra.canonical.params import BaseParams
-    from ohra.hands import get_hand
-
-    params = get_hand(name, "extended" if extended else None)
-    if extended and isinstance(params, BaseParams):
-        params = params.to_extended()
-    return params
-
-
 def _jobs(names: list[str]) -> list[tuple[str, str | None]]:
     """(hand, form) pairs to check: each form of a registered hand or a spec YAML, else the hand as named.
 
@@ -154,14 +143,17 @@ def _cmd_list(args: argparse.Namespace) -> int:
 
 
 def _cmd_render(args: argparse.Namespace) -> int:
+    from ohra.canonical.params import BaseParams
     from ohra.canonical.urdfgen import render, write
+    from ohra.hands.resolve import resolve_hand
 
-    params = _resolve(args.hand, args.extended)
+    ref = resolve_hand(args.hand, "extended" if args.extended else None)  # the hand's name becomes the robot's
+    params = ref.params.to_extended() if args.extended and isinstance(ref.params, BaseParams) else ref.params
     if args.output:
-        path = write(params, args.output)
+        path = write(params, args.output, robot_name=ref.name)
         print(f"wrote {path}", file=sys.stderr)
     else:
-        sys.stdout.write(render(params))
+        sys.stdout.write(render(params, robot_name=ref.name))
     return 0
 
 

@@ -11,8 +11,10 @@ templates with::
 
 User hands, no package edits: every folder in ``$OHRA_HANDS_PATH`` (``os.pathsep``-separated) or
 added with :func:`add_hands_path` (``ohra --hands DIR``) contributes its ``*.yaml`` specs; their
-params are read from ``DIR/params/<form>/<name>.json`` when present, else parsed (with the fit) on
-first use and kept for the process. A name defined twice is an error naming both files.
+params are read from ``DIR/params/<form>/<name>.json`` when present and newer than the spec and its URDF (else
+the spec is parsed, with the fit, on first use and kept for the process; a stale file is named in a warning).
+``OHRA_HANDS_PATH=DIR python -m ohra.hands.registry NAME`` writes those files (and ``DIR/urdf/<form>/<name>.urdf``),
+so that later processes skip the fit. A name defined twice is an error naming both files.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from pathlib import Path
 from ohra.canonical.couplings import Coupling, params_json, read_couplings
 from ohra.canonical.params import BaseParams, ExtendedParams, load_params
 from ohra.errors import AssetsNotFoundError, HandNotFoundError, SpecError
+from ohra.io import write_text
 from ohra.resources import hands_data_dir, specs_dir, urdf_dir
 
 FORMS = ("base", "extended")
@@ -153,11 +156,43 @@ def _resolve_form(name: str, form: str | None) -> str:
     return form
 
 
+def _written_params(name: str, form: str) -> Path | None:
+    """The params JSON to read for a hand and form, or None to parse its spec.
+
+    A user hand's file is used only while it is newer than its spec and the spec's URDF: after either is edited
+    it no longer describes the hand, so the spec is parsed instead and a warning names the command that rewrites
+    the file. Package files are regenerated with the package (tests hold them to the parser).
+    """
+    p = params_path(name, form)
+    if not p.is_file() or not _is_user(name):
+        return p if p.is_file() else None
+    spec_file = _spec_files()[name]
+    sources = [spec_file]
+    try:
+        sources.append(spec(name).urdf_path())
+    except Exception:  # noqa: BLE001 - a URDF that cannot be found fails later, where it is needed, naming the path
+        pass
+    written = p.stat().st_mtime_ns
+    newer = [str(f) for f in sources if f.is_file() and f.stat().st_mtime_ns > written]
+    if not newer:
+        return p
+    key = (str(p), written)
+    if key not in _stale_warned:
+        _stale_warned.add(key)
+        warnings.warn(f"{p} is older than {' and '.join(newer)} (edited since the params were written): using the "
+                      f"spec parsed now; rewrite the file with: {PATH_ENV}={spec_file.parent} python -m ohra.hands.registry "
+                      f"{name}", stacklevel=3)
+    return None
+
+
+_stale_warned: set[tuple[str, int]] = set()
+
+
 def registered_params(name: str, form: str | None = None) -> BaseParams | ExtendedParams:
     """Params of a registered hand (``form`` None: base when registered, else extended)."""
     form = _resolve_form(name, form)
-    p = params_path(name, form)
-    if p.is_file():
+    p = _written_params(name, form)
+    if p is not None:
         return load_params(p)
     return _parsed(name, form).params
 
@@ -165,8 +200,8 @@ def registered_params(name: str, form: str | None = None) -> BaseParams | Extend
 def couplings(name: str, form: str | None = None) -> tuple[Coupling, ...]:
     """Canonical couplings of a registered hand (empty for hands without coupled joints)."""
     form = _resolve_form(name, form)
-    p = params_path(name, form)
-    if p.is_file():
+    p = _written_params(name, form)
+    if p is not None:
         return read_couplings(p)
     return _parsed(name, form).couplings
 
@@ -206,7 +241,7 @@ def generate(name: str, form: str, write: bool = True):
     if write:
         p = params_path(name, form)
         p.parent.mkdir(parents=True, exist_ok=True)
-        p.write_text(params_json(res.params, res.couplings))
+        write_text(p, params_json(res.params, res.couplings))  # atomic: a reader never sees half a file
         urdfgen.write(res.params, urdf_path(name, form), robot_name=name)
     return res
 

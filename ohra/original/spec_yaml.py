@@ -12,7 +12,7 @@ import numpy as np
 import yaml
 
 from ohra.canonical.couplings import Coupling, coupling_from_dict, resolve
-from ohra.canonical.params import JOINT_INDEX, JOINT_NAMES
+from ohra.canonical.params import JOINT_INDEX, JOINT_NAMES, MAX_POSITION
 from ohra.errors import ParamsError, SpecError
 from ohra.original.action import SlotMap
 from ohra.original.spec import _KEY_RE, FORMS, FormSpec, HandSpec, Override
@@ -87,12 +87,19 @@ def _slots(d: Any, where: str, allow_null: bool) -> dict[str, SlotMap | None]:
     return out
 
 
+# The farthest a palm origin may sit from the original root link (the params' position bound).
+PALM_ORIGIN_MAX_M = MAX_POSITION
+
+
 def _palm_origin(v: Any, where: str) -> np.ndarray:
     if isinstance(v, Mapping):
         unknown = sorted(set(v) - {"xyz", "rpy"})
         if unknown:
             raise SpecError(f"{where}: unknown key(s) {unknown}; expected xyz, rpy")
-        xyz, rpy = v.get("xyz", [0, 0, 0]), v.get("rpy", [0, 0, 0])
+        if "xyz" not in v:  # never a silent zero: the palm's place is the one measurement every hand needs
+            raise SpecError(f"{where}: missing 'xyz' (the canonical palm origin in the original root frame, metres; "
+                            "write xyz: [0, 0, 0] if the palm sits at the root)")
+        xyz, rpy = v["xyz"], v.get("rpy", [0, 0, 0])
         if not isinstance(xyz, list) or not isinstance(rpy, list) or len(xyz) != 3 or len(rpy) != 3:
             raise SpecError(f"{where}: xyz and rpy must be lists of 3 numbers")
         vals = list(xyz) + list(rpy)
@@ -100,7 +107,14 @@ def _palm_origin(v: Any, where: str) -> np.ndarray:
         vals = v
     else:
         raise SpecError(f"{where}: expected {{xyz: [3], rpy: [3]}} or a list of 6 numbers, got {v!r}")
-    return np.array([_number(x, f"{where}[{i}]") for i, x in enumerate(vals)])
+    out = np.array([_number(x, f"{where}[{i}]") for i, x in enumerate(vals)])
+    dist = float(np.linalg.norm(out[:3]))
+    if dist > PALM_ORIGIN_MAX_M:  # a hand's palm is centimetres from its root link; this is a unit slip
+        raise SpecError(f"{where}: xyz {out[:3].tolist()} is {dist:.3g} m from the root link (expected metres, at most "
+                        f"{PALM_ORIGIN_MAX_M} m; millimetres? xyz [0, 0, -95] is written [0, 0, -0.095])")
+    if np.any(np.abs(out[3:]) > 2 * np.pi + 1e-9):
+        raise SpecError(f"{where}: rpy {out[3:].tolist()} beyond +-2 pi (expected radians; degrees?)")
+    return out
 
 
 def _override(v: Any, where: str) -> Override:
