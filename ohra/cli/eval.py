@@ -58,7 +58,9 @@ def register(subparsers) -> None:
     p.add_argument("--limit", type=int, default=None, help="evaluate only the first N grasps")
     p.add_argument("--render", metavar="PNG", default=None, help="write a contact sheet of the grasps (first 16)")
     p.add_argument("--meshcat", metavar="HTML", default=None, help="write a meshcat scene of the first grasp as static HTML")
-    p.add_argument("-o", "--output", metavar="JSON", default=None, help="write the JSON report here")
+    p.add_argument("-o", "--output", metavar="JSON", default=None,
+                   help="write the JSON report here; until it is written, finished grasps are kept in OUTPUT's "
+                        ".partial.npz beside it, and a rerun after an interruption simulates only the rest")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -77,6 +79,13 @@ def eval_hand(name: str, original: bool = False, form: str | None = None, inerti
     if inertials == "original":
         hand = hand.with_finger_masses(original_finger_masses(name, form))
     return hand
+
+
+def partial_path(output: str | Path) -> Path:
+    """Where ``ohra eval -o OUTPUT`` keeps finished grasps until the report is written (``OUTPUT`` with
+    ``.partial.npz`` for its suffix)."""
+    out = Path(output)
+    return out.with_name(out.stem + ".partial.npz")
 
 
 def load_grasp_file(path: str | Path, key: str | None = None) -> tuple[np.ndarray, dict[str, str]]:
@@ -176,7 +185,11 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # already reported above
-        rep = ev.evaluate(g, mode=args.mode, workers=args.workers, progress=not args.quiet, backend=args.backend, address=args.address)
+        # with a report file, finished grasps are kept beside it until the report is written: a rerun of an
+        # interrupted evaluation (same grasps and settings) simulates only the rest
+        partial = partial_path(args.output) if args.output else None
+        rep = ev.evaluate(g, mode=args.mode, workers=args.workers, progress=not args.quiet, backend=args.backend,
+                          address=args.address, resume=partial)
     wall = time.perf_counter() - t0
     ev.close()
     rep.meta.update({"grasp_file": str(args.grasps), "original_hand": bool(args.original), "inertials": args.inertials, "wall_s": wall,
@@ -185,6 +198,10 @@ def run(args: argparse.Namespace) -> int:
         from ohra.io import write_json
 
         write_json(args.output, rep.to_dict())
+        partial.unlink(missing_ok=True)
+        if rep.meta.get("resumed"):
+            print(f"ohra: note: {rep.meta['resumed']} of {len(rep.results)} grasps came from the interrupted run's "
+                  f"{partial}", file=sys.stderr)
     if args.render:
         from ohra.sim.render import contact_sheet, render_grasps, write_png
 

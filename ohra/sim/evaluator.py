@@ -26,6 +26,7 @@ import multiprocessing as mp
 import os
 import warnings
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 from typing import Iterable, Sequence
 
 import numpy as np
@@ -302,10 +303,17 @@ class GraspEvaluator:
         return g, out
 
     def evaluate(self, grasps: np.ndarray, mode: str = "eval", workers: int = 1, progress: bool = False,
-                 chunksize: int = 1, backend: str = "process", address: str | None = None) -> EvalReport:
+                 chunksize: int = 1, backend: str = "process", address: str | None = None,
+                 resume: str | Path | None = None) -> EvalReport:
         """Run the protocol on (N,31) grasps; ``mode`` ``"eval"`` or ``"filter"``; ``workers`` processes
         (``backend="ray"``: Ray tasks of about N / (4 workers) grasps each, on a local cluster with
-        ``workers`` CPUs or the cluster at ``address``; see :mod:`ohra.data.backends`)."""
+        ``workers`` CPUs or the cluster at ``address``; see :mod:`ohra.data.backends`).
+
+        ``resume``: an ``.npz`` path rewritten (atomically) after every finished grasp; a call with the same
+        grasps, hand, object, protocol and mode takes the outcomes stored there and simulates only the rest
+        (``meta["resumed"]`` counts them), so an interrupted evaluation loses nothing it finished. A file made
+        under other inputs is replaced. The file is left in place; delete it once the report is kept
+        (:mod:`ohra.sim.partial`)."""
         if mode not in ("eval", "filter"):
             raise GraspError(f"mode must be 'eval' or 'filter', got {mode!r}")
         if int(workers) < 1:
@@ -314,16 +322,33 @@ class GraspEvaluator:
         if out.any():
             warnings.warn(f"{int(out.sum())} grasp(s) have joints outside the limits; they are clamped", stacklevel=user_stacklevel())
         results: list[GraspResult | None] = [None] * len(g)
+        store = None
+        if resume is not None:
+            from ohra.sim.partial import PartialEvaluation, evaluation_key
+
+            store = PartialEvaluation(resume, evaluation_key(self.hand, self.obj, self.protocol, mode, g))
+            for i, r in store.done.items():
+                if 0 <= i < len(g):
+                    results[i] = r
+        todo = np.array([i for i, r in enumerate(results) if r is None], dtype=int)
         bar = _progress(len(g), progress)
+        bar.update(len(g) - len(todo))
         try:
-            it = self._iter(g, mode, int(workers), int(chunksize)) if backend == "process" and not address else \
-                self._iter_backend(g, mode, int(workers), backend, address)
-            for i, r in it:
-                results[i] = r
-                bar.update(1)
+            if len(todo):
+                sub = g[todo]
+                it = self._iter(sub, mode, int(workers), int(chunksize)) if backend == "process" and not address else \
+                    self._iter_backend(sub, mode, int(workers), backend, address)
+                for j, r in it:
+                    i = int(todo[j])
+                    results[i] = r
+                    if store is not None:
+                        store.add(i, r)
+                    bar.update(1)
         finally:
             bar.close()
         meta = {"hand": self.hand.name, "object": self.obj.name, "object_hash": self.obj.mesh_hash, "workers": int(workers)}
+        if store is not None:
+            meta["resumed"] = len(g) - len(todo)
         return EvalReport([r for r in results if r is not None], mode, self.protocol, meta)
 
     def _iter_backend(self, g: np.ndarray, mode: str, workers: int, backend: str, address: str | None) -> Iterable[tuple[int, GraspResult]]:
