@@ -23,6 +23,10 @@ pytestmark = pytest.mark.assets
 
 JOBS = [(n, f) for n in registry.registered_hands() for f in registry.registered_forms(n)]
 FAST = {("shadow_hand_right", "base"), ("gaia_hand_left", "extended")}
+# 5e-4 (0.5 mm, 0.5 mrad): the least-squares fit lands ~3e-5 apart on different BLAS builds, and where its
+# valley is flat further with the BLAS thread count (the Sharpa hands' little-finger base yaw: 1.2e-4 rad
+# between one and two threads). A parser change moves parameters by millimetres.
+FIT_ATOL = 5e-4
 
 
 def _quiet_parse(*args, **kwargs):
@@ -35,15 +39,14 @@ def _quiet_parse(*args, **kwargs):
 def test_parse_reproduces_committed_params(hands_dir, name, form):
     res = _quiet_parse(registry.spec(name), form, fit_params=True)
     committed = registry.registered_params(name, form)
-    # 1e-4 (0.1 mm, 0.1 mrad): the least-squares fit lands ~3e-5 apart on different BLAS builds.
-    assert res.params.isclose(committed, atol=1e-4)
+    assert res.params.isclose(committed, atol=FIT_ATOL)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name, form", [j for j in JOBS if j not in FAST])
 def test_parse_reproduces_committed_params_all(hands_dir, name, form):
     res = _quiet_parse(registry.spec(name), form, fit_params=True)
-    assert res.params.isclose(registry.registered_params(name, form), atol=1e-4)
+    assert res.params.isclose(registry.registered_params(name, form), atol=FIT_ATOL)
 
 
 @pytest.mark.parametrize("name, form", JOBS)
