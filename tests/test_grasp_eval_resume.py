@@ -101,3 +101,19 @@ def test_a_procedural_training_object_exported_to_a_mesh_file_is_still_refused(t
         with pytest.raises(DatasetError, match=r"'my_box' .* is in the model's training set \(as 'box-1'\)"):
             check_unseen(model, [ObjectModel.load(path)])
     check_unseen(model, [ObjectModel.procedural("box", 1001), ObjectModel.builtin("box")])
+
+
+def test_a_ycb_training_object_exported_to_another_file_is_still_refused(tmp_path, objects_dir):
+    """A mesh training object found again by name under the objects root (same mesh hash) is compared by shape:
+    its re-export (another name and hash) is refused; an unseen YCB object still passes."""
+    from ohra.errors import DatasetError
+    from ohra.learn.grasp.evaluate import check_unseen
+    from ohra.objects.model import ObjectModel
+
+    model = load_grasp_model()
+    assert "CrackerBox" in model.meta["train_objects"]
+    path = tmp_path / "my_crackers.stl"
+    ObjectModel.load(objects_dir / "ycb" / "CrackerBox").mesh.export(path)
+    with pytest.raises(DatasetError, match=r"'my_crackers' .* is in the model's training set \(as 'CrackerBox'\)"):
+        check_unseen(model, [ObjectModel.load(path)])
+    check_unseen(model, [ObjectModel.load(objects_dir / "ycb" / "MustardBottle")])

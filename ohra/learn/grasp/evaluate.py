@@ -31,6 +31,8 @@ import warnings
 import zlib
 from collections import Counter
 from dataclasses import asdict, dataclass, field
+from functools import lru_cache
+from glob import escape as glob_escape
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -169,16 +171,52 @@ def check_unseen(model: GraspModel, objects: Sequence[Any]) -> None:
 
 
 def _procedural_shapes(train: dict) -> dict[str, np.ndarray]:
-    """Shape signatures of the training objects named ``family-seed`` of a procedural family."""
+    """Shape signatures of the training objects that can be made or found again: those named ``family-seed``
+    of a procedural family, and mesh objects found by name under the objects root (``$OHRA_OBJECTS_ROOT``, a
+    folder or file ``NAME`` there or one level down, e.g. ``ycb/CrackerBox``) whose mesh hash is the one
+    trained on. A training object found nowhere is still refused by name and hash."""
     from ohra.objects.model import ObjectModel
     from ohra.objects.procedural import FAMILIES
 
     out = {}
-    for name in train:
+    for name, mesh_hash in train.items():
         family, _, seed = name.rpartition("-")
         if family in FAMILIES and seed.isdigit():
             out[name] = _shape_signature(ObjectModel.procedural(family, int(seed)))
+        else:
+            sig = _found_shape(name, str(mesh_hash))
+            if sig is not None:
+                out[name] = sig
     return out
+
+
+def _found_shape(name: str, mesh_hash: str) -> np.ndarray | None:
+    """Signature of the training mesh object ``name`` under the objects root, if it is there unchanged."""
+    from ohra.paths import objects_root
+
+    root = objects_root()
+    if not root.is_dir() or not name or "/" in name or name.startswith("."):
+        return None
+    for path in [root / name, *sorted(root.glob(f"*/{glob_escape(name)}"))]:
+        if path.exists():
+            sig = _file_shape(str(path.resolve()), path.stat().st_mtime_ns, mesh_hash)
+            if sig is not None:
+                return sig
+    return None
+
+
+@lru_cache(maxsize=64)
+def _file_shape(path: str, mtime_ns: int, mesh_hash: str) -> np.ndarray | None:
+    """Signature of the object at ``path`` when its mesh hash is ``mesh_hash`` (else None), once per process."""
+    from ohra.objects.model import ObjectModel
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # its mesh and body notes were given when it was trained on
+            obj = ObjectModel.load(path)
+    except Exception:  # noqa: BLE001 - an unreadable file is not the trained object
+        return None
+    return _shape_signature(obj) if obj.mesh_hash == mesh_hash else None
 
 
 def _shape_signature(obj: Any) -> np.ndarray:
