@@ -40,7 +40,7 @@ import numpy as np  # noqa: E402
 from ohra.canonical.mirror import mirror_params  # noqa: E402
 from ohra.hands import get_hand  # noqa: E402
 from ohra.hands.registry import registered_hands  # noqa: E402
-from ohra.learn.grasp.evaluate import evaluate_model  # noqa: E402
+from ohra.learn.grasp.evaluate import evaluate_model, hand_label  # noqa: E402
 from ohra.learn.grasp.model import load_grasp_model  # noqa: E402
 
 LEAP_TEST = ("leap_3033", "leap_3303", "leap_3330")
@@ -64,7 +64,7 @@ def arm(model, hands: list, labels: list[str], objects: list, protocol, args, pa
            for m in ("off", "on")}
     rows = {}
     for h, label in zip(hands, labels):
-        sel = {m: type(r)([p for p in r.pairs if p.hand == str(h)], r.meta) for m, r in rep.items()}
+        sel = {m: type(r)([p for p in r.pairs if p.hand == hand_label(h, h)], r.meta) for m, r in rep.items()}
         change, se, n = paired(sel["off"], sel["on"])
         rows[label] = {"off": float(np.mean([p.success_rate for p in sel["off"].pairs])),
                        "on": float(np.mean([p.success_rate for p in sel["on"].pairs])), "change": [change, se], "grasps": n}
@@ -91,13 +91,13 @@ def main() -> None:
                                    args, args.runs / "pairs")
 
     leap = load_grasp_model("leap")
-    files = []
+    images = []
     for v in LEAP_TEST:
-        f = args.runs / f"{v}_mirror.json"
-        mirror_params(get_hand(v)).params.to_json(f)
-        files.append(str(f))
-    assert all(leap.mirrors(f) for f in files), "the auto rule should mirror every left LEAP variant"
-    res["models"]["leap"] = arm(leap, files, [f"{v} mirror image" for v in LEAP_TEST], objects,
+        image = mirror_params(get_hand(v)).params
+        image.to_json(args.runs / f"{v}_mirror.json")  # for `ohra grasp sample --hand FILE`
+        images.append(image)  # evaluated as params: labelled (and seeded) by content, not by a checkout's path
+    assert all(leap.mirrors(h) for h in images), "the auto rule should mirror every left LEAP variant"
+    res["models"]["leap"] = arm(leap, images, [f"{v} mirror image" for v in LEAP_TEST], objects,
                                 data_protocol([str(ROOT / "datasets" / "leap_zeroshot_s0")]), args, args.runs / "pairs")
     res["protocol_note"] = protocol_note(data_protocol([str(ROOT / "datasets" / "grasp_unified_s0")]))
 

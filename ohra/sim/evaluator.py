@@ -309,11 +309,11 @@ class GraspEvaluator:
         (``backend="ray"``: Ray tasks of about N / (4 workers) grasps each, on a local cluster with
         ``workers`` CPUs or the cluster at ``address``; see :mod:`ohra.data.backends`).
 
-        ``resume``: an ``.npz`` path rewritten (atomically) after every finished grasp; a call with the same
-        grasps, hand, object, protocol and mode takes the outcomes stored there and simulates only the rest
-        (``meta["resumed"]`` counts them), so an interrupted evaluation loses nothing it finished. A file made
-        under other inputs is replaced. The file is left in place; delete it once the report is kept
-        (:mod:`ohra.sim.partial`)."""
+        ``resume``: an ``.npz`` path rewritten (atomically) every 2 s while grasps finish and when the call ends
+        or is interrupted (:mod:`ohra.sim.partial`); a call with the same grasps, hand, object, protocol and
+        mode takes the outcomes stored there and simulates only the rest (``meta["resumed"]`` counts them), so
+        an interrupted evaluation loses nothing it finished (a killed one at most its last 2 s). A file made
+        under other inputs is replaced. The file is left in place; delete it once the report is kept."""
         if mode not in ("eval", "filter"):
             raise GraspError(f"mode must be 'eval' or 'filter', got {mode!r}")
         if int(workers) < 1:
@@ -346,6 +346,8 @@ class GraspEvaluator:
                     bar.update(1)
         finally:
             bar.close()
+            if store is not None:
+                store.flush()  # an interruption (Ctrl-C, an error in a worker) keeps every finished grasp
         meta = {"hand": self.hand.name, "object": self.obj.name, "object_hash": self.obj.mesh_hash, "workers": int(workers)}
         if store is not None:
             meta["resumed"] = len(g) - len(todo)

@@ -1,7 +1,7 @@
 """The resume file of one evaluation: finished grasps' outcomes, kept while a long ``evaluate`` runs.
 
 :meth:`ohra.sim.GraspEvaluator.evaluate` with ``resume=PATH`` rewrites ``PATH`` (an ``.npz``, atomically)
-after every finished grasp; a later call with the same grasps, hand, object, protocol and mode takes the
+at most every 2 s while grasps finish and once more when the evaluation ends or is interrupted; a later call with the same grasps, hand, object, protocol and mode takes the
 outcomes stored there and simulates only the rest. Outcomes do not depend on order, batch or workers (each
 grasp starts from a reset world), so a resumed evaluation equals an uninterrupted one. A file made under
 other inputs, or one that cannot be read, is replaced, never trusted.
@@ -12,6 +12,7 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import time
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -43,9 +44,11 @@ def evaluation_key(hand: Any, obj: Any, protocol: Any, mode: str, grasps: np.nda
 class PartialEvaluation:
     """Outcomes finished so far under one :func:`evaluation_key`, written to ``path`` as they come."""
 
-    def __init__(self, path: str | Path, key: str):
+    def __init__(self, path: str | Path, key: str, interval_s: float = 2.0):
         self.path = Path(path)
         self.key = key
+        self.interval_s = float(interval_s)
+        self._dirty, self._written_at = False, float("-inf")
         self.replaced = False  # a file was there, made under other inputs or unreadable: it will be overwritten
         self.done: dict[int, Any] = self._read() if self.path.is_file() else {}
 
@@ -71,13 +74,24 @@ class PartialEvaluation:
         return out
 
     def add(self, index: int, result: Any) -> None:
-        """Record one finished grasp and rewrite the file (atomically: an interruption leaves the previous one)."""
+        """Record one finished grasp; the file is rewritten when ``interval_s`` has passed since the last write
+        (each write holds every finished grasp, so writing after each of thousands would cost quadratic time)."""
         self.done[int(index)] = result
+        self._dirty = True
+        if time.monotonic() - self._written_at >= self.interval_s:
+            self.flush()
+
+    def flush(self) -> None:
+        """Rewrite the file with every finished grasp if any came since the last write (atomically: an
+        interruption during the write leaves the previous file)."""
+        if not self._dirty:
+            return
         idx = sorted(self.done)
         arrays = {f: np.array([getattr(self.done[i], f) for i in idx]) for f in _FIELDS}
         buf = io.BytesIO()
         np.savez(buf, key=np.array(self.key), index=np.array(idx, dtype=np.int64), **arrays)
         write_bytes(self.path, buf.getvalue())
+        self._dirty, self._written_at = False, time.monotonic()
 
     def remove(self) -> None:
         self.path.unlink(missing_ok=True)
