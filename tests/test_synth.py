@@ -153,3 +153,29 @@ def test_the_urdf_damping_setting_leaves_synthesis_digests_alone():
     assert "urdf_joint_damping" not in SynthSettings().to_dict()["protocol"]
     assert kept.digest() == SynthSettings().digest()
     assert SynthSettings(protocol=replace(Protocol(), friction=1.0)).digest() != SynthSettings().digest()
+
+
+def test_ctrl_c_during_a_solve_stops_the_run_instead_of_storing_a_failed_solve():
+    """CasADi catches the KeyboardInterrupt raised inside IPOPT and returns a failed solve: a one-worker run went
+    on, stored it as a failure and exited 0. The solve now raises, and leaves the SIGINT handler as it was."""
+    import os
+    import signal
+    import threading
+    import time
+
+    hand = HandModel.from_params(get_hand("shadow_hand_right"))
+    obj = ObjectModel.builtin("box")
+    nlp = GraspNLP(hand, obj)
+    st = initial_poses(hand, obj, 1, np.random.default_rng(0))[0]
+    t = time.perf_counter()
+    assert nlp.solve(st["R0"], st["t0"], st["q0"], st["q_pref"])["success"]  # ~0.5-1 s on the 2-core machine
+    took = time.perf_counter() - t
+    before = signal.getsignal(signal.SIGINT)
+    timer = threading.Timer(min(0.1, took / 5), os.kill, (os.getpid(), signal.SIGINT))
+    timer.start()
+    with pytest.raises(KeyboardInterrupt):
+        nlp.solve(st["R0"], st["t0"], st["q0"], st["q_pref"])
+        time.sleep(1.0)  # never reached when the interrupt arrives in the solve
+    timer.join()
+    assert signal.getsignal(signal.SIGINT) is before
+    assert nlp.solve(st["R0"], st["t0"], st["q0"], st["q_pref"])["success"]  # the NLP still solves afterwards

@@ -115,10 +115,10 @@ def execute(args: argparse.Namespace) -> int:
     """Run the command parsed into ``args`` (its ``func``); user errors become one stderr line and exit 2."""
     from ohra.sim.pybullet_import import import_pybullet
 
-    import_pybullet()  # done once, after parsing: `ohra --help` does not pay the import
     shown = warnings.showwarning
     warnings.showwarning = _one_line_warnings(shown)
     try:
+        import_pybullet()  # done once, after parsing: `ohra --help` does not pay the import; Ctrl-C here is one line too
         for folder in getattr(args, "hands_dirs", ()):
             from ohra.hands.registry import add_hands_path
 

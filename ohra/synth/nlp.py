@@ -28,6 +28,9 @@ reproduce the old solutions bit for bit).
 
 from __future__ import annotations
 
+import signal
+import threading
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import casadi as ca
@@ -212,7 +215,10 @@ class GraspNLP:
         """
         p = np.concatenate([np.asarray(R0, dtype=float).reshape(-1, order="F"), q_pref[self.movable]])
         x0 = self._initial_guess(p, t0, q0)
-        sol = self.solver(x0=x0, p=p, lbx=self.lbx, ubx=self.ubx, lbg=self.lbg, ubg=self.ubg)
+        with _interrupts() as interrupted:
+            sol = self.solver(x0=x0, p=p, lbx=self.lbx, ubx=self.ubx, lbg=self.lbg, ubg=self.ubg)
+        if interrupted():  # CasADi turns Ctrl-C into a failed solve ("NonIpopt_Exception_Thrown"): stop instead
+            raise KeyboardInterrupt
         stats = self.solver.stats()
         x = np.asarray(sol["x"]).ravel()
         over = np.maximum(np.maximum(self.lbg - np.asarray(sol["g"]).ravel(), np.asarray(sol["g"]).ravel() - self.ubg), 0.0)
@@ -229,6 +235,32 @@ class GraspNLP:
             "iterations": int(stats.get("iter_count", -1)), "coupling_residual": coupling_res, "contacts": contacts, "normals": normals,
             "forces": x[self.force_slice].reshape(-1, 3),
         }
+
+
+@contextmanager
+def _interrupts():
+    """Yield a function telling whether Ctrl-C (SIGINT) arrived inside the block.
+
+    CasADi catches the KeyboardInterrupt raised inside IPOPT's callbacks and returns a failed solve, so a run
+    would go on, store that solve as a failure and exit 0. Where SIGINT is ignored (pool workers leave it to
+    the driver) or this is not the main thread, nothing is installed."""
+    previous = signal.getsignal(signal.SIGINT)
+    if threading.current_thread() is not threading.main_thread() or previous in (signal.SIG_IGN, None):
+        yield lambda: False
+        return
+    hit: list[int] = []
+
+    def handler(signum, frame):
+        hit.append(signum)
+        if callable(previous):
+            previous(signum, frame)
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGINT, handler)
+    try:
+        yield lambda: bool(hit)
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 __all__ = ["GraspNLP", "NLPSettings", "SUCCESS_STATUSES", "capsule_pair_indices", "constraint_blocks", "sdf_bspline"]
