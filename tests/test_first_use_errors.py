@@ -39,6 +39,36 @@ def test_a_dataset_filtered_by_a_hand_it_does_not_hold_names_the_hands_it_holds(
         GraspDataset(tmp_path, hands=["leap_hnad"])
 
 
+def _manifest(folder, hands: dict) -> None:
+    from ohra.io import write_json
+
+    write_json(folder / "manifest.json", {"format": "ohra-grasps/1", "hands": hands})
+
+
+def test_a_dataset_filtered_by_an_object_it_does_not_hold_names_the_objects_it_holds(tmp_path):
+    from ohra.data import GraspDataset
+
+    shard = {"box-7fefc98d": {"object": {"name": "box"}}, "sphere-0a1b2c3d": {"object": {"name": "sphere"}}}
+    _manifest(tmp_path, {"leap_3303": {"shards": shard}, "leap_2211": {"shards": {}}})
+    assert len(GraspDataset(tmp_path, objects=["box"]).entries) == 1  # by name
+    assert len(GraspDataset(tmp_path, objects=["sphere-0a1b2c3d"]).entries) == 1  # or by key
+    assert GraspDataset(tmp_path, hands=["leap_2211"], objects=["box"]).entries == []  # held, not for that hand
+    with pytest.raises(DatasetError, match=r"object\(s\) \['bxo'\] not in .*it holds 2 object\(s\): box, sphere"):
+        GraspDataset(tmp_path, objects=["box", "bxo"])  # a typo was an empty selection
+
+
+def test_one_hand_name_with_other_params_in_another_folder_is_refused(tmp_path):
+    from ohra.data import GraspDataset
+
+    a, b = tmp_path / "a", tmp_path / "b"
+    a.mkdir(), b.mkdir()
+    _manifest(a, {"my_hand": {"params_hash": "1111", "shards": {}}, "leap_3303": {"params_hash": "33", "shards": {}}})
+    _manifest(b, {"my_hand": {"params_hash": "2222", "shards": {}}, "leap_3303": {"params_hash": "33", "shards": {}}})
+    assert GraspDataset([a, b], hands=["leap_3303"]).entries == []  # same name, same params: one hand
+    with pytest.raises(DatasetError, match=r"hand 'my_hand' has different params in these folders \(1111 in .*a; 2222 in .*b\)"):
+        GraspDataset([a, b])  # e.g. a spec's base form in one folder, its extended form in the other
+
+
 def test_the_evaluator_takes_an_object_spec_as_the_cli_does():
     from ohra.sim import GraspEvaluator
 
@@ -211,3 +241,16 @@ def test_a_spec_file_where_a_registered_hand_is_needed_says_how_to_register_it(t
     with pytest.raises(HandNotFoundError, match="unknown hand 'tridnet'; registered: ") as exc:
         registry.spec_path("tridnet")
     assert "--hands" not in str(exc.value)
+
+
+def test_data_info_keeps_one_name_with_other_params_in_two_rows_and_counts_objects_without_a_split(tmp_path):
+    from ohra.data.build import combined_summary, format_summary
+
+    a, b = tmp_path / "a", tmp_path / "b"
+    a.mkdir(), b.mkdir()
+    shards = {"box-1": {"n_grasps": 3}, "sphere-2": {"n_grasps": 1}}
+    _manifest(a, {"my_hand": {"params_hash": "1111aaaa", "shards": shards}, "leap_3303": {"params_hash": "33", "shards": shards}})
+    _manifest(b, {"my_hand": {"params_hash": "2222bbbb", "shards": shards}, "leap_3303": {"params_hash": "33", "shards": shards}})
+    rows = {r["hand"]: r["grasps"] for r in combined_summary([a, b])["rows"]}
+    assert rows == {"my_hand [1111aaaa]": 4, "my_hand [2222bbbb]": 4, "leap_3303": 8}
+    assert "2 objects (no train/test split: not built from a recipe)" in format_summary(combined_summary([a]))

@@ -94,10 +94,11 @@ def _summarise(path: Path, man: dict) -> dict:
         row["no_convergence"] = sorted(k for k, s in sh.items() if s.get("diagnosis"))
         rows.append(row)
     total = {k: sum(r[k] for r in rows) for k in _COUNTS}
+    objects = {k for entry in man["hands"].values() for k in entry.get("shards", {})}
     return {"path": str(path), "format": man.get("format"), "ohra_version": man.get("ohra_version"),
             "settings_digest": man.get("settings_digest"), "recipe": (man.get("recipe") or {}).get("name"),
             "core_hours": man.get("core_hours", total["core_s"] / 3600.0), "cpu_hours": total["cpu_s"] / 3600.0, "split": {"train": len(split.get("train", [])), "test": len(test)},
-            "rows": rows, "total": total}
+            "objects": len(objects), "rows": rows, "total": total}
 
 
 def combined_summary(paths: Sequence[str | Path]) -> dict:
@@ -107,10 +108,17 @@ def combined_summary(paths: Sequence[str | Path]) -> dict:
     parts = [_summarise(p, man) for p, man in mans]
     if len(parts) == 1:
         return parts[0]
+    # one row per hand, unless a name stands for different params in different folders (e.g. a spec's base
+    # form in one, its extended form in another): those rows stay apart, labelled by their params hash
+    hashes: dict[str, set] = {}
+    for _, man in mans:
+        for hand, entry in man["hands"].items():
+            hashes.setdefault(hand, set()).add(entry.get("params_hash"))
     rows: dict[str, dict] = {}
-    for part in parts:
+    for part, (_, man) in zip(parts, mans):
         for r in part["rows"]:
-            acc = rows.setdefault(r["hand"], {"hand": r["hand"], **{k: 0 for k in _COUNTS}, "no_convergence": []})
+            label = r["hand"] if len(hashes[r["hand"]]) == 1 else f"{r['hand']} [{str(man['hands'][r['hand']].get('params_hash'))[:8]}]"
+            acc = rows.setdefault(label, {"hand": label, **{k: 0 for k in _COUNTS}, "no_convergence": []})
             for k in _COUNTS:
                 acc[k] += r[k]
             acc["no_convergence"] += [f"{Path(part['path']).name}/{k}" for k in r["no_convergence"]]
@@ -129,7 +137,9 @@ def combined_summary(paths: Sequence[str | Path]) -> dict:
             "format": joined("format"), "ohra_version": joined("ohra_version"), "settings_digest": joined("settings_digest"),
             "recipe": joined("recipe"), "core_hours": sum(x["core_hours"] for x in parts),
             "cpu_hours": sum(x["cpu_hours"] for x in parts),
-            "split": {k: len(v) for k, v in split.items()}, "rows": list(rows.values()), "total": total,
+            "split": {k: len(v) for k, v in split.items()},
+            "objects": len({k for _, man in mans for e in man["hands"].values() for k in e.get("shards", {})}),
+            "rows": list(rows.values()), "total": total,
             "folders": [x["path"] for x in parts]}
 
 
@@ -137,7 +147,9 @@ def format_summary(s: dict) -> str:
     """The table ``ohra data info`` prints."""
     lines = [f"{s['path']}: {s['format']}, ohra {s['ohra_version']}, settings {s['settings_digest']}"
              + (f", recipe {s['recipe']}" if s["recipe"] else "")
-             + f", {s['core_hours']:.3f} core-hours (wall per shard; {s['cpu_hours']:.3f} CPU-hours), objects {s['split']['train']} train / {s['split']['test']} test"]
+             + f", {s['core_hours']:.3f} core-hours (wall per shard; {s['cpu_hours']:.3f} CPU-hours), "
+             + (f"objects {s['split']['train']} train / {s['split']['test']} test" if sum(s["split"].values())
+                else f"{s['objects']} objects (no train/test split: not built from a recipe)")]
     head = f"{'hand':22s} {'pairs':>5s} {'solves':>7s} {'converged':>9s} {'sim pass':>8s} {'kept':>6s} {'kept/conv':>9s} {'test kept':>9s} {'kept/core-h':>11s} {'kept/CPU-h':>10s}"
     lines += [head, "-" * len(head)]
     for r in s["rows"] + [{"hand": "total", **s["total"], "no_convergence": []}]:

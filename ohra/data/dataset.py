@@ -79,8 +79,8 @@ class GraspDataset:
         split: ``"train"`` or ``"test"``: only objects of that side of the recipe's split.
 
     Raises:
-        DatasetError: a directory without a manifest; ``which`` or ``split`` unknown; a named hand in none of the
-            directories (objects named but absent select nothing: held-out objects are absent by design).
+        DatasetError: a directory without a manifest; ``which`` or ``split`` unknown; a named hand or object in
+            none of the directories; one hand name with different params (params hash) in two directories.
     """
 
     def __init__(self, path: str | Path, hands: list[str] | None = None, objects: list[str] | None = None,
@@ -99,6 +99,9 @@ class GraspDataset:
         self.which = which
         self.entries: list[tuple[Path, str, str, dict]] = []
         seen_hands: set[str] = set()
+        seen_objects: set[str] = set()  # shard keys and object names
+        object_names: set[str] = set()
+        hand_params: dict[str, dict[str, Path]] = {}  # hand -> params hash -> first folder holding it
         for root in self.roots:
             manifest = require_manifest(root)
             fmt = manifest.get("format", "ohra-grasps/1")
@@ -107,17 +110,32 @@ class GraspDataset:
             side = set(manifest["split"][split]) if split else None
             for hand, entry in manifest.get("hands", {}).items():
                 seen_hands.add(hand)
+                for key, sh in entry.get("shards", {}).items():
+                    object_names.add(sh.get("object", {}).get("name", key))
+                    seen_objects.update((key, sh.get("object", {}).get("name", key)))
                 if hands and hand not in hands:
                     continue
+                if entry.get("params_hash"):
+                    hand_params.setdefault(hand, {}).setdefault(str(entry["params_hash"]), root)
                 for key, sh in entry.get("shards", {}).items():
                     name = sh.get("object", {}).get("name", key)
                     if (objects and key not in objects and name not in objects) or (side is not None and key not in side):
                         continue
                     self.entries.append((root, hand, key, {**sh, "_format": fmt, "_name": name}))
         unknown = [h for h in (hands or []) if h not in seen_hands]
-        if unknown:  # a typo would otherwise read as an empty dataset (objects may be absent: held-out ones are)
+        if unknown:  # a typo would otherwise read as an empty dataset
             raise DatasetError(f"hand(s) {unknown} not in {', '.join(map(str, self.roots))}; it holds "
                                f"{', '.join(sorted(seen_hands)) or 'no hands'}")
+        unknown = [o for o in (objects or []) if o not in seen_objects]
+        if unknown:
+            held = sorted(object_names)
+            raise DatasetError(f"object(s) {unknown} not in {', '.join(map(str, self.roots))} (by name or key); it holds "
+                               f"{len(held)} object(s): {', '.join(held[:12]) + (' ...' if len(held) > 12 else '') or 'none'}")
+        for hand, by_hash in hand_params.items():
+            if len(by_hash) > 1:  # e.g. a spec's base form in one folder and its extended form in another
+                where = "; ".join(f"{h} in {r}" for h, r in by_hash.items())
+                raise DatasetError(f"hand {hand!r} has different params in these folders ({where}): their grasps are not "
+                                   "one hand's; read the folders apart, or keep one form of the hand")
         self.max_per_pair = max_per_pair
 
     @classmethod
