@@ -51,12 +51,7 @@ def test_ppo_settings_from_the_command_line_are_checked_and_refused_on_resume(tm
     assert "kl_target" in capsys.readouterr().err
     assert main(["train", "-o", out, "--ppo", "learning_rate=fast"]) == 2
     assert "learning_rate" in capsys.readouterr().err
-    assert main(["train", "-o", out, "--resume", "--ppo", "kl_target=null"]) == 2
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "--resume" in err and not (tmp_path / "run").exists()
-    assert main(["train", "-o", out, "--resume", "--policy", "lstm"]) == 2
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "--policy lstm" in err and "--resume" in err
+    assert not (tmp_path / "run").exists()
 
 
 def test_ppo_settings_from_the_command_line_reach_training(tmp_path, monkeypatch):
@@ -176,18 +171,27 @@ def test_resume_refuses_options_that_differ_from_the_run_and_accepts_its_own(tmp
                          (["--set", "sim_dt=0.01"], "sim_dt: run 0.0083"), (["--seed", "3"], "seed: run 0, given 3")):
         assert main(["train", "-o", run, "--resume", *extra]) == 2
         err = capsys.readouterr().err
-        assert err.count("\n") == 1 and "only --steps and --minutes change on --resume" in err and named in err, err
+        assert err.count("\n") == 1 and "only --steps, --minutes and --checkpoint-every change on --resume" in err
+        assert named in err, err
+    for extra, named in ((["--ppo", "kl_target=null"], "kl_target: run 0.02, given None"),
+                         (["--policy", "lstm"], "policy: run 'mlp', given 'lstm'"),
+                         (["--ppo", "n_epochs=7"], "n_epochs: run 5, given 7")):
+        assert main(["train", "-o", run, "--resume", *extra]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and named in err, err
     assert not calls
-    # the run's own options repeated (the original command plus --resume) resume it, with the new budget
+    # the run's own options repeated (the original command plus --resume) resume it, with the new budget; the
+    # checkpoint interval may change (as train_rotation allows)
     assert main(["train", "-o", run, "--resume", "--hand", "shadow_hand_right", "--set", "joint_damping=true",
-                 "--steps", "4096"]) == 0
+                 "--policy", "mlp", "--ppo", "n_epochs=5", "--steps", "4096", "--checkpoint-every", "1024"]) == 0
     assert calls[0][0].hand == "shadow_hand_right" and calls[0][1].total_steps == 4096
+    assert calls[0][1].checkpoint_every == 1024
 
 
-@pytest.mark.parametrize("setting, problem", [("sim_dt=abc", "sim_dt must be a number, got 'abc'"),
+@pytest.mark.parametrize("setting, problem", [("sim_dt=abc", "sim_dt must be a finite number, got 'abc'"),
                                               ("self_collision=maybe", "self_collision must be true or false"),
                                               ("episode_steps=1.5", "episode_steps must be a whole number"),
-                                              ('grasp_noise="x"', "grasp_noise must be a number or None")])
+                                              ('grasp_noise="x"', "grasp_noise must be a finite number or None")])
 def test_set_values_of_the_wrong_type_are_one_line_and_exit_2(tmp_path, capsys, monkeypatch, setting, problem):
     monkeypatch.setenv("OHRA_CACHE_DIR", str(tmp_path / "cache"))
     assert main(["grasps", "--set", setting]) == 2
@@ -264,3 +268,47 @@ def test_steps_zero_is_refused_not_read_as_the_default(tmp_path, capsys, monkeyp
     monkeypatch.setattr(rl_train, "train_rotation", lambda *a, **k: pytest.fail("--steps 0 reached training"))
     assert main(["train", "--steps", "0", "-o", str(tmp_path / "r")]) == 2
     assert "total_steps" in capsys.readouterr().err and not (tmp_path / "r").exists()
+
+
+def test_outputs_that_are_files_and_runs_without_an_ended_episode_are_one_line(tmp_path, capsys):
+    afile = tmp_path / "afile"
+    afile.write_text("")
+    assert main(["train", "--hand", "leap_3303", "--steps", "128", "-o", str(afile)]) == 2  # was a traceback
+    assert capsys.readouterr().err.count("\n") == 1
+    run = tmp_path / "r"
+    run.mkdir()
+    (run / "progress.csv").write_text("timesteps,ep_reward_mean\n128,\n256,nan\n")  # no episode has ended yet
+    assert main(["plot", f"a={run}", "-o", str(tmp_path / "p.png")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no value of 'ep_reward_mean' yet (2 rows, all empty" in err
+    (run / "progress.csv").write_text("timesteps,ep_reward_mean\n100,1.0\n200,2.0\n")
+    assert main(["plot", f"a={run}", "-o", str(afile / "p.png")]) == 2
+    assert "is a file" in capsys.readouterr().err
+    for groups, named in (([f"a={run},,{run}"], "no empty label or run"), ([f"a={run}", f"a={run}"], "label 'a' is given twice")):
+        assert main(["plot", *groups, "-o", str(tmp_path / "p.png")]) == 2
+        assert named in capsys.readouterr().err
+    assert main(["plot", f"a={run}", "-o", str(tmp_path / "p.png")]) == 0
+
+
+def test_a_setting_given_twice_or_not_finite_is_refused(tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("OHRA_CACHE_DIR", str(tmp_path / "cache"))
+    for argv, named in ((["--grasps", "5", "--set", "grasp_count=3"], "--set grasp_count=3 and --grasps 5 both set grasp_count"),
+                        (["--set", "friction=NaN"], "friction must be a finite number, got nan"),
+                        (["--set", "motor_force=Infinity"], "motor_force must be a finite number, got inf")):
+        assert main(["grasps", *argv]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and named in err, err
+    assert not (tmp_path / "cache").exists()
+
+
+def test_a_spec_yaml_hand_is_named_by_its_absolute_path_in_the_run(tmp_path, monkeypatch):
+    pytest.importorskip("stable_baselines3", reason="rotation runs need stable-baselines3")
+    from ohra.learn.rl.train import _portable_env
+    from ohra.sim.rotation.config import RotationConfig
+
+    spec = tmp_path / "specs" / "my_hand.yaml"
+    spec.parent.mkdir()
+    spec.write_text("name: my_hand\n")  # only its place matters here
+    monkeypatch.chdir(spec.parent)
+    env, source = _portable_env(tmp_path / "run", RotationConfig(hand="my_hand.yaml"))
+    assert env["hand"] == str(spec.resolve()) and source is None  # evaluates from any folder; not copied

@@ -49,7 +49,14 @@ def _given_env(args: argparse.Namespace) -> dict[str, Any]:
     from ohra.sim.rotation.config import RotationConfigError
 
     given = {field: getattr(args, opt) for opt, field in _ENV_FIELDS if getattr(args, opt) is not None}
-    given.update(_key_values(args.set, "--set", RotationConfigError))
+    sets = _key_values(args.set, "--set", RotationConfigError)
+    option = {field: opt for opt, field in _ENV_FIELDS}
+    both = [k for k in sets if k in given]
+    if both:  # one would silently win over the other
+        k = both[0]
+        raise RotationConfigError(f"--set {k}={json.dumps(sets[k])} and --{option[k].replace('_', '-')} {given[k]} both "
+                                  f"set {k}: give it once")
+    given.update(sets)
     return given
 
 
@@ -94,7 +101,7 @@ def _train_args(p: argparse.ArgumentParser) -> None:
                    f"(default) or a recurrent one, an LSTM of {d.lstm_hidden} units before it (sb3-contrib RecurrentPPO)")
     p.add_argument("--ppo", action="append", default=[], metavar="KEY=JSON",
                    help="any other PPOSettings field, e.g. --ppo kl_target=null for a constant learning rate (repeatable; "
-                        "not with --resume: a resumed run keeps its settings)")
+                        "with --resume only the run's own values: a resumed run keeps its settings)")
     p.add_argument("-o", "--output", required=True, help="run directory")
     p.add_argument("--resume", action="store_true", help="continue OUTPUT from its last checkpoint")
     p.add_argument("--init-from", metavar="RUN", help="a new run that starts from RUN's trained policy and settings "
@@ -161,17 +168,20 @@ def _cmd_train(args: argparse.Namespace) -> int:
     from ohra.learn.rl.train import load_run, train_rotation, with_budget
 
     out = Path(args.output)
+    from ohra.io import check_output
+
+    check_output(out, folder=True)  # a file there: one line, not a traceback from the run's lock
     extra = _key_values(args.ppo, "--ppo", RLConfigError)
     if args.resume:
-        if extra or args.policy:
-            given = f"--ppo {' '.join(args.ppo)}" if extra else f"--policy {args.policy}"
-            raise RLConfigError(f"{given}: a resumed run keeps the PPO settings in {out / 'config.json'}; "
-                                "only --steps and --minutes change on --resume")
         if args.init_from:
             raise RLConfigError("--init-from starts a new run; --resume continues OUTPUT from its own checkpoint")
         env_cfg, ppo = load_run(out)
-        _same_as_run(args, env_cfg, ppo, out)
+        _same_as_run(args, env_cfg, ppo, out, {**extra, **({"policy": args.policy} if args.policy else {})})
         ppo = with_budget(ppo, args.steps, args.minutes)
+        if args.checkpoint_every is not None:
+            from dataclasses import replace
+
+            ppo = replace(ppo, checkpoint_every=int(args.checkpoint_every))
     else:
         # a new run's own budget and the PPO options given; the rest from the source (--init-from) or the defaults
         given = {"total_steps": PPOSettings().total_steps if args.steps is None else args.steps, "max_minutes": args.minutes,
@@ -201,19 +211,25 @@ def _given_ppo(args: argparse.Namespace) -> dict[str, Any]:
     return {field: getattr(args, opt) for opt, field in _PPO_OPTIONS if getattr(args, opt) is not None}
 
 
-def _same_as_run(args: argparse.Namespace, env_cfg, ppo, out: Path) -> None:
-    """On --resume, refuse environment or PPO options that differ from the run's (they would be ignored);
-    repeating the run's own options is fine."""
-    from ohra.learn.rl.config import RLConfigError
+def _same_as_run(args: argparse.Namespace, env_cfg, ppo, out: Path, extra: dict[str, Any]) -> None:
+    """On --resume, refuse environment or PPO options (``extra``: the --ppo and --policy ones) that differ from
+    the run's (they would be ignored); repeating the run's own options is fine, and the budget (--steps,
+    --minutes) and --checkpoint-every may change."""
+    from ohra.learn.rl.config import PPOSettings, RLConfigError
+    from ohra.learn.rl.train import RESUMABLE_CHANGES
 
     theirs, mine = env_cfg.to_dict(), env_cfg.with_overrides(**_given_env(args)).to_dict()
+    for k in ("hand", "object"):  # a file given again by a relative path is the file the run names absolutely
+        if isinstance(mine[k], str) and Path(mine[k]).expanduser().exists() and Path(str(theirs[k])).is_absolute():
+            mine[k] = theirs[k] if Path(mine[k]).expanduser().resolve() == Path(theirs[k]).resolve() else mine[k]
     diff = [f"{k}: run {theirs[k]!r}, given {mine[k]!r}" for k in mine if mine[k] != theirs[k]]
-    for field, v in _given_ppo(args).items():
-        if v != getattr(ppo, field):
-            diff.append(f"{field}: run {getattr(ppo, field)!r}, given {v!r}")
+    run_ppo = ppo.to_dict()
+    given = PPOSettings.from_dict({**run_ppo, **_given_ppo(args), **extra}, "command line (--ppo)").to_dict()
+    diff += [f"{k}: run {run_ppo[k]!r}, given {given[k]!r}" for k in given
+             if k not in RESUMABLE_CHANGES and given[k] != run_ppo[k]]
     if diff:
-        raise RLConfigError(f"{out}: a resumed run keeps the settings in {out / 'config.json'}; only --steps and "
-                            f"--minutes change on --resume (differs: {'; '.join(diff)})")
+        raise RLConfigError(f"{out}: a resumed run keeps the settings in {out / 'config.json'}; only --steps, "
+                            f"--minutes and --checkpoint-every change on --resume (differs: {'; '.join(diff)})")
 
 
 def _cmd_eval(args: argparse.Namespace) -> int:
@@ -253,12 +269,18 @@ def _cmd_eval(args: argparse.Namespace) -> int:
 def _cmd_plot(args: argparse.Namespace) -> int:
     from ohra.learn.rl.plots import reward_curves
 
-    groups = {}
+    from ohra.io import check_output
+
+    check_output(args.output)
+    groups: dict[str, list[str]] = {}
     for g in args.groups:
         label, sep, runs = g.partition("=")
-        if not sep or not runs:
-            raise OhraError(f"expected LABEL=RUN[,RUN...], got {g!r}")
-        groups[label] = runs.split(",")
+        items = runs.split(",")
+        if not sep or not label or not all(items):
+            raise OhraError(f"expected LABEL=RUN[,RUN...] (no empty label or run), got {g!r}")
+        if label in groups:
+            raise OhraError(f"label {label!r} is given twice: put its runs in one group, {label}=RUN,RUN")
+        groups[label] = items
     print(f"wrote {reward_curves(groups, args.output, key=args.key)}")
     return 0
 

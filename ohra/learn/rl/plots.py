@@ -44,6 +44,9 @@ def mean_std_curve(runs: list[str | Path], key: str = "ep_reward_mean", x: str =
                 raise CheckpointError(f"{Path(r) / 'progress.csv'} has no column {col!r}"
                                       + (f" (columns: {', '.join(p)})" if p else " (no rows yet)"))
         ok = np.isfinite(p[key])
+        if not ok.any():  # e.g. ep_reward_mean before the first episode has ended
+            raise CheckpointError(f"{Path(r) / 'progress.csv'} has no value of {key!r} yet ({len(ok)} rows, all empty: "
+                                  "no episode has ended); plot it once the run has trained longer")
         curves.append((p[x][ok], smooth(p[key], window)[ok]))
     end = min(c[0][-1] for c in curves)
     grid = np.linspace(0.0, end, points)

@@ -450,7 +450,7 @@ def _check_start(run_dir: Path, last: Path, resume: bool) -> None:
                             + ("; the run stopped before its first checkpoint: start it again without resume (--resume)"
                                if stopped else ""))
     if not resume and _trained(run_dir):
-        raise RLConfigError(f"{run_dir} already holds a run; pass resume=True (--resume) or choose another folder")
+        raise RLConfigError(f"{run_dir} already holds a run; pass --resume (resume=True in Python) to continue it, or choose another folder")
 
 
 @contextmanager
@@ -532,12 +532,14 @@ def _write_config(run_dir: Path, env_cfg: RotationConfig, ppo: PPOSettings, init
 
 
 HAND_FILE_SUFFIXES = (".json",)  # a params file; a spec YAML names its URDF relative to itself: not copied
+SPEC_SUFFIXES = (".yaml", ".yml")  # named by its absolute path instead, so the run evaluates from any folder
 
 
 def _portable_env(run_dir: Path, env_cfg: RotationConfig, copy: bool = True) -> tuple[dict, str | None]:
     """The env settings as ``config.json`` stores them: a hand given as a params file is copied into the run
     folder under its own name and named by that (the run keeps the hand it was trained on, wherever it is
-    evaluated from and whatever later happens to the file); an object file is named by its absolute path.
+    evaluated from and whatever later happens to the file); a spec YAML and an object file are named by their
+    absolute paths.
     Returns the settings and the absolute path the hand file was copied from (None: no file). ``copy=False``
     (a resume's comparison, against :func:`_saved_env`): the hand is named by the run's copy, as a path, only when
     the file still holds the same hand."""
@@ -552,6 +554,8 @@ def _portable_env(run_dir: Path, env_cfg: RotationConfig, copy: bool = True) -> 
             d["hand"] = hand.name
         elif own.is_file() and hand.read_bytes() == own.read_bytes():
             d["hand"] = str(own.resolve())
+    elif hand.suffix.lower() in SPEC_SUFFIXES and hand.expanduser().is_file():
+        d["hand"] = str(hand.expanduser().resolve())  # its URDF is found relative to it: named where it lies
     if _object_file(env_cfg.object):
         d["object"] = str(Path(env_cfg.object).expanduser().resolve())
     return d, source

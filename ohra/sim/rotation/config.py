@@ -208,9 +208,10 @@ class RotationConfig:
                 continue
             ok = {"str": isinstance(v, str), "bool": isinstance(v, (bool, np.bool_)),
                   "int": isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_)),
-                  "float": isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_))}[kind]
+                  "float": isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_))
+                  and bool(np.isfinite(v))}[kind]  # NaN passed every `< 0` check after this one
             if not ok:
-                what = {"str": "text", "bool": "true or false", "int": "a whole number", "float": "a number"}[kind]
+                what = {"str": "text", "bool": "true or false", "int": "a whole number", "float": "a finite number"}[kind]
                 raise RotationConfigError(f"RotationConfig.{f.name} must be {what}"
                                           + (" or None" if str(f.type).endswith("| None") else "") + f", got {v!r}")
 

@@ -60,6 +60,9 @@ class InHandRotateEnv(gym.Env):
         self.grasps = grasps if grasps is not None else load_or_generate(self.task)
         self.scene = RotationScene(self.task.hand, self.task.obj, cfg, self.task.palm_radius,
                                    visual=render_mode is not None)
+        # PyBullet's first step sets up state that later steps reuse: without this step (hand alone, before any
+        # object) the first episode after construction drifted ~1e-10 from the same seed and actions replayed later
+        self.scene.step()
         n = self.space.dim
         self.action_space = spaces.Box(-1.0, 1.0, (n,), np.float32)
         self.observation_structure = obs_terms.sizes(n)
