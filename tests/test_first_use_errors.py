@@ -201,6 +201,9 @@ def test_ohra_eval_checks_every_output_and_option_before_writing_anything(tmp_pa
     base = ["eval", str(tmp_path / "g.npy"), "--hand", "leap_3303", "--object", "builtin:box"]
     for extra, named in ((["-o", str(tmp_path / "r.json"), "--render", str(tmp_path / "adir")], "adir is a folder"),
                          (["-o", str(tmp_path / "r.json"), "--meshcat", str(tmp_path / "adir")], "adir is a folder"),
+                         (["-o", str(tmp_path / "r.txt")], "-o must end in .json, got"),
+                         (["--render", str(tmp_path / "x.txt")], "--render must end in .png, got"),
+                         (["--meshcat", str(tmp_path / "x.png")], "--meshcat must end in .html, got"),
                          (["--limit", "0"], "--limit must be >= 1, got 0"),
                          (["--original", "--inertials", "original"], "give one of them")):
         assert main(base + extra) == 2, extra

@@ -139,9 +139,11 @@ def run(args: argparse.Namespace) -> int:
         raise GraspError("--meshcat draws canonical hands only; drop --original")
     from ohra.io import check_output
 
-    for out in (args.output, args.render, args.meshcat):  # all checked before anything is simulated or written
-        if out:
+    for out, suffix, flag in ((args.output, ".json", "-o"), (args.render, ".png", "--render"), (args.meshcat, ".html", "--meshcat")):
+        if out:  # all checked before anything is simulated or written
             check_output(out)
+            if Path(out).suffix.lower() != suffix:  # a PNG written into r.txt, a report into sheet.png
+                raise GraspError(f"{flag} must end in {suffix}, got {out}")
     grasps, made = load_grasp_file(args.grasps, args.key)  # made: what `ohra grasp sample` recorded, if anything
     if made.get("hand") and made["hand"] != str(args.hand):
         from ohra.hands.resolve import resolve_hand
@@ -213,8 +215,10 @@ def run(args: argparse.Namespace) -> int:
     if n == 0:
         print(f"{args.hand} on {obj.name}: {args.grasps} holds no grasps; nothing was simulated")
         return 0
+    simulated = n - int(rep.meta.get("resumed", 0))  # the rate of this run's own simulations
     print(f"{args.hand} on {obj.name}: {int(rep.success.sum())}/{n} succeeded ({100 * rep.success_rate:.1f} %), "
-          f"{rep.clamped_count} clamped, {wall:.1f} s ({n / wall if wall > 0 else 0:.1f} grasps/s)")
+          f"{rep.clamped_count} clamped, {wall:.1f} s ({simulated / wall if wall > 0 else 0:.1f} grasps/s"
+          f"{f' over the {simulated} simulated now' if simulated < n else ''})")
     return 0
 
 

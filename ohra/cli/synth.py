@@ -87,6 +87,8 @@ def run(args: argparse.Namespace) -> int:
         raise OhraError(f"--workers must be >= 1, got {args.workers}")
     if args.grasps_per_object < 1:
         raise OhraError(f"--grasps-per-object must be >= 1, got {args.grasps_per_object}")
+    if args.cap is not None and args.cap < 1:
+        raise OhraError(f"--cap must be >= 1 (leave it out to try every start), got {args.cap}")
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise OhraError(f"--out {out} exists and is not a directory")

@@ -68,10 +68,16 @@ def _flatten(d: dict, prefix: str = "") -> dict:
     return out
 
 
+# settings stored under another name than a recipe key or command-line option gives them
+SETTING_NAMES = {"grasps_per_object": "grasps_per_object (a recipe's grasps_per_pair, --grasps-per-object)"}
+
+
 def settings_diff(old: dict, new: dict) -> list[str]:
-    """``key: old -> new`` for every setting that differs (nested keys dotted)."""
+    """``key: old -> new`` for every setting that differs (nested keys dotted; a setting a recipe names otherwise
+    is named both ways)."""
     a, b = _flatten(old), _flatten(new)
-    return [f"{k}: {a.get(k, '(absent)')} -> {b.get(k, '(absent)')}" for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)]
+    return [f"{SETTING_NAMES.get(k, k)}: {a.get(k, '(absent)')} -> {b.get(k, '(absent)')}"
+            for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)]
 
 
 def remove_listed_shards(root: Path, manifest: dict) -> int:

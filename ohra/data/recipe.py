@@ -48,6 +48,32 @@ class RecipeError(OhraError, ValueError):
     """A dataset recipe is malformed or names hands or objects that do not exist."""
 
 
+def _checked_fields(defaults: Any, given: dict, where: str) -> dict:
+    """``given`` overrides of the dataclass instance ``defaults``, each a known field of the default's kind (a
+    number, a whole number, true/false, text): a typo or a wrong type is named with its key, not left to fail
+    inside the dataclass (``'<' not supported``, ``unexpected keyword argument``)."""
+    known = {f.name: getattr(defaults, f.name) for f in fields(defaults)}
+    unknown = sorted(set(given) - set(known))
+    if unknown:
+        raise RecipeError(f"{where}: unknown key(s) {unknown}; known: {', '.join(known)}")
+    for k, v in given.items():
+        d = known[k]
+        if isinstance(d, bool):
+            ok, what = isinstance(v, bool), "true or false"
+        elif isinstance(d, int):
+            ok, what = isinstance(v, int) and not isinstance(v, bool), "a whole number"
+        elif isinstance(d, float):
+            ok = isinstance(v, (int, float)) and not isinstance(v, bool) and bool(np.isfinite(v))
+            what = "a finite number"
+        elif isinstance(d, str):
+            ok, what = isinstance(v, str), "text"
+        else:
+            continue  # tuples and optional settings: the dataclass checks them
+        if not ok:
+            raise RecipeError(f"{where}.{k} must be {what}, got {v!r}")
+    return given
+
+
 @dataclass(frozen=True)
 class Recipe:
     """A parsed recipe (see the module doc); ``source`` resolves relative paths."""
@@ -226,12 +252,20 @@ class Recipe:
         from ohra.synth.pipeline import SynthSettings
         from ohra.synth.robust import RobustnessSettings
 
+        src = self.source or "<recipe>"
         prot = self.protocol if isinstance(self.protocol, dict) else {"preset": self.protocol}
         try:
-            protocol = replace(Protocol.preset(prot.get("preset", "reference")), **{k: v for k, v in prot.items() if k != "preset"})
-            robust = RobustnessSettings(**self.robustness)
-        except (TypeError, ValueError) as exc:
-            raise RecipeError(f"{self.source or '<recipe>'}: protocol/robustness: {exc}") from None
+            base = Protocol.preset(prot.get("preset", "reference"))
+        except ValueError as exc:
+            raise RecipeError(f"{src}: protocol.preset: {exc}") from None
+        try:
+            protocol = replace(base, **_checked_fields(base, {k: v for k, v in prot.items() if k != "preset"}, f"{src}: protocol"))
+        except (TypeError, ValueError, OhraError) as exc:
+            raise RecipeError(f"{src}: protocol: {exc}".replace(f"{src}: protocol: {src}: protocol", f"{src}: protocol")) from None
+        try:
+            robust = RobustnessSettings(**_checked_fields(RobustnessSettings(), dict(self.robustness), f"{src}: robustness"))
+        except (TypeError, ValueError, OhraError) as exc:
+            raise RecipeError(f"{src}: robustness: {exc}".replace(f"{src}: robustness: {src}: robustness", f"{src}: robustness")) from None
         return SynthSettings(grasps_per_object=self.grasps_per_pair, seed=self.seed, filter=self.filter, cap=self.cap,
                              robustness=robust, protocol=protocol)
 
