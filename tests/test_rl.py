@@ -75,6 +75,10 @@ def test_train_resume_evaluate_and_plot_a_tiny_run(tiny):
     assert load_run(run)[1].total_steps == 96  # the resume's budget is the run's now
     with pytest.warns(UserWarning, match="already at 96 of 96 steps: nothing to train"):
         train_rotation(env_cfg, load_run(run)[1], run, resume=True)
+    before = (run / "model.zip").read_bytes()
+    with pytest.warns(UserWarning, match="already at 96 of 48 steps: nothing to train"):
+        train_rotation(env_cfg, with_budget(ppo, total_steps=48), run, resume=True)
+    assert load_run(run)[1].total_steps == 96 and (run / "model.zip").read_bytes() == before  # left as it was
 
     res = evaluate_run(run, episodes=2, seed=10)
     assert len(res.steps_to_fall) == 2 and all(0 < s <= 24 for s in res.steps_to_fall)

@@ -381,7 +381,6 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
         _check_start(run_dir, last, resume)  # ... and again under the lock: another run may have started meanwhile
         if resume:
             _check_resume(run_dir, env_cfg, ppo)
-            _save_budget(run_dir, ppo)  # a later plain resume continues to this budget
         else:
             # a run stopped before its first checkpoint left only its config and a few progress rows
             (run_dir / "progress.csv").unlink(missing_ok=True)
@@ -429,6 +428,10 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
                 warnings.warn(f"{run_dir}: already at {model.num_timesteps:,} of {ppo.total_steps:,} steps"
                               + (f" and {wall_before / 60:.0f} of {ppo.max_minutes:g} minutes" if ppo.max_minutes else "")
                               + ": nothing to train; give a larger --steps / --minutes to continue", UserWarning, stacklevel=2)
+                if (run_dir / "model.zip").is_file():  # finished: its files and recorded budget stay as they are
+                    return run_dir / "model.zip"
+            if resume:
+                _save_budget(run_dir, ppo)  # a later plain resume continues to this budget
             model.learn(total_timesteps=remaining, callback=cb, reset_num_timesteps=False, tb_log_name="ppo")
             save_checkpoint(model, run_dir, cb.wall())
             model.save(run_dir / "model.zip")
