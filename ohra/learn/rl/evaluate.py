@@ -158,7 +158,10 @@ class Policy:
         zip_path, stats = {"model": (run / "model.zip", run / "vecnormalize.pkl"),
                            "last": (run / "checkpoints" / "last.zip", run / "checkpoints" / "last_vecnormalize.pkl")}[which]
         if not zip_path.is_file():
-            raise CheckpointError(f"no trained policy at {zip_path}")
+            last = which == "model" and (run / "checkpoints" / "last.zip").is_file()
+            raise CheckpointError(f"no trained policy at {zip_path}" + (
+                " (the run stopped before its end: its last checkpoint is evaluated with --checkpoint last, "
+                "which='last' in Python; --resume finishes it)" if last else ""))
         from ohra.learn.rl.train import ppo_class
 
         self._policy = load_checked(zip_path, "SB3 policy (.zip)",
