@@ -312,3 +312,12 @@ def test_a_spec_yaml_hand_is_named_by_its_absolute_path_in_the_run(tmp_path, mon
     monkeypatch.chdir(spec.parent)
     env, source = _portable_env(tmp_path / "run", RotationConfig(hand="my_hand.yaml"))
     assert env["hand"] == str(spec.resolve()) and source is None  # evaluates from any folder; not copied
+
+
+def test_eval_of_a_run_stopped_before_its_end_names_its_last_checkpoint(tmp_path, capsys):
+    run = _saved_run(tmp_path)
+    (run / "checkpoints").mkdir()
+    (run / "checkpoints" / "last.zip").write_bytes(b"")
+    assert main(["eval", str(run), "--episodes", "1", "-o", str(tmp_path / "ev")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no trained policy at" in err and "--checkpoint last" in err
