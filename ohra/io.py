@@ -123,12 +123,17 @@ def folder_lock(folder: str | Path, what: str = "folder") -> Iterator[Path]:
     the message); the kernel drops it when the holder exits, however it exits, so a killed job leaves
     no stale lock. ``what`` names the folder's content in the error (``"training run"``, ``"dataset"``).
 
+    A folder this call created is removed again if the block leaves nothing but the lock in it (a job that
+    failed its checks before writing anything leaves no empty run folder).
+
     Raises:
         FolderInUseError: another process holds the lock (its PID in the message).
+        OutputPathError: ``folder`` is a file, or lies under one.
     """
     from ohra.errors import FolderInUseError
 
-    folder = Path(folder)
+    folder = check_output(folder, folder=True)  # a file there: one line naming it, not FileExistsError
+    created = not folder.exists()
     folder.mkdir(parents=True, exist_ok=True)
     try:
         import fcntl
@@ -137,6 +142,7 @@ def folder_lock(folder: str | Path, what: str = "folder") -> Iterator[Path]:
         return
     path = folder / LOCK_NAME
     fh = open(path, "a+")
+    held = False
     try:
         try:
             fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -145,6 +151,7 @@ def folder_lock(folder: str | Path, what: str = "folder") -> Iterator[Path]:
             holder = fh.read().strip() or "unknown"
             raise FolderInUseError(f"{folder}: another process (pid {holder}) is writing this {what}; "
                                    f"wait for it to finish or choose another folder") from None
+        held = True
         fh.seek(0)
         fh.truncate()
         fh.write(f"{os.getpid()}\n")
@@ -152,6 +159,13 @@ def folder_lock(folder: str | Path, what: str = "folder") -> Iterator[Path]:
         yield folder
     finally:
         fh.close()  # releases the lock
+        if held and created and [p.name for p in folder.iterdir()] == [LOCK_NAME]:
+            # the job failed before writing anything (bad data, a hand not in it): leave no empty run folder
+            path.unlink(missing_ok=True)
+            try:
+                folder.rmdir()
+            except OSError:  # another process wrote into it meanwhile
+                pass
 
 
 __all__ = ["folder_lock", "umask_mode", "atomic_path", "atomic_write", "write_bytes", "write_text", "write_json", "write_npz"]

@@ -71,7 +71,7 @@ def test_urdf_from_api_and_cli_honour_the_umask(tmp_path, umask):
     api = ohra.write(ohra.get_hand("leap_3303"), tmp_path / "api.urdf")
     assert main(["hand", "render", "leap_3303", "-o", str(tmp_path / "cli.urdf")]) == 0
     assert _mode(api) == umask and _mode(tmp_path / "cli.urdf") == umask
-    assert (tmp_path / "cli.urdf").read_text() == ohra.render(ohra.get_hand("leap_3303"))
+    assert (tmp_path / "cli.urdf").read_text() == ohra.render(ohra.get_hand("leap_3303"), robot_name="leap_3303")
     assert _leftovers(tmp_path, {"api.urdf", "cli.urdf"}) == []
 
 
@@ -222,3 +222,25 @@ def test_an_output_folder_that_cannot_be_written_is_named_before_the_work(tmp_pa
     assert check_output(tmp_path / "ok.json") == tmp_path / "ok.json"
     assert main(["rotate", "eval", "leap_canonical", "--episodes", "1", "-o", str(ro / "out")]) == 2
     assert "permission denied" in capsys.readouterr().err
+
+
+def test_a_lock_on_a_file_is_one_error_and_a_failed_job_leaves_no_empty_folder(tmp_path):
+    from ohra.errors import OutputPathError
+    from ohra.io import LOCK_NAME, folder_lock
+
+    (tmp_path / "afile").write_text("")
+    with pytest.raises(OutputPathError, match="afile is a file; give a folder"):  # was FileExistsError
+        with folder_lock(tmp_path / "afile"):
+            pass
+    with pytest.raises(ValueError):  # a job that fails its checks before writing anything
+        with folder_lock(tmp_path / "run"):
+            raise ValueError("no such hand in the data")
+    assert not (tmp_path / "run").exists()
+    with folder_lock(tmp_path / "run") as run:  # a job that wrote something keeps its folder
+        (run / "config.json").write_text("{}")
+    assert sorted(p.name for p in (tmp_path / "run").iterdir()) == [LOCK_NAME, "config.json"]
+    (tmp_path / "mine").mkdir()
+    with pytest.raises(ValueError):
+        with folder_lock(tmp_path / "mine"):  # a folder the caller made stays
+            raise ValueError
+    assert (tmp_path / "mine").is_dir()
