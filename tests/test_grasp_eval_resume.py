@@ -117,3 +117,34 @@ def test_a_ycb_training_object_exported_to_another_file_is_still_refused(tmp_pat
     with pytest.raises(DatasetError, match=r"'my_crackers' .* is in the model's training set \(as 'CrackerBox'\)"):
         check_unseen(model, [ObjectModel.load(path)])
     check_unseen(model, [ObjectModel.load(objects_dir / "ycb" / "MustardBottle")])
+
+
+def test_a_hand_file_samples_alike_however_its_path_is_spelled(leap, tmp_path, monkeypatch):
+    """Pair seeds came from the hand's label as typed: mirror.json, ./mirror.json and its absolute path drew other
+    rotations (1/4, 0/4, 2/4 on one object). A file hand is seeded by its content; names keep their own seeds."""
+    from ohra.hands import get_hand
+    from ohra.learn.grasp.condition import hand_key
+    from ohra.learn.grasp.evaluate import seed_label
+
+    params = get_hand("leap_2211")
+    params.to_json(tmp_path / "mine.json")
+    monkeypatch.chdir(tmp_path)
+    assert seed_label("leap_2211", params) == "leap_2211" and seed_label("allegro_hand_right", params) == "allegro_hand_right"
+    assert {seed_label(h, params) for h in ("mine.json", "./mine.json", tmp_path / "mine.json", params)} == {hand_key(params)}
+    reps = [evaluate_model(leap, [h], ["procedural:box:1234"], n=2) for h in ("mine.json", str(tmp_path / "mine.json"))]
+    np.testing.assert_array_equal(reps[0].pairs[0].grasps, reps[1].pairs[0].grasps)
+    np.testing.assert_array_equal(reps[0].pairs[0].success, reps[1].pairs[0].success)
+
+
+def test_a_builtin_training_object_exported_to_a_file_is_still_refused(tmp_path):
+    from types import SimpleNamespace
+
+    from ohra.errors import DatasetError
+    from ohra.learn.grasp.evaluate import check_unseen
+    from ohra.objects.model import ObjectModel
+
+    model = SimpleNamespace(meta={"train_objects": {"box": ObjectModel.builtin("box").mesh_hash}})
+    ObjectModel.builtin("box").mesh.export(tmp_path / "other_name.stl")  # float32: another mesh hash
+    with pytest.raises(DatasetError, match=r"'other_name' .* in the model's training set \(as 'box'\)"):
+        check_unseen(model, [ObjectModel.load(tmp_path / "other_name.stl")])
+    check_unseen(model, [ObjectModel.builtin("sphere")])

@@ -151,6 +151,20 @@ def hand_label(hand: HandLike, params: Any) -> str:
     return hand_key(params)
 
 
+def seed_label(hand: HandLike, params: Any) -> str:
+    """What a hand's pair seeds (:func:`pair_seed`) are drawn from: a registered hand's or LEAP variant's name, and
+    for a hand given as a file (spec YAML, params JSON) its content (:func:`hand_key`), so that ``mirror.json``,
+    ``./mirror.json`` and its absolute path sample and score alike (the label as typed seeded them apart)."""
+    if isinstance(hand, (str, Path)):
+        from ohra.hands.leap.variants import is_variant
+        from ohra.hands.registry import registered_hands
+
+        text = str(hand)
+        if text in registered_hands() or is_variant(text):
+            return text
+    return hand_key(params)
+
+
 def check_unseen(model: GraspModel, objects: Sequence[Any]) -> None:
     """Refuse objects the model was trained on: by name, by mesh hash, or, for its procedural training objects
     (``family-seed``, which can be made again), by shape: a copy exported to a mesh file (vertices off by float
@@ -172,10 +186,10 @@ def check_unseen(model: GraspModel, objects: Sequence[Any]) -> None:
 
 def _procedural_shapes(train: dict) -> dict[str, np.ndarray]:
     """Shape signatures of the training objects that can be made or found again: those named ``family-seed``
-    of a procedural family, and mesh objects found by name under the objects root (``$OHRA_OBJECTS_ROOT``, a
+    of a procedural family, built-in objects, and mesh objects found by name under the objects root (``$OHRA_OBJECTS_ROOT``, a
     folder or file ``NAME`` there or one level down, e.g. ``ycb/CrackerBox``) whose mesh hash is the one
     trained on. A training object found nowhere is still refused by name and hash."""
-    from ohra.objects.model import ObjectModel
+    from ohra.objects.model import ObjectModel, builtin_object_names
     from ohra.objects.procedural import FAMILIES
 
     out = {}
@@ -183,6 +197,10 @@ def _procedural_shapes(train: dict) -> dict[str, np.ndarray]:
         family, _, seed = name.rpartition("-")
         if family in FAMILIES and seed.isdigit():
             out[name] = _shape_signature(ObjectModel.procedural(family, int(seed)))
+        elif name in builtin_object_names():  # made again like a procedural one, if it is the one trained on
+            obj = ObjectModel.builtin(name)
+            if obj.mesh_hash == str(mesh_hash):
+                out[name] = _shape_signature(obj)
         else:
             sig = _found_shape(name, str(mesh_hash))
             if sig is not None:
@@ -246,8 +264,9 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
         objects: objects as :func:`~ohra.learn.grasp.model.resolve_object` takes them (or one such object);
             unseen in training.
         n: grasps per pair, >= 1, each with its own uniformly random wrist rotation.
-        seed: base seed; each pair's seed is :func:`pair_seed` of it, the hand's label
-            (:func:`hand_label`: its name or path, or for params their content hash) and the mesh hash.
+        seed: base seed; each pair's seed is :func:`pair_seed` of it, the hand (:func:`seed_label`: a registered
+            hand's or variant's name, else the content hash of its params, however its file is spelled) and the
+            mesh hash.
         original: replay the grasps on the hand's original URDF through its action map.
         workers: simulation processes per pair (:meth:`ohra.sim.GraspEvaluator.evaluate`).
         protocol: a :class:`ohra.sim.Protocol` or a preset name (``"reference"``, ``"strict"``,
@@ -343,7 +362,8 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
         except ParamsError as exc:
             who = hand if condition_hand is None else condition_hand
             raise ParamsError(f"hand {str(who) if isinstance(who, (str, Path)) else type(who).__name__!r}: {exc}") from None
-        resolved.append((hand_label(hand, params), params, _couplings(hand), told, model.mirrors(told, mirror)))
+        resolved.append((hand_label(hand, params), params, _couplings(hand), told, model.mirrors(told, mirror),
+                         seed_label(hand, params)))
     twice = sorted(name for name, k in Counter(name for name, *_ in resolved).items() if k > 1)
     if twice:
         raise GraspError(f"hand(s) {twice} given more than once")
@@ -352,7 +372,7 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
     resumed = 0
     settings = _resume_settings(model, n, original, inertials, collisions, protocol, refine, centre, candidates,
                                 condition_hand) if resume is not None else None
-    for name, params, couplings, told, flip in resolved:
+    for name, params, couplings, told, flip, seeded_by in resolved:
         movable = np.asarray(params.movable_joints)
         hybrid = None
         if original and collisions == "canonical":  # one fit per hand, shared by its objects
@@ -360,7 +380,7 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
 
             hybrid, _ = with_canonical_collisions(SimHand.registered_original(name), SimHand.from_params(params, name=str(name)))
         for obj in objs:
-            s = pair_seed(seed, str(name), obj.mesh_hash)
+            s = pair_seed(seed, seeded_by, obj.mesh_hash)
             if resume is not None:
                 path = resume / f"{_pair_key(settings, str(name), params, obj, s, model.condition.vector(told), flip)}.npz"
                 done = _load_pair(path)
@@ -483,5 +503,5 @@ def _couplings(hand: Any) -> tuple:
     return get_couplings(hand)
 
 
-__all__ = ["COLLISIONS", "evaluate_model", "GraspEvalReport", "PairResult", "diversity", "hand_label", "pair_seed",
+__all__ = ["COLLISIONS", "evaluate_model", "GraspEvalReport", "PairResult", "diversity", "hand_label", "pair_seed", "seed_label",
            "check_unseen"]
