@@ -376,4 +376,10 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from ohra.errors import OhraError
+
+    try:
+        main()
+    except OhraError as exc:  # a missing data folder, no training grasps left: one line, as the ohra commands
+        print(f"{Path(__file__).name}: error: {exc}", file=sys.stderr)
+        sys.exit(2)

@@ -48,7 +48,7 @@ from _study_cache import cached, claim_run, eval_key, run_key, store, train_key,
 import numpy as np  # noqa: E402
 
 from grasp_study import add_run_args, data_protocol, eval_objects, pictures  # noqa: E402
-from ohra.data.dataset import read_manifest  # noqa: E402
+from ohra.data.dataset import require_manifest  # noqa: E402
 from ohra.learn.grasp import GraspModelConfig, GraspTrainConfig  # noqa: E402
 from ohra.learn.grasp.evaluate import evaluate_model  # noqa: E402
 from ohra.learn.grasp.model import load_grasp_model  # noqa: E402
@@ -72,7 +72,7 @@ def digit_sum(h: str) -> int:
 def data_hands(data: list[str]) -> list[str]:
     out: dict[str, None] = {}
     for d in data:
-        for h, e in read_manifest(Path(d) / "manifest.json")["hands"].items():
+        for h, e in require_manifest(d)["hands"].items():
             if sum(s.get("n_grasps", 0) for s in e["shards"].values()):
                 out[h] = None
     return list(out)
@@ -263,4 +263,10 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from ohra.errors import OhraError
+
+    try:
+        main()
+    except OhraError as exc:  # a missing data folder, no training grasps left: one line, as the ohra commands
+        print(f"{Path(__file__).name}: error: {exc}", file=sys.stderr)
+        sys.exit(2)
