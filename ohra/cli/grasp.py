@@ -182,7 +182,11 @@ def _cmd_train(args: argparse.Namespace) -> int:
     res = train_grasp(args.data, mcfg, tcfg, out, resume=args.resume, progress=not args.quiet, vae_path=args.vae)
     m = res.metrics
     f = m["final_losses"]
-    print(f"trained {m['steps']} steps in {m['train_seconds_total']:.1f} s on {m['data']['grasps']} grasps "
+    earlier = m["steps"] - m["steps_this_run"]
+    done = (f"trained {m['steps']} steps in {m['train_seconds_total']:.1f} s" if not earlier else
+            f"trained steps {earlier}-{m['steps']} in {m['train_seconds_this_run']:.1f} s ({m['steps']} steps in "
+            f"{m['train_seconds_total']:.1f} s over all sessions)")
+    print(f"{done} on {m['data']['grasps']} grasps "
           f"({', '.join(f'{h} {c}' for h, c in m['data']['per_hand'].items())}); "
           f"final loss diffusion {f.get('diffusion', float('nan')):.4f}, joints {f.get('joints', float('nan')):.4f}")
     from ohra.learn.grasp.data import recorded_test_objects

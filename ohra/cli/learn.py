@@ -32,7 +32,8 @@ def register(sub) -> None:
     p.add_argument("--batch-size", type=int, default=d.batch_size, help=f"default {d.batch_size}")
     p.add_argument("--threads", type=int, default=d.threads, help=f"torch CPU threads (default {d.threads})")
     p.add_argument("--checkpoint-every", type=int, default=d.checkpoint_every, help="epochs between checkpoints")
-    p.add_argument("--heldout", type=int, default=d.heldout, help="held-out hands for the final metrics")
+    p.add_argument("--heldout", type=int, default=d.heldout,
+                   help=f"number of sampled hands held out for the final metrics (default {d.heldout})")
     p.add_argument("-o", "--output", default="out/vae", help="run directory (default out/vae)")
     p.add_argument("--resume", action="store_true", help="continue from OUTPUT/checkpoints/last.pt")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -46,7 +47,8 @@ def register(sub) -> None:
     p.set_defaults(func=_cmd_encode)
 
     p = vae.add_parser("decode", help="decode a latent vector into base params JSON")
-    p.add_argument("latent", help="comma-separated numbers, or a .json / .npy file with one latent")
+    p.add_argument("latent", help="comma-separated numbers, or a .json / .npy file with one latent (a first number "
+                   "below 0: put -- before it, after the options, e.g. ohra vae decode -o h.json -- -0.1,0.2,...)")
     p.add_argument("-o", "--output", help="params JSON path (default: stdout)")
     p.add_argument("--urdf", help="also write the canonical URDF here")
     p.add_argument("--model", help=model_help)
@@ -59,7 +61,7 @@ def register(sub) -> None:
     p.add_argument("-n", "--steps", type=int, default=8, help="number of hands, endpoints included (default 8)")
     p.add_argument("--spacing", choices=("geodesic", "arc", "even"), default="geodesic",
                    help="geodesic (default): a bent latent path of short fingertip travel, at equal fingertip arc "
-                   "length (~1-2 s); arc: the straight latent line at equal fingertip arc length; even: the straight "
+                   "length (4 s per pair on average, up to ~10 s, in bench_vae on one free core); arc: the straight latent line at equal fingertip arc length; even: the straight "
                    "line at even latent steps")
     p.add_argument("-o", "--output", required=True, help="output directory")
     p.add_argument("--model", help=model_help)
@@ -161,7 +163,8 @@ def _cmd_decode(args: argparse.Namespace) -> int:
     z = _read_latent(args.latent)
     params = vae.decode(z)
     if isinstance(params, list):
-        raise OhraError(f"latent: expected one vector of {vae.latent_dim} numbers, got shape {z.shape}")
+        raise OhraError(f"latent: expected one vector of {vae.latent_dim} numbers, got shape {z.shape} (decode "
+                        "several with ohra.learn.load_vae().decode(Z) in Python)")
     if args.output:
         params.to_json(args.output)
         print(f"wrote {args.output}", file=sys.stderr)

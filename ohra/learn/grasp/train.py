@@ -69,7 +69,10 @@ def _tables(cond: HandCondition, data: TrainingData) -> tuple[torch.Tensor, torc
 def _check_resume(ckpt: dict[str, Any], spec: RunSpec, digest: str, path: Path) -> None:
     old = ckpt["spec"]
     if old["model"] != spec.model.to_dict():
-        raise CheckpointError(f"{path}: cannot resume, the model settings differ from the checkpoint's")
+        new_model = spec.model.to_dict()
+        diff = [f"{k}={old['model'].get(k)!r}, this run asks for {new_model.get(k)!r}"
+                for k in sorted(set(old["model"]) | set(new_model)) if old["model"].get(k) != new_model.get(k)]
+        raise CheckpointError(f"{path}: cannot resume, the checkpoint's model was made with {'; '.join(diff)}")
     new_train = spec.train.to_dict()
     defaults = GraspTrainConfig().to_dict()  # settings added since the checkpoint was made: their defaults
     for f in fields(GraspTrainConfig):
@@ -280,10 +283,12 @@ def train_grasp(data: str | Path | Sequence[str | Path], model_cfg: GraspModelCo
         if run is not None:
             write_text(run / "config.json", json.dumps(spec.to_dict(), indent=1) + "\n")
         first = st.step
+        before = float(st.history[-1]["elapsed_s"]) if st.history else 0.0  # a resumed run's earlier sessions
         seconds = _loop(st, spec, ckpt_path, progress, on_step)
         n_steps, h = cfg.steps - first, st.history
         metrics: dict[str, Any] = {
-            "steps": cfg.steps, "train_seconds_this_run": seconds, "train_seconds_total": h[-1]["elapsed_s"] if h else 0.0,
+            "steps": cfg.steps, "steps_this_run": n_steps, "train_seconds_this_run": seconds,
+            "train_seconds_total": before + seconds,
             "steps_per_s": n_steps / seconds if seconds > 0 and n_steps else None,
             "grasps_per_s": n_steps * cfg.batch_size / seconds if seconds > 0 and n_steps else None,
             "final_losses": {k: h[-1][k] for k in loss_terms(cfg)} if h else {},
