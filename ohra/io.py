@@ -159,7 +159,7 @@ def folder_lock(folder: str | Path, what: str = "folder") -> Iterator[Path]:
         yield folder
     finally:
         fh.close()  # releases the lock
-        if held and created and [p.name for p in folder.iterdir()] == [LOCK_NAME]:
+        if held and created and folder.is_dir() and [p.name for p in folder.iterdir()] == [LOCK_NAME]:
             # the job failed before writing anything (bad data, a hand not in it): leave no empty run folder
             path.unlink(missing_ok=True)
             try:
