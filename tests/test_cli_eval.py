@@ -163,6 +163,13 @@ def test_a_sampled_grasp_file_says_which_hand_and_form_it_was_made_for(tmp_path,
     with np.load(out) as d:
         assert (str(d["hand"]), str(d["form"]), str(d["model"])) == ("allegro_hand_left", "base", "default")
         assert d["grasps"].shape == (2, 31)
+        # ... and what makes them again: the object, its mesh, the seed and the sampling options
+        from ohra.objects.model import ObjectModel
+
+        assert (str(d["object"]), str(d["object_name"]), str(d["object_hash"])) == (
+            "builtin:box", "box", ObjectModel.builtin("box").mesh_hash)
+        assert (int(d["seed"]), str(d["refine"]), int(d["candidates"]), bool(d["centre"]), str(d["condition_hand"])) == (
+            0, "none", 1, False, "")
     forms = []
     real = cli_eval.eval_hand
     monkeypatch.setattr(cli_eval, "eval_hand", lambda name, original, form, inertials: forms.append(form) or

@@ -286,7 +286,14 @@ def _cmd_sample(args: argparse.Namespace) -> int:
     atomic_write_npz(out, {"grasps": g.astype(np.float64), "hand": np.array(str(args.hand)),
                            "form": np.array("extended" if isinstance(params, ExtendedParams) else "base"),
                            "model": np.array(str(args.model or ("leap" if note else "default"))),
-                           "mirrored": np.array(bool(mirrored))})
+                           "mirrored": np.array(bool(mirrored)),
+                           # and how, so that the file can be made again: object (as given, its name and mesh hash),
+                           # seed and the sampling options
+                           "object": np.array(str(args.object)), "object_name": np.array(obj.name),
+                           "object_hash": np.array(obj.mesh_hash), "seed": np.array(int(args.seed)),
+                           "refine": np.array(str(args.refine or "none")), "candidates": np.array(int(args.candidates)),
+                           "centre": np.array(bool(args.centre)),
+                           "condition_hand": np.array(str(args.condition_hand or ""))})
     if note:
         print(note, file=sys.stderr)
     fingers = params.num_fingers
