@@ -143,7 +143,7 @@ def test_cli_packs_and_reports_sizes_and_a_missing_manifest_is_one_line(ds, tmp_
     assert "4 pairs of 2 hands packed" in ok.stdout and "MB ->" in ok.stdout
     bad = run(str(tmp_path / "nothing"))
     lines = [ln for ln in bad.stderr.splitlines() if ln.strip()]
-    assert bad.returncode == 2 and len(lines) == 1 and "no manifest.json" in lines[0]
+    assert bad.returncode == 2 and len(lines) == 1 and "dataset folder not found" in lines[0]
 
 
 def test_the_studies_cache_key_ignores_packing_but_sees_a_changed_pair(ds):

@@ -88,6 +88,8 @@ def test_evaluate_model_takes_one_hand_by_itself():
 
     with pytest.raises(GraspError, match=r"'/nowhere/hand.json' is not a registered hand"):
         evaluate_model(object(), "/nowhere/hand.json", "builtin:box", n=1, inertials="original", allow_seen=True)
+    with pytest.raises(GraspError, match=r"'leap_2211' is a LEAP variant, a canonical hand with no original URDF"):
+        evaluate_model(object(), "leap_2211", "builtin:box", n=1, original=True, allow_seen=True)
 
 
 def test_evaluate_model_refuses_a_bad_seed_protocol_or_a_repeated_hand_or_object_before_simulating():
@@ -257,3 +259,14 @@ def test_data_info_keeps_one_name_with_other_params_in_two_rows_and_counts_objec
     rows = {r["hand"]: r["grasps"] for r in combined_summary([a, b])["rows"]}
     assert rows == {"my_hand [1111aaaa]": 4, "my_hand [2222bbbb]": 4, "leap_3303": 8}
     assert "2 objects (no train/test split: not built from a recipe)" in format_summary(combined_summary([a]))
+
+
+def test_a_vae_given_to_a_params_conditioned_training_is_refused_not_ignored(tmp_path, capsys):
+    pytest.importorskip("torch", reason="grasp training needs the learn extra")
+    from ohra.cli.main import main
+
+    assert main(["train", "grasp", "--data", str(tmp_path), "--condition", "params", "--vae", "my_vae", "-o",
+                 str(tmp_path / "run")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--vae my_vae gives the VAE of --condition vae" in err
+    assert not (tmp_path / "run").exists()

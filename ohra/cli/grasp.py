@@ -179,6 +179,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
                             condition_noise=args.condition_noise, penetration_weight=args.penetration_weight,
                             penetration_shift=args.penetration_shift, contact_weight=args.contact_weight, contact_form=args.contact_form, hands=tuple(args.hands), test_objects=tuple(args.test_objects),
                             test_hands=tuple(args.test_hands))
+    if args.vae and args.condition != "vae":  # it would be ignored without a word
+        raise OhraError(f"--vae {args.vae} gives the VAE of --condition vae; this run is --condition {args.condition}")
     res = train_grasp(args.data, mcfg, tcfg, out, resume=args.resume, progress=not args.quiet, vae_path=args.vae)
     m = res.metrics
     f = m["final_losses"]

@@ -245,6 +245,8 @@ def require_manifest(root: str | Path) -> dict:
     if Path(root).is_file():
         raise DatasetError(f"{root} is a file; give the dataset's folder" + (" (the folder holding it)"
                                                                            if Path(root).name == "manifest.json" else ""))
+    if not Path(root).exists():
+        raise DatasetError(f"dataset folder not found: {root}")
     manifest = read_manifest(Path(root) / "manifest.json")
     if manifest is None:
         raise DatasetError(f"{root}: no manifest.json (not an ohra grasp dataset)")

@@ -352,9 +352,13 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
     for hand in hands:
         if (original or inertials == "original") and not (isinstance(hand, str) and hand in registered_hands()):
             what = "original=True (--original)" if original else "inertials='original' (--inertials original)"
+            from ohra.hands.leap.variants import is_variant
+
+            why = ("a LEAP variant, a canonical hand with no original URDF (the original LEAP hand is leap_hand_right)"
+                   if isinstance(hand, str) and is_variant(hand) else
+                   "not a registered hand (a spec of your own registers with ohra --hands DIR or $OHRA_HANDS_PATH)")
             raise GraspError(f"{what} needs a registered hand's original URDF: give the hand by name; "
-                             f"{hand if isinstance(hand, str) else type(hand).__name__!r} is not a registered hand "
-                             "(a spec of your own registers with ohra --hands DIR or $OHRA_HANDS_PATH)")
+                             f"{hand if isinstance(hand, str) else type(hand).__name__!r} is {why}")
         params = resolve_hand(hand)
         told = params if condition_hand is None else resolve_hand(condition_hand)  # the hand the model is told
         try:
