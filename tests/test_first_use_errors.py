@@ -270,3 +270,15 @@ def test_a_vae_given_to_a_params_conditioned_training_is_refused_not_ignored(tmp
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--vae my_vae gives the VAE of --condition vae" in err
     assert not (tmp_path / "run").exists()
+
+
+def test_an_interrupted_resumable_command_says_how_to_continue(tmp_path, capsys, monkeypatch):
+    import ohra.synth.pipeline as pipeline
+    from ohra.cli.main import main
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(pipeline, "synthesize", interrupted)
+    assert main(["synth", "--hand", "leap_3303", "--objects", "builtin:box", "--out", str(tmp_path / "o")]) == 130
+    assert capsys.readouterr().err == "ohra: interrupted; the same command with --resume continues it\n"

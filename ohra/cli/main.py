@@ -134,7 +134,9 @@ def execute(args: argparse.Namespace) -> int:
         sys.stderr.close()  # output was cut short by its reader (e.g. `| head`): not an error
         return 0
     except KeyboardInterrupt:
-        print("ohra: interrupted", file=sys.stderr)
+        # every command with --resume keeps its finished work (checkpoints, shards): say how to continue it
+        hint = "; the same command with --resume continues it" if hasattr(args, "resume") else ""
+        print(f"ohra: interrupted{hint}", file=sys.stderr)
         return 130
     finally:
         warnings.showwarning = shown
