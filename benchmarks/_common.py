@@ -18,6 +18,20 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 RESULTS = Path(os.environ.get("OHRA_RESULTS_DIR") or Path(__file__).resolve().parent / "results")
 
 
+def run_script(main: Callable[[], Any], script: str) -> None:
+    """Run a benchmark script's ``main``; an ohra error (a missing data folder, nothing left to train on) is one
+    line on stderr and exit 2, as from the ``ohra`` commands."""
+    import sys
+
+    from ohra.errors import OhraError
+
+    try:
+        main()
+    except OhraError as exc:
+        print(f"{Path(script).name}: error: {exc}", file=sys.stderr)
+        sys.exit(2)
+
+
 def natural_sorted(paths: list[str]) -> list[str]:
     """Data folders in natural order (``s2`` before ``s10``) whatever order the shell's glob gave: the
     order of the data folders is part of the studies' run keys."""

@@ -41,7 +41,7 @@ from dataclasses import asdict
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import RESULTS, natural_sorted, write_results  # noqa: E402
+from _common import RESULTS, natural_sorted, run_script, write_results  # noqa: E402
 from _stats import ratio_interval  # noqa: E402
 from _study_cache import cached, claim_run, eval_key, run_key, store, train_key, when_free  # noqa: E402
 
@@ -263,10 +263,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    from ohra.errors import OhraError
-
-    try:
-        main()
-    except OhraError as exc:  # a missing data folder, no training grasps left: one line, as the ohra commands
-        print(f"{Path(__file__).name}: error: {exc}", file=sys.stderr)
-        sys.exit(2)
+    run_script(main, __file__)

@@ -170,7 +170,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     out = Path(args.output)
     from ohra.io import check_output
 
-    check_output(out, folder=True)  # a file there: one line, not a traceback from the run's lock
+    check_output(out, folder=True)  # before the starting grasps are made (minutes), not only at the run's lock
     extra = _key_values(args.ppo, "--ppo", RLConfigError)
     if args.resume:
         if args.init_from:
@@ -220,8 +220,9 @@ def _same_as_run(args: argparse.Namespace, env_cfg, ppo, out: Path, extra: dict[
 
     theirs, mine = env_cfg.to_dict(), env_cfg.with_overrides(**_given_env(args)).to_dict()
     for k in ("hand", "object"):  # a file given again by a relative path is the file the run names absolutely
-        if isinstance(mine[k], str) and Path(mine[k]).expanduser().exists() and Path(str(theirs[k])).is_absolute():
-            mine[k] = theirs[k] if Path(mine[k]).expanduser().resolve() == Path(theirs[k]).resolve() else mine[k]
+        if (isinstance(mine[k], str) and Path(str(theirs[k])).is_absolute() and Path(mine[k]).expanduser().exists()
+                and Path(mine[k]).expanduser().resolve() == Path(theirs[k]).resolve()):
+            mine[k] = theirs[k]
     diff = [f"{k}: run {theirs[k]!r}, given {mine[k]!r}" for k in mine if mine[k] != theirs[k]]
     run_ppo = ppo.to_dict()
     given = PPOSettings.from_dict({**run_ppo, **_given_ppo(args), **extra}, "command line (--ppo)").to_dict()

@@ -94,11 +94,15 @@ def _summarise(path: Path, man: dict) -> dict:
         row["no_convergence"] = sorted(k for k, s in sh.items() if s.get("diagnosis"))
         rows.append(row)
     total = {k: sum(r[k] for r in rows) for k in _COUNTS}
-    objects = {k for entry in man["hands"].values() for k in entry.get("shards", {})}
     return {"path": str(path), "format": man.get("format"), "ohra_version": man.get("ohra_version"),
             "settings_digest": man.get("settings_digest"), "recipe": (man.get("recipe") or {}).get("name"),
             "core_hours": man.get("core_hours", total["core_s"] / 3600.0), "cpu_hours": total["cpu_s"] / 3600.0, "split": {"train": len(split.get("train", [])), "test": len(test)},
-            "objects": len(objects), "rows": rows, "total": total}
+            "objects": len(_object_keys(man)), "rows": rows, "total": total}
+
+
+def _object_keys(man: dict) -> set[str]:
+    """Every object (shard key) a manifest holds, of any hand."""
+    return {k for entry in man["hands"].values() for k in entry.get("shards", {})}
 
 
 def combined_summary(paths: Sequence[str | Path]) -> dict:
@@ -138,7 +142,7 @@ def combined_summary(paths: Sequence[str | Path]) -> dict:
             "recipe": joined("recipe"), "core_hours": sum(x["core_hours"] for x in parts),
             "cpu_hours": sum(x["cpu_hours"] for x in parts),
             "split": {k: len(v) for k, v in split.items()},
-            "objects": len({k for _, man in mans for e in man["hands"].values() for k in e.get("shards", {})}),
+            "objects": len(set().union(*(_object_keys(man) for _, man in mans))),
             "rows": list(rows.values()), "total": total,
             "folders": [x["path"] for x in parts]}
 

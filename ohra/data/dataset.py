@@ -99,7 +99,7 @@ class GraspDataset:
         self.which = which
         self.entries: list[tuple[Path, str, str, dict]] = []
         seen_hands: set[str] = set()
-        seen_objects: set[str] = set()  # shard keys and object names
+        object_keys: set[str] = set()
         object_names: set[str] = set()
         hand_params: dict[str, dict[str, Path]] = {}  # hand -> params hash -> first folder holding it
         for root in self.roots:
@@ -110,23 +110,21 @@ class GraspDataset:
             side = set(manifest["split"][split]) if split else None
             for hand, entry in manifest.get("hands", {}).items():
                 seen_hands.add(hand)
-                for key, sh in entry.get("shards", {}).items():
-                    object_names.add(sh.get("object", {}).get("name", key))
-                    seen_objects.update((key, sh.get("object", {}).get("name", key)))
-                if hands and hand not in hands:
-                    continue
-                if entry.get("params_hash"):
+                selected = not hands or hand in hands
+                if selected and entry.get("params_hash"):
                     hand_params.setdefault(hand, {}).setdefault(str(entry["params_hash"]), root)
                 for key, sh in entry.get("shards", {}).items():
                     name = sh.get("object", {}).get("name", key)
-                    if (objects and key not in objects and name not in objects) or (side is not None and key not in side):
+                    object_keys.add(key)
+                    object_names.add(name)
+                    if not selected or (objects and key not in objects and name not in objects) or (side is not None and key not in side):
                         continue
                     self.entries.append((root, hand, key, {**sh, "_format": fmt, "_name": name}))
         unknown = [h for h in (hands or []) if h not in seen_hands]
         if unknown:  # a typo would otherwise read as an empty dataset
             raise DatasetError(f"hand(s) {unknown} not in {', '.join(map(str, self.roots))}; it holds "
                                f"{', '.join(sorted(seen_hands)) or 'no hands'}")
-        unknown = [o for o in (objects or []) if o not in seen_objects]
+        unknown = [o for o in (objects or []) if o not in object_keys and o not in object_names]
         if unknown:
             held = sorted(object_names)
             raise DatasetError(f"object(s) {unknown} not in {', '.join(map(str, self.roots))} (by name or key); it holds "

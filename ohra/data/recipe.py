@@ -258,14 +258,16 @@ class Recipe:
             base = Protocol.preset(prot.get("preset", "reference"))
         except ValueError as exc:
             raise RecipeError(f"{src}: protocol.preset: {exc}") from None
+        overrides = _checked_fields(base, {k: v for k, v in prot.items() if k != "preset"}, f"{src}: protocol")
         try:
-            protocol = replace(base, **_checked_fields(base, {k: v for k, v in prot.items() if k != "preset"}, f"{src}: protocol"))
-        except (TypeError, ValueError, OhraError) as exc:
-            raise RecipeError(f"{src}: protocol: {exc}".replace(f"{src}: protocol: {src}: protocol", f"{src}: protocol")) from None
+            protocol = replace(base, **overrides)
+        except (TypeError, ValueError, OhraError) as exc:  # a value the dataclass itself refuses
+            raise RecipeError(f"{src}: protocol: {exc}") from None
+        overrides = _checked_fields(RobustnessSettings(), dict(self.robustness), f"{src}: robustness")
         try:
-            robust = RobustnessSettings(**_checked_fields(RobustnessSettings(), dict(self.robustness), f"{src}: robustness"))
+            robust = RobustnessSettings(**overrides)
         except (TypeError, ValueError, OhraError) as exc:
-            raise RecipeError(f"{src}: robustness: {exc}".replace(f"{src}: robustness: {src}: robustness", f"{src}: robustness")) from None
+            raise RecipeError(f"{src}: robustness: {exc}") from None
         return SynthSettings(grasps_per_object=self.grasps_per_pair, seed=self.seed, filter=self.filter, cap=self.cap,
                              robustness=robust, protocol=protocol)
 

@@ -164,8 +164,10 @@ def _written_params(name: str, form: str) -> Path | None:
     the file. Package files are regenerated with the package (tests hold them to the parser).
     """
     p = params_path(name, form)
-    if not p.is_file() or not _is_user(name):
-        return p if p.is_file() else None
+    if not p.is_file():
+        return None
+    if not _is_user(name):
+        return p
     spec_file = _spec_files()[name]
     sources = [spec_file]
     try:

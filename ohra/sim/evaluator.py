@@ -327,9 +327,8 @@ class GraspEvaluator:
             from ohra.sim.partial import PartialEvaluation, evaluation_key
 
             store = PartialEvaluation(resume, evaluation_key(self.hand, self.obj, self.protocol, mode, g))
-            for i, r in store.done.items():
-                if 0 <= i < len(g):
-                    results[i] = r
+            for i, r in store.done.items():  # the key holds the grasps' shape: every stored index is one of them
+                results[i] = r
         todo = np.array([i for i, r in enumerate(results) if r is None], dtype=int)
         bar = _progress(len(g), progress)
         bar.update(len(g) - len(todo))

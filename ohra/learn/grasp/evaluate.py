@@ -175,7 +175,7 @@ def check_unseen(model: GraspModel, objects: Sequence[Any]) -> None:
         seen = o.name if o.name in train else next((n for n, h in train.items() if h == o.mesh_hash), None)
         if seen is None:
             if shapes is None:
-                shapes = _procedural_shapes(train)
+                shapes = _training_shapes(train)
             sig = _shape_signature(o)
             seen = next((n for n, t in shapes.items() if _same_shape(sig, t)), None)
         if seen is not None:
@@ -184,7 +184,7 @@ def check_unseen(model: GraspModel, objects: Sequence[Any]) -> None:
                                "evaluation needs unseen objects (allow_seen=True, or --allow-seen, to override)")
 
 
-def _procedural_shapes(train: dict) -> dict[str, np.ndarray]:
+def _training_shapes(train: dict) -> dict[str, np.ndarray]:
     """Shape signatures of the training objects that can be made or found again: those named ``family-seed``
     of a procedural family, built-in objects, and mesh objects found by name under the objects root (``$OHRA_OBJECTS_ROOT``, a
     folder or file ``NAME`` there or one level down, e.g. ``ycb/CrackerBox``) whose mesh hash is the one
