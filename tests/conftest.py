@@ -62,11 +62,20 @@ def objects_dir() -> Path:
     return _require(objects_root())
 
 
-# The longest files first (seconds each on the 2-core machine, stop 49): with --dist loadfile pytest-xdist hands
-# out files in collection order, and a long file handed out last keeps one worker busy after the other is idle.
-LONGEST_FIRST = ("test_notebook_grasp.py", "test_notebook_rotation.py", "test_zeroshot_study.py", "test_learn_vae.py",
-                 "test_data_ray.py", "test_synth.py", "test_data_recipe.py", "test_mirror.py",
-                 "test_notebook_morphology.py", "test_grasp_eval_resume.py", "test_data_trust.py", "test_notebook_eval.py")
+# The longest files first (seconds each on the 2-core machine, stop 50: the default suite, then the e2e one). With
+# --dist loadfile pytest-xdist hands out files in the order of its work queue, and a long file handed out last keeps one
+# worker busy after the other is idle. xdist >= 3.7 orders that queue by each file's number of tests unless told
+# not to (pytest_configure below), which had made this list moot: the notebooks, one test each, went last.
+LONGEST_FIRST = ("test_notebook_grasp.py", "test_zeroshot_study.py", "test_notebook_rotation.py", "test_data_ray.py",
+                 "test_notebook_morphology.py", "test_synth.py", "test_mirror.py", "test_learn_vae.py", "test_data_trust.py",
+                 "test_cli.py", "test_data_recipe.py", "test_grasp_eval_resume.py", "test_sim.py", "test_notebook_eval.py",
+                 "test_grasp_train.py", "test_viz.py", "test_rl.py", "test_eval_resume.py", "test_learn_geometry.py",
+                 "test_grasp_refine.py", "test_synth_capsule_pairs.py", "test_notebook_parse.py", "test_notebook_synthesis.py")
+
+
+def pytest_configure(config) -> None:
+    if hasattr(config.option, "loadscopereorder"):
+        config.option.loadscopereorder = False  # keep the collection order below (xdist's --no-loadscope-reorder)
 
 
 def pytest_collection_modifyitems(config, items) -> None:

@@ -12,6 +12,9 @@ from ohra.synth.robust import RobustnessSettings
 
 ray = pytest.importorskip("ray", reason="the ray extra is not installed (pip install -e '.[ray]')")
 
+# ~10-60 s each: outside the default suite; .ci/run runs them after it (pytest -m "e2e and not slow")
+pytestmark = pytest.mark.e2e
+
 
 def test_ray_and_the_process_pool_write_byte_identical_shards(tmp_path):
     hands = [("leap_2200", get_hand("leap_2200"))]

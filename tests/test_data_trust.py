@@ -132,6 +132,7 @@ def test_flat_and_one_triangle_meshes_are_refused_at_once(tmp_path, faces, messa
     assert proc.returncode == 2 and len(lines) == 1 and message in lines[0], proc.stderr
 
 
+@pytest.mark.e2e  # runs V-HACD (~15 s)
 def test_vhacd_is_silent_bounded_and_leaves_only_its_result(tmp_path, monkeypatch, capfd):
     monkeypatch.setenv("OHRA_CACHE_DIR", str(tmp_path / "cache"))
     from ohra.objects.decompose import vhacd_pieces

@@ -34,6 +34,7 @@ def _count_evaluations(monkeypatch, stop_at: int | None = None) -> list:
     return calls
 
 
+@pytest.mark.e2e  # three evaluations of every pair (~15 s)
 def test_an_interrupted_evaluation_resumes_its_finished_pairs_and_ends_as_an_uninterrupted_one(leap, tmp_path,
                                                                                                   monkeypatch):
     full = evaluate_model(leap, HANDS, OBJECTS, n=3)

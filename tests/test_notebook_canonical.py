@@ -10,6 +10,9 @@ nbclient = pytest.importorskip("nbclient")
 
 from notebook_utils import execute  # noqa: E402
 
+# ~10-60 s each: outside the default suite; .ci/run runs them after it (pytest -m "e2e and not slow")
+pytestmark = pytest.mark.e2e
+
 
 def test_canonical_hand_notebook_executes(hands_dir, tmp_path):
     nb, texts = execute("01_canonical_hand.ipynb", tmp_path, timeout=180, html_chars=200)

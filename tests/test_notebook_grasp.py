@@ -13,6 +13,9 @@ from notebook_utils import execute  # noqa: E402
 
 from ohra.learn.grasp.model import default_model_dir  # noqa: E402
 
+# ~10-60 s each: outside the default suite; .ci/run runs them after it (pytest -m "e2e and not slow")
+pytestmark = pytest.mark.e2e
+
 
 def test_grasp_model_notebook_executes(tmp_path):
     if not (default_model_dir() / "model.pt").is_file():

@@ -11,6 +11,9 @@ pytest.importorskip("torch")
 
 from notebook_utils import execute  # noqa: E402
 
+# ~10-60 s each: outside the default suite; .ci/run runs them after it (pytest -m "e2e and not slow")
+pytestmark = pytest.mark.e2e
+
 
 def test_morphology_notebook_executes(tmp_path):
     nb, texts = execute("03_morphology_vae.ipynb", tmp_path, timeout=300)

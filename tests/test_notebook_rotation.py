@@ -11,6 +11,9 @@ pytest.importorskip("stable_baselines3", reason="notebook 08 needs the rl extra"
 
 from notebook_utils import execute  # noqa: E402
 
+# ~10-60 s each: outside the default suite; .ci/run runs them after it (pytest -m "e2e and not slow")
+pytestmark = pytest.mark.e2e
+
 
 def test_rotation_notebook_executes(tmp_path, hands_dir):
     nb, texts = execute("08_in_hand_rotation.ipynb", tmp_path, timeout=600)

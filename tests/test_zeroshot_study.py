@@ -16,6 +16,9 @@ pytest.importorskip("torch")
 
 from grasp_fixtures import write_dataset  # noqa: E402
 
+# ~10-60 s each: outside the default suite; .ci/run runs them after it (pytest -m "e2e and not slow")
+pytestmark = pytest.mark.e2e
+
 ROOT = Path(__file__).resolve().parents[1]
 HANDS = ("leap_3033", "leap_3303", "leap_3330", "leap_3333", "leap_0303")
 
