@@ -469,3 +469,18 @@ def test_sampled_grasps_of_a_coupled_hand_hold_its_couplings_as_simulation_runs_
         assert np.abs(residual(cs, d["grasps"][:, 9:])).max() < 1e-12
     rep = evaluate_model(load_grasp_model(), ["inspire_hand_right"], ["builtin:box"], n=2, protocol="reference")
     assert np.abs(residual(cs, rep.pairs[0].grasps[:, 9:])).max() < 1e-12
+
+
+def test_grasp_eval_keeps_its_table_aligned_for_long_hand_labels(tmp_path, capsys):
+    """A hand given as a file is labelled by its path: the columns after it stay under each other."""
+    from ohra.cli.main import main
+
+    deep = tmp_path / "a_folder_with_a_rather_long_name" / "leap_2211.json"
+    deep.parent.mkdir()
+    get_hand("leap_2211").to_json(deep)
+    argv = ["grasp", "eval", "--model", "leap", "--hands", "leap_2211", str(deep), "--objects", "builtin:box", "-n", "1",
+            "--quiet"]
+    assert main(argv) == 0
+    rows = [ln for ln in capsys.readouterr().out.splitlines() if "ms/grasp" in ln]
+    assert len(rows) == 2 and len(str(deep)) > 20
+    assert rows[0].index("/1 ") == rows[1].index("/1 ") and rows[0].index("ms/grasp") == rows[1].index("ms/grasp")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib
 import json
+from pathlib import Path
 from dataclasses import replace
 
 import numpy as np
@@ -251,9 +252,13 @@ def test_resume_equals_an_uninterrupted_run(dataset, tmp_path):
                                           zip(full.metrics["history"], resumed.metrics["history"])]
     for (k, v), w in zip(full.model.net.state_dict().items(), resumed.model.net.state_dict().values()):
         assert torch.equal(v, w), k
-    # the run directory holds what it says
+    # the run directory holds what it says; a folder named twice is recorded once (it is read once)
     run = tmp_path / "full"
     assert json.loads((run / "config.json").read_text())["train"]["steps"] == 6
+    twice = train_grasp([dataset, Path(f"{dataset}/")], tiny_model_config(), tiny_train_config(steps=1), tmp_path / "twice",
+                        progress=False)
+    assert json.loads((tmp_path / "twice" / "config.json").read_text())["data"] == [str(dataset)]
+    assert twice.metrics["data"] == train_grasp(dataset, tiny_model_config(), tiny_train_config(steps=1), progress=False).metrics["data"]
     assert json.loads((run / "metrics.json").read_text())["steps"] == 6
     a = load_grasp_model(run).sample("barrett_hand", "builtin:capsule", 4, seed=0)
     np.testing.assert_array_equal(a, full.model.sample("barrett_hand", "builtin:capsule", 4, seed=0))

@@ -42,6 +42,19 @@ def test_single_fingertip_contact_fails(evaluator):
     assert not r.success
 
 
+def test_a_hand_given_as_params_is_named_by_its_content():
+    """Reports of two unnamed hands were both 'canonical_hand'; a name given is kept."""
+    from dataclasses import replace
+
+    wider = replace(pinch_hand(), finger_xyz=[[x, 1.1 * y, z] for x, y, z in pinch_hand().finger_xyz])
+    names = []
+    for params in (pinch_hand(), pinch_hand(), wider):
+        with GraspEvaluator(params, pinch_box()) as ev:
+            names.append(ev.evaluate(pinch_grasp()).meta["hand"])
+    assert names[0] == names[1] != names[2] and names[0].startswith("canonical_") and len(names[0]) == len("canonical_") + 8
+    assert GraspEvaluator(SimHand.from_params(pinch_hand(), name="pinch"), pinch_box()).hand.name == "pinch"
+
+
 def test_deep_penetration_is_reported():
     ev = GraspEvaluator(pinch_hand(), pinch_box(gap=-0.006))
     r = ev.evaluate(pinch_grasp()).results[0]

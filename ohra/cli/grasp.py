@@ -339,9 +339,11 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         if rep.meta.get("resumed_pairs"):
             print(f"ohra: note: {rep.meta['resumed_pairs']} of {len(rep.pairs)} pairs came from the interrupted run's "
                   f"{pairs_dir}", file=sys.stderr)
+    wh = max([20] + [len(p.hand) for p in rep.pairs])  # a file hand's label (its path) can be long
+    wo = max([16] + [len(p.object) for p in rep.pairs])
     for p in rep.pairs:
         d = p.diversity_all or {}
-        print(f"{p.hand:20s} {p.object:16s} {int(p.success.sum()):4d}/{len(p.success):<4d} "
+        print(f"{p.hand:{wh}s} {p.object:{wo}s} {int(p.success.sum()):4d}/{len(p.success):<4d} "
               f"({100 * p.success_rate:5.1f} %)  {1e3 * p.sample_seconds / len(p.success):6.2f} ms/grasp  "
               f"approach spread {d.get('approach_spread', float('nan')):.2f}")
     mirrored = set(rep.meta.get("mirrored_hands", []))

@@ -14,6 +14,8 @@ one native ``<capsule>`` (the same solid); relative mesh paths become absolute.
 
 from __future__ import annotations
 
+import hashlib
+
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -107,14 +109,17 @@ class SimHand:
 
     # -- constructors ---------------------------------------------------------------------------
     @classmethod
-    def from_params(cls, params: Params, name: str = "canonical_hand", couplings: tuple = ()) -> "SimHand":
+    def from_params(cls, params: Params, name: str | None = None, couplings: tuple = ()) -> "SimHand":
         """A canonical hand: the driven joints are its movable canonical joints; ``couplings`` (the
         hand's, e.g. ``ohra.get_couplings(name)``) make the controller drive coupled joints with
-        their drivers."""
+        their drivers. Without a ``name`` the hand is named by its content (``canonical_<hash>``, the first
+        8 hex digits of its params JSON's SHA-256), so reports of two unnamed hands are told apart."""
         from ohra.canonical.urdfgen import render
 
         if not isinstance(params, (BaseParams, ExtendedParams)):
             raise TypeError(f"expected BaseParams or ExtendedParams, got {type(params).__name__}")
+        if name is None:
+            name = "canonical_" + hashlib.sha256(params.to_json().encode()).hexdigest()[:8]
         lo, up = np.asarray(params.joint_lowers, dtype=float), np.asarray(params.joint_uppers, dtype=float)
         movable = up > lo
         locked = {n: float(lo[k]) for k, n in enumerate(JOINT_NAMES) if not movable[k]}

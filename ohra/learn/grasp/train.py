@@ -272,6 +272,11 @@ def train_grasp(data: str | Path | Sequence[str | Path], model_cfg: GraspModelCo
     ``checkpoint_every``, ``log_every``; same data). ``on_step(step, losses)`` runs after every step.
     """
     paths = [data] if isinstance(data, (str, Path)) else list(data)
+    # a folder named twice (``--data D D``, ``D ./D/``) is read once by the dataset: record it once too
+    firsts: dict[Path, Any] = {}
+    for p in paths:
+        firsts.setdefault(Path(p).resolve(), p)
+    paths = list(firsts.values())
     spec = RunSpec([str(p) for p in paths], model_cfg, cfg)
     run = Path(run_dir) if run_dir is not None else None
     ckpt_path = run / "checkpoints" / "last.pt" if run is not None else None
