@@ -264,3 +264,50 @@ def test_cli_refine_takes_open_or_touch(tmp_path, capsys):
         cli(["grasp", "sample", "--model", str(run), "--hand", "barrett_hand", "--object", "builtin:cylinder",
              "--refine", "squeeze", "-o", str(tmp_path / "x.npz")])
     assert exc.value.code == 2 and "choose from 'open', 'touch'" in capsys.readouterr().err
+
+
+def _full_gradient_refine(hand, obj, g, s):
+    """The refinement as first written: every finite-difference step measures every capsule again."""
+    from ohra.learn.grasp.refine import _penetration
+    from ohra.rotations import grasp_to_pose
+
+    T, q = grasp_to_pose(g.astype(float))
+    q = q.copy()
+    movable = np.flatnonzero(hand.upper > hand.lower)
+    E, _ = _penetration(hand, obj, T, q, s)
+    step, steps = np.full(len(g), s.step_rad), np.zeros(len(g), dtype=int)
+    for _ in range(s.iterations):
+        act = np.flatnonzero((E > 0) & (step > 1e-4))
+        if not act.size:
+            break
+        grad = np.zeros((len(act), 22))
+        for j in movable:
+            qj = q[act].copy()
+            qj[:, j] += s.fd_rad
+            grad[:, j] = (_penetration(hand, obj, T[act], qj, s)[0] - E[act]) / s.fd_rad
+        trial = np.clip(q[act] - step[act, None] * grad / np.maximum(np.linalg.norm(grad, axis=1, keepdims=True), 1e-12),
+                        hand.lower, hand.upper)
+        E_new, _ = _penetration(hand, obj, T[act], trial, s)
+        better = E_new < E[act]
+        q[act[better]], E[act[better]] = trial[better], E_new[better]
+        steps[act[better]] += 1
+        step[act[~better]] *= 0.5
+    return q, steps
+
+
+def test_measuring_only_the_capsules_a_joint_moves_changes_no_bit(case, objects_dir):
+    """The gradient measures again only the capsules that hang from the perturbed joint (2-4x faster on
+    V-HACD bodies): the refined grasps are bit for bit those of measuring every capsule, on an exact body
+    (the sphere) and on a union of convex pieces (a YCB bottle)."""
+    from ohra.learn.grasp.model import load_grasp_model, resolve_object
+
+    hand, sphere, g, _ = case
+    bottle = resolve_object(str(objects_dir / "ycb" / "MustardBottle"))
+    assert len(bottle.body.pieces) > 1
+    s = RefineSettings(touch=True)  # both energies: sunk samples and hovering fingers
+    sampled = load_grasp_model().sample("allegro_hand_left", bottle, 4, seed=0)
+    for obj, grasps in ((sphere, g[:6]), (bottle, sampled)):
+        r = refine_grasps(hand, obj, grasps, s)
+        q, steps = _full_gradient_refine(hand, obj, grasps, s)
+        assert steps.sum() > 0 and np.array_equal(r.steps, steps)
+        assert np.array_equal(r.grasps[:, 9:], q)

@@ -223,12 +223,16 @@ class Body:
         if self._exact is not None:
             return self._exact(p)
         tree, P, N, spacing = self._surface
+        if len(self.pieces) > 1:  # the sign is the point-in-piece test everywhere: only the nearest sample is needed
+            d1 = tree.query(p, k=1)[0]
+            return np.where(self.piece_value(p) < 0.0, -d1, d1)
         d, i = tree.query(p, k=4)
         side = np.einsum("nkj,nkj->nk", p[:, None, :] - P[i], N[i]) / (d + 1e-9)
         inside = side.sum(axis=1) < 0.0
-        near = d[:, 0] < 3.0 * spacing if len(self.pieces) == 1 else np.ones(len(p), dtype=bool)
+        near = d[:, 0] < 3.0 * spacing
         inside[near] = self.piece_value(p[near]) < 0.0
         return np.where(inside, -d[:, 0], d[:, 0])
+
     def sample_surface(self, n: int, seed: int = 0) -> np.ndarray:
         """(n,3) points on the body's surface (area-uniform over the union's exposed faces)."""
         P = self._surface[1]

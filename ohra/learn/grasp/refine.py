@@ -82,14 +82,30 @@ class RefineResult:
     steps: np.ndarray
 
 
-def _capsule_distances(hand, obj, T: np.ndarray, q: np.ndarray, s: RefineSettings) -> tuple[np.ndarray, np.ndarray]:
+def _capsule_distances(hand, obj, T: np.ndarray, q: np.ndarray, s: RefineSettings,
+                       only: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Signed distances (N, S, K) [m] of S samples along each of the K capsule cores to ``obj``, minus the
-    capsule radius, for palm poses T (N,4,4) and joints q (N,22); and each capsule's finger index (K,)."""
+    capsule radius, for palm poses T (N,4,4) and joints q (N,22); and each capsule's finger index (K,).
+    ``only``: capsule indices to measure (N, S, len(only)); the others are not computed."""
     caps = hand.capsules(q)
+    p0, p1, radius = (caps.p0, caps.p1, caps.radius) if only is None else (caps.p0[:, only], caps.p1[:, only], caps.radius[only])
     u = np.linspace(0.0, 1.0, s.samples_per_capsule)[:, None, None]
-    pts = caps.p0[:, None] + u * (caps.p1 - caps.p0)[:, None]  # (N, S, K, 3) palm frame
+    pts = p0[:, None] + u * (p1 - p0)[:, None]  # (N, S, K, 3) palm frame
     world = np.einsum("nij,nskj->nski", T[:, :3, :3], pts) + T[:, None, None, :3, 3]
-    return obj.signed_distance(world.reshape(-1, 3)).reshape(world.shape[:3]) - caps.radius, caps.finger
+    return obj.signed_distance(world.reshape(-1, 3)).reshape(world.shape[:3]) - radius, caps.finger
+
+
+def _moved_by(hand) -> dict[int, np.ndarray]:
+    """For each canonical joint index, the capsules (indices into ``hand.capsules``) whose pose depends on it."""
+    tree = hand.tree
+    specs = hand.capsule_specs
+    out: dict[int, list[int]] = {}
+    for k, spec in enumerate(specs):
+        j = int(tree.frame_joint[tree.frame_names.index(spec[0])])
+        while j >= 0:
+            out.setdefault(int(tree.joint_q[j]), []).append(k)
+            j = int(tree.joint_parent[j])
+    return {j: np.array(sorted(set(ks)), dtype=int) for j, ks in out.items()}
 
 
 def _per_finger(per_capsule: np.ndarray, finger: np.ndarray) -> np.ndarray:
@@ -97,14 +113,19 @@ def _per_finger(per_capsule: np.ndarray, finger: np.ndarray) -> np.ndarray:
     return np.stack([per_capsule[:, finger == f].min(axis=1) for f in np.unique(finger)], axis=1)
 
 
-def _penetration(hand, obj, T: np.ndarray, q: np.ndarray, s: RefineSettings) -> tuple[np.ndarray, np.ndarray]:
-    """(energy (N,), smallest signed distance (N,)) of grasps with palm poses T (N,4,4) and joints q (N,22)."""
-    d, finger = _capsule_distances(hand, obj, T, q, s)
+def _energy(d: np.ndarray, finger: np.ndarray, s: RefineSettings) -> np.ndarray:
+    """(N,) penetration energy of capsule-sample distances d (N, S, K) (see the module docstring)."""
     energy = (np.maximum(-s.clearance_m - d, 0.0) ** 2).sum(axis=(1, 2))
     if s.touch:
         for nearest in _per_finger(d.min(axis=1), finger).T:  # added finger by finger (the evaluated runs' order)
             energy = energy + np.maximum(nearest - s.clearance_m, 0.0) ** 2
-    return energy, d.min(axis=(1, 2))
+    return energy
+
+
+def _penetration(hand, obj, T: np.ndarray, q: np.ndarray, s: RefineSettings) -> tuple[np.ndarray, np.ndarray]:
+    """(energy (N,), smallest signed distance (N,)) of grasps with palm poses T (N,4,4) and joints q (N,22)."""
+    d, finger = _capsule_distances(hand, obj, T, q, s)
+    return _energy(d, finger, s), d.min(axis=(1, 2))
 
 
 def finger_clearance(hand, obj, grasps: np.ndarray, settings: RefineSettings | None = None) -> np.ndarray:
@@ -151,7 +172,9 @@ def refine_grasps(hand, obj, grasps: np.ndarray, settings: RefineSettings | None
     T, q = grasp_to_pose(g.astype(float))
     q = q.copy()
     movable = np.flatnonzero(hm.upper > hm.lower)
-    E, d0 = _penetration(hm, obj, T, q, s)
+    moved = _moved_by(hm)
+    D, finger = _capsule_distances(hm, obj, T, q, s)  # kept in step with q: (N, S, K)
+    E, d0 = _energy(D, finger, s), D.min(axis=(1, 2))
     step = np.full(len(g), float(s.step_rad))
     steps = np.zeros(len(g), dtype=int)
     for _ in range(int(s.iterations)):
@@ -160,17 +183,25 @@ def refine_grasps(hand, obj, grasps: np.ndarray, settings: RefineSettings | None
             break
         grad = np.zeros((len(act), q.shape[1]))
         for j in movable:
+            ks = moved.get(int(j))
+            if ks is None:  # no capsule hangs from this joint: the energy does not depend on it
+                continue
             qj = q[act].copy()
             qj[:, j] += s.fd_rad
-            grad[:, j] = (_penetration(hm, obj, T[act], qj, s)[0] - E[act]) / s.fd_rad
+            # only the capsules joint j moves are measured again; the others' distances are those at q, as they
+            # would be measured again (a sample's distance depends on its own position only)
+            dj = D[act]
+            dj[:, :, ks] = _capsule_distances(hm, obj, T[act], qj, s, only=ks)[0]
+            grad[:, j] = (_energy(dj, finger, s) - E[act]) / s.fd_rad
         norm = np.linalg.norm(grad, axis=1, keepdims=True)
         trial = np.clip(q[act] - step[act, None] * grad / np.maximum(norm, 1e-12), hm.lower, hm.upper)
-        E_new, _ = _penetration(hm, obj, T[act], trial, s)
+        D_new, _ = _capsule_distances(hm, obj, T[act], trial, s)
+        E_new = _energy(D_new, finger, s)
         better = E_new < E[act]
-        q[act[better]], E[act[better]] = trial[better], E_new[better]
+        q[act[better]], E[act[better]], D[act[better]] = trial[better], E_new[better], D_new[better]
         steps[act[better]] += 1
         step[act[~better]] *= 0.5
-    _, d1 = _penetration(hm, obj, T, q, s)
+    d1 = D.min(axis=(1, 2))
     out = g.astype(np.result_type(g.dtype, np.float32))  # a copy; float64 stays float64
     changed = steps > 0
     out[changed, 9:] = q[changed]
