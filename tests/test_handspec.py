@@ -84,6 +84,16 @@ def test_override_needs_a_reason():
     assert ok.overrides[0].name == "finger_lengths" and ok.overrides[0].index == (0, 2)
 
 
+def test_an_override_of_a_key_no_form_has_is_refused_not_skipped():
+    """A misspelt key was skipped as 'a key of the other form' and then reported as applied."""
+    with pytest.raises(SpecError, match="no parameter 'finger_radiuz' in the base or extended form"):
+        load_spec(MINIMAL + "overrides:\n  - {key: finger_radiuz, value: 0.01, reason: typo}\n")
+    with pytest.raises(SpecError, match="no parameter 'finger_radii' in the base form"):  # an extended-only key
+        load_spec(MINIMAL + "overrides:\n  - {key: finger_radii, value: 0.01, reason: r, form: base}\n")
+    ext_only = load_spec(MINIMAL + "overrides:\n  - {key: finger_radii, value: 0.01, reason: r}\n")  # the other form's: fine
+    assert ext_only.overrides[0].name == "finger_radii"
+
+
 def test_check_joints_names_the_missing_joint():
     sp = load_spec(MINIMAL)
     with pytest.raises(SpecError, match="'b', which is not a movable joint"):

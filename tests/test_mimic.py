@@ -72,6 +72,18 @@ def test_a_mapped_mimic_joint_becomes_a_coupling_and_the_finger_keeps_its_length
     assert rep.tips["hand"].mean < 0.5 and rep.tips["hand"].n == 41
 
 
+def test_a_prismatic_joint_in_a_revolute_slot_is_refused(tmp_path, no_hands_root):
+    """Its metre limits were read as radians: a parse that passed with 1-2 m fingertip errors."""
+    urdf = MIMIC_URDF.replace('<mimic joint="a" multiplier="1.2" offset="-0.05"/>', "")
+    (tmp_path / "toy_mimic.urdf").write_text(urdf.replace('<joint name="m" type="revolute">', '<joint name="m" type="prismatic">'))
+    spec = tmp_path / "toy.yaml"
+    spec.write_text(MIMIC_SPEC)
+    with pytest.raises(SpecError, match="slot 'index_joint3' names joint 'm', a prismatic joint"):
+        parse(spec, "extended", fit_params=False)
+    (tmp_path / "toy_mimic.urdf").write_text(urdf)  # the same hand with a revolute m parses
+    assert parse(spec, "extended", fit_params=False).params is not None
+
+
 def test_an_unmapped_mimic_joint_is_named_and_its_error_is_honest(tmp_path, no_hands_root):
     spec = _toy(tmp_path, MIMIC_SPEC.replace(", index_joint3: m", ""))
     with pytest.warns(ParseWarning, match=r"'m' \(mimic of 'a'\).*drive no slot"):
@@ -359,3 +371,22 @@ def test_flipped_mcp_flexion_signs_are_refused_in_the_extended_form_too(hands_di
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 parse(spec, form, fit_params=False)
+
+
+def test_hand_compare_checks_its_options_first_and_shows_missing_meshes(tmp_path, no_hands_root, capsys):
+    """--samples below 1 was a traceback (negative) or a table of zero configurations (0); an --html folder was
+    refused only after the comparison; a missing mesh, which changes the numbers, was silenced."""
+    from ohra.cli.main import main
+
+    spec = _toy(tmp_path, MIMIC_SPEC.replace("name: toy_mimic", "name: toy_nomesh"))
+    urdf = (tmp_path / "toy_mimic.urdf").read_text()
+    (tmp_path / "toy_mimic.urdf").write_text(urdf.replace(
+        '<link name="l2">', '<link name="l2"><visual><geometry><mesh filename="meshes/l2.stl"/></geometry></visual>'))
+    for argv, named in ((["--samples", "0"], "--samples must be >= 1"), (["--samples", "-5"], "--samples must be >= 1"),
+                        (["--html", str(tmp_path)], "is a folder")):
+        assert main(["hand", "compare", str(spec), "--no-surface", *argv]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and named in err, err
+    assert main(["hand", "compare", str(spec), "--no-surface", "--samples", "3"]) == 0
+    err = capsys.readouterr().err
+    assert "1 mesh file(s) not found" in err and "l2.stl" in err

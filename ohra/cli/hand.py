@@ -246,6 +246,10 @@ def _cmd_parse(args: argparse.Namespace) -> int:
     from ohra.original.parse import parse
     from ohra.original.spec import load_spec
 
+    from ohra.io import check_output
+
+    if args.output:
+        check_output(args.output)  # before the parse and the fit (seconds), not after
     spec = load_spec(args.spec)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -282,11 +286,21 @@ def _cmd_parse(args: argparse.Namespace) -> int:
 
 
 def _cmd_compare(args: argparse.Namespace) -> int:
+    from ohra.errors import OhraError
     from ohra.hands.resolve import resolve_hand
+    from ohra.io import check_output
     from ohra.original.fidelity import compare
+    from ohra.original.hand import MissingMeshWarning
 
+    if args.samples < 1:
+        raise OhraError(f"--samples must be >= 1 (random configurations compared), got {args.samples}")
+    if args.html:
+        check_output(args.html)  # before the comparison (seconds), not after
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # the original URDF's mesh warnings are not this command's output
+        # the parse's notes are not this command's output; a missing mesh is: the fidelity numbers (and the
+        # surface column) are measured on the geometry that is there
+        warnings.simplefilter("ignore")
+        warnings.simplefilter("default", MissingMeshWarning)
         ref = resolve_hand(args.hand, _natural_form(args))
         rep = compare(ref, ref.form, samples=args.samples, surface=not args.no_surface)
     print(json.dumps(rep.to_dict(), indent=2) if args.json else rep.table(surface_hint="--no-surface skipped it"))

@@ -69,9 +69,11 @@ class HandRef:
             return self.result
         sp = self.require_spec("a fidelity report")
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+            warnings.simplefilter("ignore")  # the measurement's notes are kept below
+            _keep_mesh_warnings()
             m = measure(self.original(), sp, self.form)
-        notes = list(m.notes) + [f"override {o.key} = {o.value}: {o.reason}" for o in sp.overrides_for(self.form)]
+        keys = self.params.to_dict()
+        notes = list(m.notes) + [f"override {o.key} = {o.value}: {o.reason}" for o in sp.overrides_for(self.form) if o.name in keys]
         return ParseResult(self.params, self.form, sp, m, self.params, None, notes)
 
 
@@ -80,8 +82,17 @@ def _parse_cached(path: Path, mtime: float, form: str):
     from ohra.original.parse import parse
 
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+        warnings.simplefilter("ignore")  # the parse's notes travel in its result
+        _keep_mesh_warnings()
         return parse(path, form, fit_params=True)
+
+
+def _keep_mesh_warnings() -> None:
+    """Inside a block that ignores warnings, still show a missing mesh: what is measured on the original hand
+    (fingertips, link surfaces) changes without it."""
+    from ohra.original.hand import MissingMeshWarning
+
+    warnings.simplefilter("default", MissingMeshWarning)
 
 
 def parse_spec_file(path: str | Path, form: str | None = None):

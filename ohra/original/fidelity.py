@@ -307,7 +307,12 @@ def compare(
     surface_points: int = 1500,
 ) -> FidelityReport:
     """Fidelity of a :class:`ParseResult`, or of any hand :func:`ohra.hands.resolve_hand` accepts
-    (registered name: committed params; spec YAML: parsed; params JSON with its spec)."""
+    (registered name: committed params; spec YAML: parsed; params JSON with its spec) over ``samples`` >= 1
+    random configurations (plus the canonical zero)."""
+    if int(samples) < 1:
+        from ohra.errors import OhraError
+
+        raise OhraError(f"compare: samples must be >= 1, got {samples}")
     if isinstance(hand, ParseResult):
         res = hand
         name = res.spec.name

@@ -186,7 +186,8 @@ def parse(
         params = rounded(init)
     params = _separate_fingers(params, m.action_map, m.notes)
     params = apply_overrides(params, spec, form)
-    notes = list(m.notes) + [f"override {o.key} = {o.value}: {o.reason}" for o in spec.overrides_for(form)]
+    keys = params.to_dict()
+    notes = list(m.notes) + [f"override {o.key} = {o.value}: {o.reason}" for o in spec.overrides_for(form) if o.name in keys]
     notes += [f"coupling: {line}" for line in describe(m.couplings)]
     return ParseResult(params, form, spec, m, init, fr, notes)
 

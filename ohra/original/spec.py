@@ -133,6 +133,11 @@ class HandSpec:
         for fname, fs in self.forms.items():
             for slot, sm in fs.slots.items():
                 if sm.name in actuated or sm.name in mimic:
+                    if getattr(joints.get(sm.name), "type", None) == "prismatic":
+                        # its limits are metres: read as a revolute slot's radians they made a hand of 1-2 m fingers
+                        raise SpecError(f"{self.source}: forms.{fname} slot {slot!r} names joint {sm.name!r}, a prismatic "
+                                        f"joint of {self.urdf}: canonical slots are revolute (radians); map a revolute "
+                                        "or continuous joint, or leave the slot out")
                     continue
                 j = joints.get(sm.name)
                 why = "which is not a movable joint of" if j is None else f"which is a {j.type} joint (not movable) of"

@@ -135,6 +135,15 @@ def _override(v: Any, where: str) -> Override:
     form = v.get("form")
     if form is not None and form not in FORMS:
         raise SpecError(f"{where}.form: expected one of {FORMS}, got {form!r}")
+    from ohra.canonical.params import BaseParams, ExtendedParams
+
+    known = {"base": [k for k, _ in BaseParams.KEYS], "extended": [k for k, _ in ExtendedParams.KEYS]}
+    name = _KEY_RE.match(key).group(1)  # type: ignore[union-attr]
+    allowed = known[form] if form else known["base"] + [k for k in known["extended"] if k not in known["base"]]
+    if name not in allowed:
+        # a misspelt key was skipped as "a key of the other form" and then reported as applied
+        raise SpecError(f"{where}.key: no parameter {name!r} in the {form or 'base or extended'} form "
+                        f"(keys: {', '.join(allowed)})")
     value = v["value"]
     try:
         np.asarray(value, dtype=float)
