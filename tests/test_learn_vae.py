@@ -345,6 +345,8 @@ def test_cli_bad_input_is_one_line_and_exit_2(vae, tmp_path, capsys):
               (["vae", "decode", "0.1,,0.2"], "an empty field"),
               (["vae", "interpolate", "barrett_hand", "dex3_right", "-n", "2", "-o", str(tmp_path / "afile")], "afile is a file"),
               (["vae", "decode", z, "-o", str(tmp_path / "ok.json"), "--urdf", str(tmp_path)], "is a folder"),
+              (["vae", "decode", z, "-o", str(tmp_path / "ok.json"), "--urdf", str(tmp_path / "." / "ok.json")], "the same file"),
+              (["vae", "decode", z.replace("0.1", "inf", 1)], "must be finite"),
               (["train", "vae", "--samples", "64", "--batch-size", "32", "--heldout", "8", "--epochs", "1", "-o", str(tmp_path / "afile")], "afile is a file"),
               (["train", "vae", "--samples", "64", "--batch-size", "32", "--epochs", "1", "--seed", "-1", "-o", str(tmp_path / "r")],
                "seed must be a whole number >= 0")]
@@ -354,6 +356,22 @@ def test_cli_bad_input_is_one_line_and_exit_2(vae, tmp_path, capsys):
         assert rc == 2, argv
         assert msg in err and "Traceback" not in err and err.count("\n") == 1, (argv, err)
     assert not (tmp_path / "ok.json").exists() and not (tmp_path / "r").exists()  # nothing written by a failed command
+
+
+def test_cli_decode_reads_what_encode_writes(vae, tmp_path, capsys):
+    """``ohra vae encode HAND > e.json; ohra vae decode e.json`` was 'expected shape (32,), got ()'."""
+    assert cli_main(["vae", "encode", "dex3_right"]) == 0
+    one = tmp_path / "one.json"
+    one.write_text(capsys.readouterr().out)
+    assert cli_main(["vae", "decode", str(one), "-o", str(tmp_path / "dex3.json")]) == 0
+    capsys.readouterr()
+    mu = json.loads(one.read_text())["dex3_right"]["mu"]
+    assert ohra.load_params(tmp_path / "dex3.json").to_json() == vae.decode(np.array(mu)).to_json()
+    assert cli_main(["vae", "encode", "dex3_right", "barrett_hand"]) == 0
+    two = tmp_path / "two.json"
+    two.write_text(capsys.readouterr().out)
+    assert cli_main(["vae", "decode", str(two)]) == 2
+    assert "holds the encodings of 2 hands (dex3_right, barrett_hand)" in capsys.readouterr().err
 
 
 def test_cli_train_small_run_and_resume(tmp_path, capsys):

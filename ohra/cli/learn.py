@@ -139,18 +139,40 @@ def _read_latent(text: str) -> np.ndarray:
         except (ValueError, OSError, EOFError) as exc:  # EOFError: an empty .npy
             raise OhraError(f"{p}: cannot read a latent ({exc or type(exc).__name__})") from None
         if isinstance(data, dict):
-            data = data.get("z", data.get("mu"))
+            data = _latent_of(data, p)
         try:
-            return np.asarray(data, dtype=float)
+            z = np.asarray(data, dtype=float)
         except (TypeError, ValueError):
             raise OhraError(f"{p}: expected a list of numbers") from None
+        return _finite(z, str(p))
     fields = text.replace(" ", "").split(",")
     if "" in fields[:-1] or (len(fields) > 1 and fields[0] == ""):  # "0.1,,0.2": a number left out, not a shorter latent
         raise OhraError(f"latent: an empty field in {text!r}")
     try:
-        return np.array([float(x) for x in fields if x != ""])
+        z = np.array([float(x) for x in fields if x != ""])
     except ValueError:
         raise OhraError(f"latent: expected comma-separated numbers, got {text!r}") from None
+    return _finite(z, "latent")
+
+
+def _latent_of(data: dict, path: Path) -> object:
+    """The latent a JSON object holds: its ``z`` or ``mu``, or the ``mu`` of the one hand ``ohra vae encode`` wrote."""
+    if "z" in data or "mu" in data:
+        return data.get("z", data.get("mu"))
+    encoded = {k: v for k, v in data.items() if isinstance(v, dict) and "mu" in v}
+    if len(encoded) == 1 and len(data) == 1:
+        return next(iter(encoded.values()))["mu"]
+    if encoded:
+        raise OhraError(f"{path}: holds the encodings of {len(encoded)} hands ({', '.join(encoded)}): decode one at a time "
+                        "(ohra vae encode HAND > one.json)")
+    raise OhraError(f"{path}: expected {{\"z\": [...]}}, {{\"mu\": [...]}} or what ohra vae encode writes for one hand, "
+                    f"got keys {sorted(data)}")
+
+
+def _finite(z: np.ndarray, where: str) -> np.ndarray:
+    if not np.all(np.isfinite(z)):
+        raise OhraError(f"{where}: every number must be finite, got {z.ravel()[~np.isfinite(z.ravel())][:3].tolist()}")
+    return z
 
 
 def _cmd_decode(args: argparse.Namespace) -> int:
@@ -159,8 +181,10 @@ def _cmd_decode(args: argparse.Namespace) -> int:
     for out in (args.output, args.urdf):  # both checked before either is written
         if out:
             check_output(out)
+    if args.output and args.urdf and Path(args.output).resolve() == Path(args.urdf).resolve():
+        raise OhraError(f"-o and --urdf name the same file ({args.output}): the URDF would overwrite the params JSON")
+    z = _read_latent(args.latent)  # before the model loads (seconds): a typo is told at once
     vae = _load(args.model)
-    z = _read_latent(args.latent)
     params = vae.decode(z)
     if isinstance(params, list):
         raise OhraError(f"latent: expected one vector of {vae.latent_dim} numbers, got shape {z.shape} (decode "
