@@ -104,3 +104,19 @@ def test_candidates_too_deep_in_the_body_are_not_simulated(tmp_path):
     synthesize(hands, [obj], tmp_path / "b", SynthSettings(grasps_per_object=2, seed=1, max_penetration_m=None), progress=False)
     sh = GraspDataset(tmp_path / "b").load_shard("leap_2200", "box")
     assert not sh["prefiltered"].any() and np.all(np.isfinite(sh["post"][sh["solver_success"]]))
+
+
+def test_the_summary_names_the_trials_that_ran_and_only_this_runs_hands(tmp_path, capsys):
+    """With --robust-trials 0 the summary claimed grasps 'also passed the robustness trials'; a second hand
+    synthesised into the same folder reprinted the first hand's line as if just made."""
+    from ohra.cli.synth import main
+
+    out = tmp_path / "o"
+    base = ["--objects", "builtin:box", "--grasps-per-object", "1", "--robust-trials", "0", "-o", str(out), "--quiet"]
+    assert main(["--hand", "leap_3303", *base]) == 0
+    text = capsys.readouterr().out
+    assert "no robustness trials (--robust-trials 0)" in text and "also passed the robustness trials" not in text
+    assert main(["--hand", "leap_2220", *base, "--resume"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert [ln.split(":")[0] for ln in lines if " solves, " in ln] == ["leap_2220"]
+    assert lines[-1].endswith("also holds leap_3303 from earlier runs (ohra data info " + str(out) + " sums the folder)")

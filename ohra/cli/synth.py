@@ -104,21 +104,30 @@ def run(args: argparse.Namespace) -> int:
         settings = replace(settings, robustness=replace(settings.robustness, trials=args.robust_trials))
     man = synthesize(hands, objects, out, settings, workers=args.workers, resume=args.resume, progress=not args.quiet,
                      overwrite=args.overwrite, backend=args.backend, address=args.address)
-    print_summary(man, out, filtered=not args.no_filter)
+    print_summary(man, out, filtered=not args.no_filter, only=[h[0] for h in hands])
     return 0
 
 
-def print_summary(man: dict, out: Path, filtered: bool = True) -> None:
-    """One line per hand (candidates, converged, kept, pass rate) and one per pair where nothing converged."""
+def print_summary(man: dict, out: Path, filtered: bool = True, only: list[str] | None = None) -> None:
+    """One line per hand (candidates, converged, kept, pass rate) and one per pair where nothing converged;
+    ``only``: the hands this run synthesised (the folder may hold others from earlier runs, named in one line)."""
+    trials = int(man.get("settings", {}).get("robustness", {}).get("trials", 1))
+    others = [n for n in man["hands"] if only is not None and n not in only]
     for name, entry in man["hands"].items():
+        if name in others:
+            continue
         c = entry["counts"]
         if filtered:
             rate = c["grasps"] / max(c["solved"], 1)
+            robust = (f"{c['grasps']} also passed the robustness trials" if trials > 0 else
+                      "no robustness trials (--robust-trials 0)")
             print(f"{name}: {c['candidates']} solves, {c['solved']} converged, {c.get('sim_passed', c['grasps'])} passed the filter, "
-                  f"{c['grasps']} also passed the robustness trials (kept {rate:.0%} of converged) -> {out.resolve()}")
+                  f"{robust} (kept {rate:.0%} of converged) -> {out.resolve()}")
         else:
             print(f"{name}: {c['candidates']} solves, {c['solved']} converged, {c['grasps']} kept without the filter "
                   f"(not simulated) -> {out.resolve()}")
         for key, sh in entry["shards"].items():
             if sh.get("diagnosis"):
                 print(f"  {key}: {sh['diagnosis']}")
+    if others:
+        print(f"{out.resolve()} also holds {', '.join(others)} from earlier runs (ohra data info {out} sums the folder)")
