@@ -112,8 +112,18 @@ def test_check_of_a_spec_yaml_checks_every_form_it_declares(capsys):
 
     spec = registry.spec_path("inspire_hand_right")
     assert main(["hand", "check", str(spec)]) == 0
-    forms = [l.split()[1] for l in capsys.readouterr().out.splitlines() if l.split() and l.split()[-1] == "ok"]
+    out = capsys.readouterr().out
+    forms = [l.split()[1] for l in out.splitlines() if l.split() and l.split()[-1] == "ok"]
     assert forms == ["base", "extended"]
+    assert "1 hand (2 hand forms) rendered" in out  # it said "2 hands" of one hand's two forms
+
+
+def test_hands_option_given_a_spec_file_names_the_folder_it_wants(tmp_path, capsys):
+    spec = tmp_path / "mine.yaml"
+    spec.write_text("name: mine\n")
+    assert main(["--hands", str(spec), "hand", "list"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"got the file {spec}" in err and f"--hands {tmp_path}" in err
 
 
 def test_check_without_all_hides_only_leap_variants_and_counts_them(capsys):

@@ -237,7 +237,9 @@ def _cmd_check(args: argparse.Namespace) -> int:
     if len(shown) < len(results):
         print(f"... and {len(results) - len(shown)} more LEAP variants (--all shows them)")
     total = sum(r.seconds for r in results)
-    print(f"{len(results)} hands rendered and loaded in Pinocchio and PyBullet in {total:.2f} s; {len(bad)} failed")
+    hands = len({r.name for r in results})
+    forms = f" ({len(results)} hand forms)" if len(results) != hands else ""
+    print(f"{hands} hand{'' if hands == 1 else 's'}{forms} rendered and loaded in Pinocchio and PyBullet in {total:.2f} s; {len(bad)} failed")
     return 1 if bad else 0
 
 

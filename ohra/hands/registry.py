@@ -41,6 +41,9 @@ def add_hands_path(folder: str | Path) -> None:
     processes it starts (worker pools, vectorised environments): the folder is appended to
     ``$OHRA_HANDS_PATH`` too, which spawned and forkserver children read."""
     p = Path(folder).expanduser().resolve()
+    if p.is_file():
+        raise HandNotFoundError(f"--hands takes the folder that holds your spec YAMLs, got the file {p} (--hands {p.parent}; "
+                                "or give the spec itself where a hand is asked for)")
     if not p.is_dir():
         raise HandNotFoundError(f"hand folder not found: {p}")
     if p not in _added:

@@ -268,7 +268,8 @@ def train(config: TrainConfig = TrainConfig(), run_dir: str | Path | None = None
 
     cfg = config
     if cfg.samples < cfg.batch_size:
-        raise CheckpointError(f"samples ({cfg.samples}) must be at least one batch ({cfg.batch_size})")
+        raise CheckpointError(f"samples ({cfg.samples}) must be at least one batch ({cfg.batch_size}; ohra train vae: "
+                              "--samples, --batch-size)")
     run = Path(run_dir) if run_dir is not None else None
     if run is not None:
         check_output(run, folder=True)  # before the minutes of training, not at the first write
