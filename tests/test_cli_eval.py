@@ -179,3 +179,21 @@ def test_a_sampled_grasp_file_says_which_hand_and_form_it_was_made_for(tmp_path,
     assert rc == 0 and forms[-1] == "base" and "note" not in err
     rc, _, err = _run(capsys, out, "--hand", "allegro_hand_left", "--object", "builtin:box", "--form", "extended")
     assert rc == 0 and forms[-1] == "extended" and "sampled for the base form of allegro_hand_left" in err
+
+
+def test_a_dataset_shard_evaluated_on_another_hand_or_object_says_so(tmp_path, capsys):
+    """A shard's manifest records its hand and object: box grasps scored on a sphere read as a plausible 50 %
+    with no word that they were made for another object."""
+    from ohra.cli.synth import main as synth
+
+    assert synth(["--hand", "leap_3303", "--objects", "builtin:box", "--grasps-per-object", "1", "--robust-trials", "0",
+                  "--no-filter", "-o", str(tmp_path / "d"), "--quiet"]) == 0
+    shard = str(next((tmp_path / "d" / "leap_3303").glob("box-*.npz")))
+    capsys.readouterr()
+    assert main(["eval", shard, "--hand", "leap_3303", "--object", "builtin:box", "--quiet"]) == 0
+    assert "note" not in capsys.readouterr().err
+    assert main(["eval", shard, "--hand", "leap_3303", "--object", "builtin:sphere", "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert f"{shard} holds grasps of box (mesh " in err and "evaluating them on --object builtin:sphere" in err
+    assert main(["eval", shard, "--hand", "leap_2220", "--object", "builtin:box", "--quiet"]) == 0
+    assert f"{shard} was synthesised for leap_3303; evaluating it on --hand leap_2220" in capsys.readouterr().err

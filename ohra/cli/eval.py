@@ -118,8 +118,28 @@ def load_grasp_file(path: str | Path, key: str | None = None) -> tuple[np.ndarra
             key = "grasps" if "grasps" in names else (names[0] if len(names) == 1 else None)
         if key is None or key not in names:
             raise GraspError(f"{path}: no array {key or 'grasps'!r} (arrays: {', '.join(names) or 'none'}); use --key")
-        info = {k: str(data[k]) for k in ("hand", "form", "model") if k in names and data[k].ndim == 0}
-        return np.asarray(data[key]), info
+        info = {k: str(data[k]) for k in ("hand", "form", "model", "object_name", "object_hash") if k in names and data[k].ndim == 0}
+        return np.asarray(data[key]), info or _shard_info(path)
+
+
+def _shard_info(path: Path) -> dict[str, str]:
+    """What a dataset shard (``DIR/HAND/OBJECT-HASH.npz``) was made for, from ``DIR/manifest.json``: hand name
+    and form, object name and mesh hash; empty for any other file."""
+    import json
+
+    manifest = path.parent.parent / "manifest.json"
+    if not manifest.is_file():
+        return {}
+    try:
+        man = json.loads(manifest.read_text())
+        entry = man["hands"][path.parent.name]
+        shard = next(sh for sh in entry["shards"].values() if Path(sh["file"]).name == path.name)
+        obj = man["objects"][shard["object"]]
+    except (ValueError, KeyError, TypeError, StopIteration, OSError):
+        return {}  # not a shard this manifest lists: nothing to compare
+    form = "extended" if "finger_radii" in entry.get("params", {}) else "base"
+    return {"hand": path.parent.name, "form": form, "object_name": str(obj["name"]), "object_hash": str(obj["mesh_hash"]),
+            "made": "synthesised"}
 
 
 def run(args: argparse.Namespace) -> int:
@@ -150,17 +170,17 @@ def run(args: argparse.Namespace) -> int:
 
         told = resolve_hand(args.hand, args.form)  # a file may hold the same hand under another reference
         if told.name != made["hand"]:
-            print(f"ohra: note: {args.grasps} was sampled for {made['hand']}; evaluating it on --hand {args.hand}",
+            print(f"ohra: note: {args.grasps} was {made.get('made', 'sampled')} for {made['hand']}; evaluating it on --hand {args.hand}",
                   file=sys.stderr)
         elif made.get("form") and told.form != made["form"]:
-            print(f"ohra: note: {args.grasps} was sampled for the {made['form']} form of {made['hand']}; --hand "
+            print(f"ohra: note: {args.grasps} was {made.get('made', 'sampled')} for the {made['form']} form of {made['hand']}; --hand "
                   f"{args.hand} gives its {told.form} form, evaluated as given (--hand {made['hand']} --form "
                   f"{made['form']} evaluates the hand the grasps were made for)", file=sys.stderr)
     if made.get("hand") == str(args.hand) and made.get("form"):
         if args.form is None:
             args.form = made["form"]  # the canonical hand the grasps were sampled for
         elif args.form != made["form"]:
-            print(f"ohra: note: {args.grasps} was sampled for the {made['form']} form of {args.hand}; evaluating on the "
+            print(f"ohra: note: {args.grasps} was {made.get('made', 'sampled')} for the {made['form']} form of {args.hand}; evaluating on the "
                   f"{args.form} form as --form asks", file=sys.stderr)
     if args.limit is not None:
         grasps = grasps[: args.limit]
@@ -168,6 +188,9 @@ def run(args: argparse.Namespace) -> int:
     if len(objs) != 1:
         raise ObjectError(f"--object must name one object, {args.object!r} names {len(objs)}")
     obj = objs[0]
+    if made.get("object_hash") and made["object_hash"] != obj.mesh_hash:
+        print(f"ohra: note: {args.grasps} holds grasps of {made.get('object_name', 'another object')} (mesh {made['object_hash']}); "
+              f"evaluating them on --object {args.object} (mesh {obj.mesh_hash})", file=sys.stderr)
     from ohra.objects.resolve import warn_if_ungraspable
 
     warn_if_ungraspable(obj)
