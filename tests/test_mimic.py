@@ -390,3 +390,14 @@ def test_hand_compare_checks_its_options_first_and_shows_missing_meshes(tmp_path
     assert main(["hand", "compare", str(spec), "--no-surface", "--samples", "3"]) == 0
     err = capsys.readouterr().err
     assert "1 mesh file(s) not found" in err and "l2.stl" in err
+
+
+@pytest.mark.parametrize("rpy, off", [("0, 1.0, 0", 57), ("0, -1.0, 0", 57), ("1.2, 0, 0", 69)])
+def test_a_palm_frame_tilted_past_45_degrees_is_refused(tmp_path, no_hands_root, rpy, off):
+    """A roll or pitch in palm_origin passed (only a yaw or a reversed +z were caught) and parsed into centimetres
+    of fingertip error; within 45 degrees it is the parse's business (the registered hands: within 32)."""
+    spec = _toy(tmp_path, MIMIC_SPEC.replace("palm_origin: [0, 0, 0, 0, 0, 0]", f"palm_origin: [0, 0, 0, {rpy}]"))
+    with pytest.raises(SpecError, match=rf"point {off} deg away from \+z of the palm frame .*palm_origin is tilted"):
+        parse(spec, "extended", fit_params=False)
+    ok = _toy(tmp_path, MIMIC_SPEC.replace("palm_origin: [0, 0, 0, 0, 0, 0]", "palm_origin: [0, 0, 0, 0, 0.7, 0]"), "ok.yaml")
+    assert parse(ok, "extended", fit_params=False).params is not None  # 40 deg: parsed

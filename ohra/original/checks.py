@@ -29,6 +29,7 @@ from ohra.original.spec import HandSpec
 
 MIN_MID = 0.05  # rad: a flexion range whose middle is this close to 0 says nothing about its sign
 CURL_COS = float(np.cos(np.radians(45.0)))  # a finger curling more than 45 deg away from +x (in the x-y plane): frame turned
+TILT_COS = float(np.cos(np.radians(45.0)))  # most fingers more than 45 deg off +z: palm_origin tilted (roll / pitch)
 
 
 def _flexion_slots(m: Measurement, f: str) -> list[str]:
@@ -76,6 +77,16 @@ def check_palm_frame(m: Measurement, spec: HandSpec, form: str) -> list[str]:
     if fingers and len(back) > len(fingers) / 2:
         raise SpecError(f"{where}: the fingers ({', '.join(back)}) point toward -z of the palm frame: palm_origin "
                         f"is rotated (z must point from the wrist toward the fingertips)")
+    tilted = [f for f in fingers if f not in back and float(m.fingers[f].z[2]) < TILT_COS]
+    if fingers and len(tilted) > len(fingers) / 2:
+        # between "along +z" and "toward -z": a roll or pitch in palm_origin; the parse went through with fingertip
+        # errors of centimetres (registered hands: every finger within 32 deg of +z, most within 13)
+        d = np.mean([m.fingers[f].z for f in tilted], axis=0)
+        off = float(np.degrees(np.arccos(np.clip(d[2] / max(float(np.linalg.norm(d)), 1e-12), -1.0, 1.0))))
+        toward = ", ".join(f"{'+' if d[k] > 0 else '-'}{'xy'[k]}" for k in (0, 1) if abs(d[k]) > 0.25 * np.linalg.norm(d[:2]))
+        raise SpecError(f"{where}: the fingers ({', '.join(tilted)}) point {off:.0f} deg away from +z of the palm frame "
+                        f"(toward {toward}): palm_origin is tilted (its roll or pitch); +z must point from the wrist along "
+                        "the fingers")
     ahead = [(f, float(m.fingers[f].p[m.fingers[f].slots[0]][2])) for f in fingers if m.fingers[f].slots]
     below = [(f, z) for f, z in ahead if z < 0]
     if ahead and len(below) > len(ahead) / 2:
