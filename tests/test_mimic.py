@@ -401,3 +401,27 @@ def test_a_palm_frame_tilted_past_45_degrees_is_refused(tmp_path, no_hands_root,
         parse(spec, "extended", fit_params=False)
     ok = _toy(tmp_path, MIMIC_SPEC.replace("palm_origin: [0, 0, 0, 0, 0, 0]", "palm_origin: [0, 0, 0, 0, 0.7, 0]"), "ok.yaml")
     assert parse(ok, "extended", fit_params=False).params is not None  # 40 deg: parsed
+
+
+def test_hand_parse_of_a_spec_with_only_an_extended_form_parses_that_form(tmp_path, no_hands_root, capsys):
+    """It failed with "has no 'base' form" where info and render take the spec's own form."""
+    from ohra.cli.main import main
+
+    assert main(["hand", "parse", str(_toy(tmp_path)), "--no-fidelity"]) == 0
+    assert "finger_radii" in json.loads(capsys.readouterr().out)
+
+
+def test_eval_original_takes_a_spec_file_and_names_why_a_variant_cannot(tmp_path, no_hands_root, capsys):
+    """--original took registered names only: a spec path, accepted without it, was an unknown hand."""
+    from ohra.cli.main import main
+    from ohra.rotations import pose_to_grasp
+
+    T = np.eye(4)
+    T[:3, 3] = (-0.05, 0.0, -0.1)
+    g = tmp_path / "g.npy"
+    np.save(g, pose_to_grasp(T, np.zeros(22))[None])
+    spec = str(_toy(tmp_path))
+    assert main(["eval", str(g), "--hand", spec, "--object", "builtin:box", "--original", "--quiet"]) == 0
+    assert f"{spec} on box: " in capsys.readouterr().out
+    assert main(["eval", str(g), "--hand", "leap_3303", "--object", "builtin:box", "--original", "--quiet"]) == 2
+    assert "leap_3303 is a LEAP variant, a canonical hand with no original URDF" in capsys.readouterr().err

@@ -253,6 +253,8 @@ def _cmd_parse(args: argparse.Namespace) -> int:
     if args.output:
         check_output(args.output)  # before the parse and the fit (seconds), not after
     spec = load_spec(args.spec)
+    if not args.extended and "base" not in spec.forms and "extended" in spec.forms:
+        args.extended = True  # the spec's only form, as info and render take it (it was "has no 'base' form")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         res = parse(spec, _form(args), fit_params=args.fit)
