@@ -18,7 +18,7 @@ from ohra import cli
 from ohra.canonical.couplings import Coupling, read_couplings
 from ohra.canonical.kinematics import HandModel
 from ohra.canonical.params import JOINT_INDEX, load_params
-from ohra.errors import SpecError
+from ohra.errors import ParseError, SpecError
 from ohra.hands import get_couplings, get_hand, registry
 from ohra.original.fidelity import compare
 from ohra.original.parse import ParseWarning, parse
@@ -425,3 +425,19 @@ def test_eval_original_takes_a_spec_file_and_names_why_a_variant_cannot(tmp_path
     assert f"{spec} on box: " in capsys.readouterr().out
     assert main(["eval", str(g), "--hand", "leap_3303", "--object", "builtin:box", "--original", "--quiet"]) == 2
     assert "leap_3303 is a LEAP variant, a canonical hand with no original URDF" in capsys.readouterr().err
+
+
+def test_a_urdf_in_millimetres_is_named_as_such(tmp_path, no_hands_root):
+    """'palm_radius = 44.76 is outside radius bounds (m)' gave no hint that the URDF's lengths are millimetres."""
+    import re
+
+    def mm(match):
+        return f'{match.group(1)}="' + " ".join(f"{1000 * float(v):g}" for v in match.group(2).split()) + '"'
+
+    urdf = re.sub(r'\b(xyz|size|radius|length)="([^"]*)"', mm, MIMIC_URDF.replace(
+        '<mimic joint="a" multiplier="1.2" offset="-0.05"/>', ""))
+    (tmp_path / "toy_mm.urdf").write_text(urdf)
+    spec = tmp_path / "toy_mm.yaml"
+    spec.write_text(MIMIC_SPEC.replace("urdf: toy_mimic.urdf", "urdf: toy_mm.urdf"))
+    with pytest.raises(ParseError, match=r"m from the palm frame: is toy_mm\.urdf written in millimetres\?"):
+        parse(spec, "extended", fit_params=False)

@@ -20,6 +20,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from ohra.canonical.params import FINGER_GAP, BaseParams, Params
 from ohra.errors import ParamsError, ParseError, SpecError
 from ohra.canonical.couplings import Coupling, describe
@@ -176,7 +178,11 @@ def parse(
     try:
         init = initial_base(m, spec, form) if form == "base" else initial_extended(m, spec, form)
     except ParamsError as exc:
-        raise ParseError(f"{spec.source}: measured {form} parameters are invalid: {exc}") from None
+        pts = [np.asarray(v, dtype=float) for fm in m.fingers.values() for v in fm.p.values()]
+        size = max((float(np.linalg.norm(v)) for v in pts), default=0.0)
+        hint = (f" (the finger joints lie up to {size:.1f} m from the palm frame: is {spec.urdf} written in millimetres? "
+                "URDF lengths are metres)" if size > 1.0 else "")
+        raise ParseError(f"{spec.source}: measured {form} parameters are invalid: {exc}{hint}") from None
     params: Params = init
     fr = None
     if fit_params:
