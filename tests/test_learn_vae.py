@@ -337,7 +337,7 @@ def test_cli_bad_input_is_one_line_and_exit_2(vae, tmp_path, capsys):
     d["finger_radii"] = [r * (1.0 + 0.1 * i) for i, r in enumerate(d["finger_radii"])]
     wrong_form = tmp_path / "ext.json"
     wrong_form.write_text(json.dumps(d))
-    cases.append((["vae", "encode", str(wrong_form)], "base"))
+    cases.append((["vae", "encode", str(wrong_form)], "the morphology VAE works on base-form params"))  # not "ask for the extended form"
     (tmp_path / "empty.npy").write_bytes(b"")
     (tmp_path / "afile").write_text("x")
     z = ",".join(["0.1"] * vae.latent_dim)

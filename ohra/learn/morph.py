@@ -59,6 +59,8 @@ def resolve_hand(hand: HandLike) -> BaseParams:
         return as_base(hand)
     from ohra.hands import get_hand
 
+    if Path(str(hand)).suffix == ".json":  # a file's own form: as_base names the VAE's need if it has no base form
+        return as_base(get_hand(str(hand)))
     return as_base(get_hand(str(hand), "base"))
 
 
