@@ -312,6 +312,17 @@ def test_tip_moves_measure_fingertip_moves_and_skip_structure_changes():
     assert np.allclose(tip_moves(np.stack([v, longer, longer, fewer, right])), [0.01, 0.0, 0.0, 0.0])
 
 
+@pytest.mark.assets
+def test_an_endpoint_given_as_a_spec_file_is_labelled_by_its_hand(vae, hands_dir, tmp_path):
+    """The strip and scene named a spec endpoint by its file's stem ('original three' for myhand3)."""
+    spec = tmp_path / "copied_under_another_name.yaml"
+    spec.write_text(registry.spec_path("dex3_right").read_text())
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        it = vae.interpolate(str(spec), "shadow_hand_right", 2, spacing="even")
+    assert it.endpoints == ("dex3_right", "shadow_hand_right")
+
+
 # -- CLI --------------------------------------------------------------------------------------------
 def test_cli_interpolate_writes_urdfs_png_and_html(vae, tmp_path, capsys):
     rc = cli_main(["vae", "interpolate", "dex3_right", "shadow_hand_right", "-n", "4", "-o", str(tmp_path)])

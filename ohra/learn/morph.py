@@ -64,6 +64,15 @@ def resolve_hand(hand: HandLike) -> BaseParams:
     return as_base(get_hand(str(hand), "base"))
 
 
+def _label(hand: str) -> str:
+    """How a strip or scene names an endpoint: a spec YAML by its hand's name, a file by its stem, a name as given."""
+    if Path(hand).suffix in (".yaml", ".yml") and Path(hand).is_file():
+        from ohra.original.spec import load_spec
+
+        return load_spec(hand).name
+    return Path(hand).stem
+
+
 @dataclass
 class VAEBundle:
     """A trained VAE in eval mode with its standardiser, training configuration and metrics."""
@@ -235,7 +244,7 @@ class VAEBundle:
         assert isinstance(params, list)
         names = [str(a) if isinstance(a, (str, Path)) else "hand_a", str(b) if isinstance(b, (str, Path)) else "hand_b"]
         return Interpolation(alphas, z, params, [render(p, robot_name=f"vae_interp_{i}") for i, p in enumerate(params)],
-                             tuple(Path(x).stem for x in names), (resolve_hand(a), resolve_hand(b)))
+                             tuple(_label(x) for x in names), (resolve_hand(a), resolve_hand(b)))
 
 
 SPACINGS = ("geodesic", "arc", "even")
