@@ -147,7 +147,7 @@ def test_vector_of_wrong_length():
 def test_non_finite_value_named_with_index(shadow_base, bad):
     xyz = shadow_base.finger_xyz.copy()
     xyz[2, 1] = bad
-    with pytest.raises(ParamsError, match=r"'finger_xyz'\[7\] is not finite"):
+    with pytest.raises(ParamsError, match=r"'finger_xyz'\[2\]\[1\] is not finite"):  # the index as JSON writes it, not [7]
         BaseParams.from_dict(_with(shadow_base, finger_xyz=xyz))
 
 
@@ -156,7 +156,7 @@ def test_negative_radius_and_length(shadow_base, allegro_ext):
         BaseParams.from_dict(_with(shadow_base, finger_radius=-0.01))
     fl = shadow_base.finger_lengths.copy()
     fl[1, 2] = -0.02
-    with pytest.raises(ParamsError, match=r"'finger_lengths'\[5\] = -0.02 is outside length bounds"):
+    with pytest.raises(ParamsError, match=r"'finger_lengths'\[1\]\[2\] = -0.02 is outside length bounds"):
         BaseParams.from_dict(_with(shadow_base, finger_lengths=fl))
     radii = allegro_ext.finger_radii.copy()
     radii[1] = -0.001

@@ -131,17 +131,23 @@ class _Checker:
     def __init__(self, params: "Params"):
         self.params = params
 
+    @staticmethod
+    def _at(key: str, arr: np.ndarray, flat_index: int) -> str:
+        """``'finger_xyz'[1][2]``: the index as the key is written in JSON and spec overrides (not ``[5]``)."""
+        shape = np.shape(arr) or (1,)
+        return f"{key!r}" + "".join(f"[{int(k)}]" for k in np.unravel_index(flat_index, shape))
+
     def finite(self, key: str, arr: np.ndarray) -> None:
         bad = np.flatnonzero(~np.isfinite(np.asarray(arr, dtype=float).reshape(-1)))
         if bad.size:
-            raise ParamsError(f"{key!r}[{int(bad[0])}] is not finite ({np.asarray(arr).reshape(-1)[bad[0]]})")
+            raise ParamsError(f"{self._at(key, arr, int(bad[0]))} is not finite ({np.asarray(arr).reshape(-1)[bad[0]]})")
 
     def range(self, key: str, arr: np.ndarray, lo: float, hi: float, what: str) -> None:
         flat = np.asarray(arr, dtype=float).reshape(-1)
         bad = np.flatnonzero((flat < lo) | (flat > hi))
         if bad.size:
             i = int(bad[0])
-            raise ParamsError(f"{key!r}[{i}] = {flat[i]:g} is outside {what} [{lo:g}, {hi:g}]")
+            raise ParamsError(f"{self._at(key, arr, i)} = {flat[i]:g} is outside {what} [{lo:g}, {hi:g}]")
 
 
 def _check_limits(chk: _Checker, lowers: np.ndarray, uppers: np.ndarray) -> None:
