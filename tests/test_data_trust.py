@@ -222,3 +222,18 @@ def test_the_ray_backend_without_ray_is_refused_before_the_output_folder_is_made
     with pytest.raises(OhraError, match=r"the ray backend needs Ray: pip install -e \"\.\[ray\]\""):
         synthesize(HAND, [ObjectModel.builtin("box")], tmp_path / "out", FAST, backend="ray", progress=False)
     assert not (tmp_path / "out").exists()  # it was left holding only its lock file
+
+
+def test_a_ray_address_without_a_cluster_is_one_line(monkeypatch):
+    """``--address auto`` with no cluster running was Ray's ConnectionError traceback, exit 1."""
+    ray = pytest.importorskip("ray", reason="the ray extra is not installed")
+    from ohra.data import backends
+    from ohra.errors import OhraError
+
+    def no_cluster(*a, **k):
+        raise ConnectionError("Could not find any running Ray instance.\nmore lines")
+
+    monkeypatch.setattr(ray, "is_initialized", lambda: False)
+    monkeypatch.setattr(ray, "init", no_cluster)
+    with pytest.raises(OhraError, match=r"--address auto: no Ray cluster reachable \(Could not find any running Ray instance\.\)"):
+        list(backends._ray(abs, [1], 1, "auto"))

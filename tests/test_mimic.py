@@ -215,6 +215,23 @@ def test_show_fails_on_a_bad_name_before_starting_meshcat(monkeypatch, capsys):
     assert len(err) == 1 and "unknown hand 'no_such_hand'" in err[0]
 
 
+
+def test_show_without_a_terminal_stops_the_viewer_instead_of_a_traceback(monkeypatch, capsys):
+    """Piped or under CI, input() met end of file: an EOFError traceback after the URL."""
+    import io
+
+    from ohra import viz
+
+    class Vis:
+        def url(self):
+            return "http://127.0.0.1:7000/static/"
+
+    monkeypatch.setattr(viz, "new_visualizer", Vis)
+    monkeypatch.setattr(viz, "show_hand", lambda *a, **k: None)
+    monkeypatch.setattr("sys.stdin", io.StringIO(""))
+    assert cli.main(["hand", "show", "leap_3303"]) == 0
+    assert "stdin is not a terminal: the viewer stops now" in capsys.readouterr().err
+
 # -- the Inspire hand (../shared) ------------------------------------------------------------------
 @pytest.mark.assets
 @pytest.mark.parametrize("form, target", [("extended", 2.0), ("base", 8.0)])

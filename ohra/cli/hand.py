@@ -333,5 +333,12 @@ def _cmd_show(args: argparse.Namespace) -> int:  # pragma: no cover - starts a s
     viz.show_hand(vis, ref, ref.form, q=q, original=args.original)
     print(vis.url())
     if not args.no_wait:
-        input("press Enter to stop the viewer ")
+        if not sys.stdin.isatty():  # piped, CI, nohup: input() had no line to read (an EOFError traceback)
+            print("ohra: note: stdin is not a terminal: the viewer stops now (keep it open from a terminal; "
+                  "--no-wait says so)", file=sys.stderr)
+            return 0
+        try:
+            input("press Enter to stop the viewer ")
+        except EOFError:
+            pass
     return 0

@@ -29,7 +29,7 @@ HELP_DEFAULTS = {"hand": "leap_hand_right", "urdf": "canonical", "object": "cube
 
 def _env_args(p: argparse.ArgumentParser) -> None:
     d = HELP_DEFAULTS
-    p.add_argument("--hand", help=f"registered hand, leap_XXXX or params JSON (default {d['hand']})")
+    p.add_argument("--hand", help=f"registered hand, leap_XXXX, hand spec YAML or params JSON (default {d['hand']})")
     p.add_argument("--urdf", choices=("canonical", "original"), help=f"default {d['urdf']}")
     p.add_argument("--inertials", choices=("capsule", "original"),
                    help="canonical URDF: finger masses of the template's capsules (default) or of the original URDF")

@@ -72,7 +72,11 @@ def _ray(fn: Callable, tasks: list, workers: int, address: str | None) -> Iterab
     started = not ray.is_initialized()
     if started:
         if address:
-            ray.init(address=address, log_to_driver=False)
+            try:
+                ray.init(address=address, log_to_driver=False)
+            except ConnectionError as exc:  # no cluster there: one line, not Ray's traceback
+                raise OhraError(f"--address {address}: no Ray cluster reachable ({str(exc).splitlines()[0][:200]}); start one "
+                                "with `ray start --head`, or leave --address out for a local cluster") from None
         else:
             ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
     try:
