@@ -74,32 +74,11 @@ def eval_hand(name: str, original: bool = False, form: str | None = None, inerti
     from ohra.sim.hands import original_finger_masses
 
     if original:
-        from ohra.hands.registry import registered_hands
-
-        if name in registered_hands():
-            return SimHand.registered_original(name, form=form)
-        return _file_original(name, form)  # a spec YAML (or a params JSON with its spec): its URDF through its action map
+        return SimHand.original_of(name, form)  # a registered name, a spec YAML or a params JSON with its spec
     hand = SimHand.from_params(get_hand(name, form), name=name, couplings=get_couplings(name))
     if inertials == "original":
         hand = hand.with_finger_masses(original_finger_masses(name, form))
     return hand
-
-
-def _file_original(hand: str, form: str | None):
-    """The original URDF of a hand given as a file, driven through the action map of the form it resolves to."""
-    from ohra.hands.resolve import resolve_hand
-    from ohra.sim import SimHand
-    from ohra.sim.hands import _absolute_text
-
-    from ohra.errors import HandNotFoundError
-
-    ref = resolve_hand(hand, form)
-    if ref.kind == "variant":
-        raise HandNotFoundError(f"--original: {hand} is a LEAP variant, a canonical hand with no original URDF")
-    ref.require_spec("--original")  # a params JSON without its spec: names what to pass
-    oh = ref.original()
-    lo, up = np.asarray(ref.params.joint_lowers, float), np.asarray(ref.params.joint_uppers, float)
-    return SimHand.from_original(_absolute_text(oh), ref.action_map(), name=f"{ref.name}:original", canon_limits=(lo, up))
 
 
 def partial_path(output: str | Path) -> Path:

@@ -244,11 +244,10 @@ def _cmd_check(args: argparse.Namespace) -> int:
 
 
 def _cmd_parse(args: argparse.Namespace) -> int:
+    from ohra.io import check_output
     from ohra.original.fidelity import compare
     from ohra.original.parse import parse
     from ohra.original.spec import load_spec
-
-    from ohra.io import check_output
 
     if args.output:
         check_output(args.output)  # before the parse and the fit (seconds), not after

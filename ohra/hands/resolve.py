@@ -63,7 +63,7 @@ class HandRef:
     def parse_result(self):
         """A :class:`~ohra.original.parse.ParseResult` for these params (measured on the original)."""
         from ohra.original.measure import measure
-        from ohra.original.parse import ParseResult
+        from ohra.original.parse import ParseResult, override_notes
 
         if self.result is not None and self.result.params is self.params:
             return self.result
@@ -72,8 +72,7 @@ class HandRef:
             warnings.simplefilter("ignore")  # the measurement's notes are kept below
             _keep_mesh_warnings()
             m = measure(self.original(), sp, self.form)
-        keys = self.params.to_dict()
-        notes = list(m.notes) + [f"override {o.key} = {o.value}: {o.reason}" for o in sp.overrides_for(self.form) if o.name in keys]
+        notes = list(m.notes) + override_notes(sp, self.params)
         return ParseResult(self.params, self.form, sp, m, self.params, None, notes)
 
 

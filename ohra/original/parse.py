@@ -100,6 +100,12 @@ def apply_overrides(params: Params, spec: HandSpec, form: str) -> Params:
         raise SpecError(f"{spec.source}: overrides make invalid {form} params: {exc}") from None
 
 
+def override_notes(spec: HandSpec, params: Params) -> list[str]:
+    """A note per override applied to ``params`` (those of its form whose key it has)."""
+    keys = {k for k, _ in type(params).KEYS}
+    return [f"override {o.key} = {o.value}: {o.reason}" for o in spec.overrides_for(params.form) if o.name in keys]
+
+
 @dataclass
 class ParseResult:
     """What :func:`parse` returns: final params, the initial estimate, the measurement, fit and notes."""
@@ -192,8 +198,7 @@ def parse(
         params = rounded(init)
     params = _separate_fingers(params, m.action_map, m.notes)
     params = apply_overrides(params, spec, form)
-    keys = params.to_dict()
-    notes = list(m.notes) + [f"override {o.key} = {o.value}: {o.reason}" for o in spec.overrides_for(form) if o.name in keys]
+    notes = list(m.notes) + override_notes(spec, params)
     notes += [f"coupling: {line}" for line in describe(m.couplings)]
     return ParseResult(params, form, spec, m, init, fr, notes)
 

@@ -214,9 +214,33 @@ class SimHand:
         oh = registry.load_original(name)
         params = get_hand(name, form)
         am = sp.action_map(params.form, oh)  # the OriginalHand: its mimic couplings come along
+        return cls._original_of(oh, am, params, name)
+
+    @classmethod
+    def original_of(cls, hand: str, form: str | None = None) -> "SimHand":
+        """The original URDF of any hand with a known original: a registered name (:meth:`registered_original`), a
+        spec YAML, or a params JSON with its spec; driven through the action map of the form it resolves to.
+
+        Raises:
+            HandNotFoundError: a LEAP variant (a canonical hand only) or a params JSON without its spec.
+        """
+        from ohra.errors import HandNotFoundError
+        from ohra.hands.registry import registered_hands
+        from ohra.hands.resolve import resolve_hand
+
+        if hand in registered_hands():
+            return cls.registered_original(hand, form)
+        ref = resolve_hand(hand, form)
+        if ref.kind == "variant":
+            raise HandNotFoundError(f"--original: {hand} is a LEAP variant, a canonical hand with no original URDF")
+        ref.require_spec("--original")  # a params JSON without its spec: names what to pass
+        return cls._original_of(ref.original(), ref.action_map(), ref.params, ref.name)
+
+    @classmethod
+    def _original_of(cls, oh, action_map, params: Params, name: str) -> "SimHand":
         lo = np.asarray(params.joint_lowers, float)
         up = np.asarray(params.joint_uppers, float)
-        return cls.from_original(_absolute_text(oh), am, name=f"{name}:original", canon_limits=(lo, up))
+        return cls.from_original(_absolute_text(oh), action_map, name=f"{name}:original", canon_limits=(lo, up))
 
 
 def _absolute_text(oh) -> str:

@@ -181,23 +181,24 @@ def refine_grasps(hand, obj, grasps: np.ndarray, settings: RefineSettings | None
         act = np.flatnonzero((E > 0) & (step > 1e-4))
         if not act.size:
             break
+        T_act, q_act, D_act, E_act = T[act], q[act], D[act], E[act]
         grad = np.zeros((len(act), q.shape[1]))
         for j in movable:
             ks = moved.get(int(j))
             if ks is None:  # no capsule hangs from this joint: the energy does not depend on it
                 continue
-            qj = q[act].copy()
+            qj = q_act.copy()
             qj[:, j] += s.fd_rad
             # only the capsules joint j moves are measured again; the others' distances are those at q, as they
             # would be measured again (a sample's distance depends on its own position only)
-            dj = D[act]
-            dj[:, :, ks] = _capsule_distances(hm, obj, T[act], qj, s, only=ks)[0]
-            grad[:, j] = (_energy(dj, finger, s) - E[act]) / s.fd_rad
+            dj = D_act.copy()
+            dj[:, :, ks] = _capsule_distances(hm, obj, T_act, qj, s, only=ks)[0]
+            grad[:, j] = (_energy(dj, finger, s) - E_act) / s.fd_rad
         norm = np.linalg.norm(grad, axis=1, keepdims=True)
-        trial = np.clip(q[act] - step[act, None] * grad / np.maximum(norm, 1e-12), hm.lower, hm.upper)
-        D_new, _ = _capsule_distances(hm, obj, T[act], trial, s)
+        trial = np.clip(q_act - step[act, None] * grad / np.maximum(norm, 1e-12), hm.lower, hm.upper)
+        D_new, _ = _capsule_distances(hm, obj, T_act, trial, s)
         E_new = _energy(D_new, finger, s)
-        better = E_new < E[act]
+        better = E_new < E_act
         q[act[better]], E[act[better]], D[act[better]] = trial[better], E_new[better], D_new[better]
         steps[act[better]] += 1
         step[act[~better]] *= 0.5
