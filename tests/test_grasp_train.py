@@ -303,6 +303,37 @@ def test_resume_refuses_other_settings_or_data(dataset, tmp_path):
         train_grasp(dataset, tiny_model_config(), tiny_train_config(), tmp_path / "none", resume=True, progress=False)
 
 
+# -- devices -----------------------------------------------------------------------------------------
+def test_a_device_is_checked_when_the_settings_are_made_and_when_training_starts(dataset):
+    with pytest.raises(GraspConfigError, match="device: expected 'cpu', 'cuda', 'cuda:N' or 'mps', got 'gpu'"):
+        tiny_train_config(device="gpu")
+    with pytest.raises(GraspConfigError, match="penetration and contact terms run on the CPU only"):
+        tiny_train_config(device="cuda", penetration_weight=1.0)
+    if not torch.cuda.is_available():
+        with pytest.raises(GraspConfigError, match="device 'cuda': this torch .* sees no CUDA GPU"):
+            train_grasp(dataset, tiny_model_config(), tiny_train_config(device="cuda"), progress=False)
+
+
+@pytest.mark.parametrize("encoder", ["pointnet", "dgcnn"])
+def test_a_training_step_runs_whole_on_another_device_with_the_cpu_drawn_batch(dataset, encoder):
+    """Every tensor of a step follows the batch to the network's device (checked on torch's 'meta'
+    device, which needs no GPU: a tensor left on the CPU fails there as it would on CUDA); the batch
+    and its diffusion noise are drawn on the CPU, so they are the same on every device."""
+    from ohra.learn.grasp.model import GraspNet
+    from ohra.learn.grasp.train import train_step
+
+    td = TrainingData.load([dataset], tiny_train_config(), None)
+    batch = make_batch(td, tiny_train_config(), 16, 0, *_tables(td), 0.1)
+    assert batch.to("cpu") is batch
+    moved = batch.to("meta")
+    tensors = [f for f, v in vars(batch).items() if isinstance(v, torch.Tensor)]
+    assert len(tensors) == 12 and all(getattr(moved, f).device.type == "meta" for f in tensors)
+    assert moved.generator is batch.generator
+    net = GraspNet(tiny_model_config(encoder=encoder, dgcnn_k=4), 4).to("meta")
+    terms = train_step(net, moved, 1.0)
+    assert set(terms) == {"diffusion", "joints", "total"} and all(t.device.type == "meta" for t in terms.values())
+
+
 # -- evaluation --------------------------------------------------------------------------------------
 def test_diversity_measures():
     g = np.zeros((4, 31))
@@ -455,6 +486,9 @@ def test_cli_train_sample_and_errors(cli, dataset, tmp_path, capsys):
     assert cli(["grasp", "eval", "--model", str(run), "--hands", "barrett_hand", "--objects", "builtin:box", "-n", "1"]) == 2
     assert "training set" in capsys.readouterr().err
     assert cli(["train", "grasp", "--data", str(tmp_path / "none"), "-o", str(tmp_path / "r2"), "--quiet"]) == 2
+    if not torch.cuda.is_available():  # a device this machine lacks: one line, before any data is read
+        assert cli(["train", "grasp", "--data", str(dataset), "--device", "cuda", "-o", str(tmp_path / "r3"), "--quiet"]) == 2
+        assert "sees no CUDA GPU" in capsys.readouterr().err
 
 
 def test_cli_names_a_millimetre_mesh_takes_scale_and_expands_object_folders(cli, dataset, tmp_path, capsys):

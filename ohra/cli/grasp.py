@@ -126,11 +126,15 @@ def register_train(train_sub: Any) -> None:
                    help="hands held out of training, by name and by parameters (zero-shot models)")
     p.add_argument("--condition", choices=CONDITIONS, default=m.condition, help="hand condition (default vae)")
     p.add_argument("--encoder", choices=ENCODERS, default=m.encoder, help="object encoder (default pointnet)")
+    p.add_argument("--object-dim", type=int, default=m.object_dim,
+                   help=f"object feature size (default {m.object_dim}; the paper's DGCNN: 512)")
     p.add_argument("--steps", type=int, default=t.steps, help=f"training steps (default {t.steps})")
     p.add_argument("--batch-size", type=int, default=t.batch_size)
     p.add_argument("--lr", type=float, default=t.lr)
     p.add_argument("--seed", type=int, default=t.seed)
     p.add_argument("--threads", type=int, default=t.threads, help="torch CPU threads (results depend on it)")
+    p.add_argument("--device", default=t.device,
+                   help="torch device: cpu (default), cuda, cuda:N, mps; batches are drawn on the CPU either way")
     p.add_argument("--rotated-copies", type=int, default=t.rotated_copies, help="rotated copies per object and batch (0: none)")
     p.add_argument("--objects-per-step", type=int, default=t.objects_per_step, help="cap on distinct objects per batch (0: none)")
     p.add_argument("--max-per-pair", type=int, default=t.max_per_pair, help="cap on grasps per (hand, object) (0: all)")
@@ -172,8 +176,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
     out = Path(args.output)
     if not args.resume and (out / "checkpoints" / "last.pt").exists():
         raise OhraError(f"{out} already holds a training run; pass --resume to continue it or choose another -o")
-    mcfg = GraspModelConfig(encoder=args.encoder, condition=args.condition)
-    tcfg = GraspTrainConfig(steps=args.steps, batch_size=args.batch_size, lr=args.lr, seed=args.seed, threads=args.threads,
+    mcfg = GraspModelConfig(encoder=args.encoder, condition=args.condition, object_dim=args.object_dim)
+    tcfg = GraspTrainConfig(steps=args.steps, batch_size=args.batch_size, lr=args.lr, seed=args.seed, threads=args.threads, device=args.device,
                             rotated_copies=args.rotated_copies, objects_per_step=args.objects_per_step,
                             max_per_pair=args.max_per_pair, checkpoint_every=args.checkpoint_every,
                             condition_noise=args.condition_noise, penetration_weight=args.penetration_weight,

@@ -9,10 +9,13 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any, TypeVar
 
+import re
+
 from ohra.errors import OhraError, reject_unknown, require_seed
 
 ENCODERS = ("pointnet", "dgcnn")
 CONDITIONS = ("vae", "params")
+_DEVICE = re.compile(r"cpu|cuda(:\d+)?|mps")
 
 
 class GraspConfigError(OhraError, ValueError):
@@ -135,8 +138,12 @@ class GraspTrainConfig(_JSONSettings):
     # its form: "capped" (both distances capped at 1 cm; stop 46's first arms) or "target" (only the data's
     # clear links capped: a link the data has on the surface is pulled there from any distance)
     contact_form: str = "capped"
+    # torch device of the network and the batches ("cpu", "cuda", "cuda:1", "mps"); batches are drawn on the
+    # CPU from (seed, step) whatever the device, so runs differ between devices only by float rounding. A run
+    # may resume on another device; the saved model and checkpoints load on any machine.
+    device: str = "cpu"
 
-    RESUMABLE_CHANGES = ("steps", "checkpoint_every", "log_every")
+    RESUMABLE_CHANGES = ("steps", "checkpoint_every", "log_every", "device")
 
     def __post_init__(self) -> None:
         for name in ("steps", "batch_size", "threads", "checkpoint_every", "log_every", "surface_pool"):
@@ -151,6 +158,11 @@ class GraspTrainConfig(_JSONSettings):
                      "contact_weight"):
             if not getattr(self, name) >= 0:
                 raise GraspConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
+        if not _DEVICE.fullmatch(str(self.device)):
+            raise GraspConfigError(f"device: expected 'cpu', 'cuda', 'cuda:N' or 'mps', got {self.device!r}")
+        if self.device != "cpu" and (self.penetration_weight > 0 or self.contact_weight > 0):
+            raise GraspConfigError(f"device {self.device!r}: the penetration and contact terms run on the CPU only "
+                                   "(train with device='cpu' or set their weights to 0)")
         if self.contact_form not in ("capped", "target"):
             raise GraspConfigError(f"contact_form must be 'capped' or 'target', got {self.contact_form!r}")
         require_seed(self.seed, GraspConfigError)

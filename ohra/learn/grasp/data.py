@@ -312,6 +312,13 @@ class Batch:
     R_obj_palm: torch.Tensor | None = None  # (B, 3, 3) palm rotation in the object mesh frame
     R_cloud: torch.Tensor | None = None  # (B, 3, 3) the rotation applied to the row's cloud and grasp
 
+    def to(self, device: torch.device | str) -> "Batch":
+        """The batch with its tensors on ``device`` (the generator stays on the CPU)."""
+        if torch.device(device).type == "cpu":
+            return self
+        move = {f: (v.to(device) if isinstance(v, torch.Tensor) else v) for f, v in vars(self).items()}
+        return Batch(**move)
+
 
 def _rows(data: TrainingData, cfg: GraspTrainConfig, rng: np.random.Generator) -> np.ndarray:
     """Robot-balanced row indices of one batch (optionally from a random pool of objects)."""

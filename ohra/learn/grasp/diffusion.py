@@ -44,7 +44,7 @@ class DDIMScheduler:
 
     def add_noise(self, x0: torch.Tensor, noise: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
         """x_t = sqrt(abar_t) x0 + sqrt(1 - abar_t) noise; ``t`` (B,) integer levels."""
-        ab = self.alphas_cumprod[t].unsqueeze(-1)
+        ab = self.alphas_cumprod.to(t.device)[t].unsqueeze(-1)
         return ab.sqrt() * x0 + (1.0 - ab).sqrt() * noise
 
     def timesteps(self, n: int | None = None) -> list[int]:
@@ -75,7 +75,7 @@ class DDIMScheduler:
 def timestep_embedding(t: torch.Tensor, dim: int) -> torch.Tensor:
     """Sinusoidal embedding (B, dim) of integer levels ``t`` (B,) (Vaswani et al. / DDPM)."""
     half = dim // 2
-    freqs = torch.exp(-math.log(10000.0) * torch.arange(half, dtype=torch.float32) / half)
+    freqs = torch.exp(-math.log(10000.0) * torch.arange(half, dtype=torch.float32, device=t.device) / half)
     arg = t.float().unsqueeze(-1) * freqs
     return torch.cat([arg.sin(), arg.cos()], dim=-1)
 
@@ -111,7 +111,7 @@ class Denoiser(nn.Module):
         """:meth:`forward` with one level ``t`` for the whole batch (sampling): the time part of the
         first layer is one row, broadcast."""
         w = self.xt_in.weight  # (hidden, 3 + time_dim)
-        temb = timestep_embedding(torch.tensor([t]), self.time_dim)
+        temb = timestep_embedding(torch.tensor([t], device=w.device), self.time_dim)
         h = cond_h + x_t @ w[:, :3].T + temb @ w[:, 3:].T
         return self.body(h)
 

@@ -67,8 +67,9 @@ class GraspNet(nn.Module):
         true translation."""
         cond = torch.cat([obj_feat, hand, rot6d], dim=-1)
         b = len(cond)
-        levels = torch.randint(0, self.scheduler.train_steps, (b,), generator=generator)
-        noise = torch.randn(t_norm.shape, generator=generator)
+        # drawn on the CPU generator whatever the device: a batch's noise is the same on every device
+        levels = torch.randint(0, self.scheduler.train_steps, (b,), generator=generator).to(t_norm.device)
+        noise = torch.randn(t_norm.shape, generator=generator).to(t_norm.device)
         x_t = self.scheduler.add_noise(t_norm, noise, levels)
         x0 = self.denoiser(x_t, levels, self.denoiser.project_condition(cond))
         l_diff = F.smooth_l1_loss(x0, t_norm)

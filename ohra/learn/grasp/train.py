@@ -66,6 +66,18 @@ def _tables(cond: HandCondition, data: TrainingData) -> tuple[torch.Tensor, torc
     return hand, present
 
 
+def _device(name: str) -> torch.device:
+    """The torch device ``name``, or :class:`GraspConfigError` when this machine has none such."""
+    dev = torch.device(name)
+    if dev.type == "cuda" and not torch.cuda.is_available():
+        raise GraspConfigError(f"device {name!r}: this torch ({torch.__version__}) sees no CUDA GPU")
+    if dev.type == "cuda" and (dev.index or 0) >= torch.cuda.device_count():
+        raise GraspConfigError(f"device {name!r}: this machine has {torch.cuda.device_count()} CUDA GPU(s)")
+    if dev.type == "mps" and not torch.backends.mps.is_available():
+        raise GraspConfigError(f"device {name!r}: MPS is not available on this machine")
+    return dev
+
+
 def _check_resume(ckpt: dict[str, Any], spec: RunSpec, digest: str, path: Path) -> None:
     old = ckpt["spec"]
     if old["model"] != spec.model.to_dict():
@@ -200,7 +212,7 @@ def _prepare(spec: RunSpec, paths: list, ckpt_path: Path | None, resume: bool,
     cond = HandCondition.from_state(ckpt["condition"]) if ckpt else HandCondition.fit(model_cfg.condition, td.params, vae_path)
     t_scale = float(ckpt["t_scale"]) if ckpt else td.translation_scale()
     torch.manual_seed(cfg.seed)
-    net = GraspNet(model_cfg, cond.dim)
+    net = GraspNet(model_cfg, cond.dim).to(_device(cfg.device))  # initialised on the CPU: same weights on any device
     opt = torch.optim.Adam(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     summary = td.summary()
     meta = {"hands": td.hands, "data": spec.data, "data_digest": digest,
@@ -237,7 +249,7 @@ def _loop(st: _State, spec: RunSpec, ckpt_path: Path | None, progress: bool,
         lr = learning_rate(cfg, s)
         for group in opt.param_groups:
             group["lr"] = lr
-        batch = make_batch(st.td, cfg, spec.model.n_points, s, *st.tables, st.model.t_scale)
+        batch = make_batch(st.td, cfg, spec.model.n_points, s, *st.tables, st.model.t_scale).to(cfg.device)
         terms = train_step(net, batch, cfg.joint_loss_weight, st.contact)
         opt.zero_grad(set_to_none=True)
         terms["total"].backward()
@@ -256,6 +268,7 @@ def _loop(st: _State, spec: RunSpec, ckpt_path: Path | None, progress: bool,
         if on_step is not None:
             on_step(done, vals)
     bar.close()
+    net.to("cpu")  # the model a run returns and saves samples on the CPU, like every loaded model
     net.eval()
     return time.perf_counter() - t_run
 
@@ -299,7 +312,7 @@ def train_grasp(data: str | Path | Sequence[str | Path], model_cfg: GraspModelCo
             "final_losses": {k: h[-1][k] for k in loss_terms(cfg)} if h else {},
             "heldout_losses": heldout_losses(st.model, st.td, st.td.test_models),
             "data": st.td.summary(), "translation_scale_m": st.model.t_scale, "condition": model_cfg.condition,
-            "encoder": model_cfg.encoder, "threads": cfg.threads, "history": h,
+            "encoder": model_cfg.encoder, "threads": cfg.threads, "device": cfg.device, "history": h,
             "wall_seconds": time.perf_counter() - t_start, "peak_rss_mib": _peak_rss_mib(),
         }
         model = st.model

@@ -1,0 +1,217 @@
+"""Does network capacity close the grasp model's precision gap (issue 13)? The paper's encoder on a GPU.
+
+The committed study (``grasp_study.py``) trained a PointNet-encoder model (256-D object feature) because
+the paper's DGCNN encoder trains at ~3 clouds/s on this machine's CPU (days per run). The study's models
+do no better on their training objects than on unseen ones (``grasp_seen_objects.py``), so the gap to
+the paper's success is precision, and more data or more steps did not close it (``grasp_scale_up.py``).
+Capacity is the lever left untested. This script trains, on the study's data (the 23 committed folders),
+hands, VAE condition, seed, batch (128), learning rate and steps (12,000), three larger models:
+
+- ``dgcnn512``: the paper's encoder family: DGCNN edge convolutions (64, 64, 128, 256), k = 20, 512-D
+  object feature; denoiser and joint network as the study's;
+- ``wide``: the study's PointNet, wider and deeper everywhere: point MLP (64, 128, 256, 512), 512-D
+  feature, denoiser (1024, 512, 256), joint network 512 wide with 3 blocks;
+- ``dgcnn512-wide``: both.
+
+and evaluates each exactly as the study evaluated its unified model (100 grasps per (hand, unseen
+object) of ``recipes/grasp_eval_objects.yaml``, sampling seed 0, the data's protocol, canonical URDFs),
+paired over the same wrist rotations with the committed evaluation ``runs/grasp_study/eval_unified.json``.
+
+How it is read, written before any of these models was trained (stop 51):
+pooled over the three hands (3,900 paired grasps), an arm whose success exceeds the committed unified
+model's by more than two standard errors reads as "capacity helped", below minus two as "capacity hurt",
+otherwise "no change detectable"; per-hand differences are shown, not read. One training seed, one
+sampling seed. ``--touch`` adds the same comparison with test-time finger refinement (``--refine touch``)
+against ``runs/grasp_study/eval_unified_touched.json``. The shipped model and Tables 4-6 stay the committed
+study's whatever this shows (an arm that wins is the candidate for the next full study).
+
+Two phases, so that training can run where a GPU is (the evaluation needs PyBullet, the CPU machine):
+
+    python benchmarks/grasp_capacity.py train --device cuda --parallel [--torch-only]
+    python benchmarks/grasp_capacity.py eval [--touch] [--workers 2]
+      -> benchmarks/results/grasp_capacity.{json,md}
+
+``--torch-only`` stands in for Pinocchio, Coal, CasADi and PyBullet when they are not installed
+(``_torch_only.py``; training calls none of them). Runs are cached and resumable under ``--runs``
+(``_study_cache.py``; a run made on another device is reused: its key records the device).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path.insert(0, str(HERE))
+
+HANDS = ["allegro_hand_left", "barrett_hand", "shadow_hand_right"]
+STUDY_DATA = [f"datasets/grasp_unified_s{i}" for i in range(23)]
+
+# each arm's GraspModelConfig fields that differ from the default (the study's model)
+ARMS: dict[str, dict] = {
+    "dgcnn512": {"encoder": "dgcnn", "encoder_channels": (64, 64, 128, 256), "object_dim": 512, "dgcnn_k": 20},
+    "wide": {"encoder_channels": (64, 128, 256, 512), "object_dim": 512, "denoiser_hidden": (1024, 512, 256),
+             "joint_hidden": 512, "joint_blocks": 3},
+    "dgcnn512-wide": {"encoder": "dgcnn", "encoder_channels": (64, 64, 128, 256), "object_dim": 512, "dgcnn_k": 20,
+                      "denoiser_hidden": (1024, 512, 256), "joint_hidden": 512, "joint_blocks": 3},
+}
+
+
+def _key(arm: str, args: argparse.Namespace) -> dict:
+    from _study_cache import _jsonable, train_key
+
+    return train_key(args.data, HANDS, args.steps, args.seed, "vae") | _jsonable(
+        {"model": ARMS[arm], "batch_size": args.batch_size, "device": args.device})
+
+
+def train_arm(arm: str, args: argparse.Namespace) -> None:
+    """Train (or resume, or reuse) one arm's run under ``args.runs``."""
+    from _study_cache import claim_run
+
+    from ohra.learn.grasp.config import GraspModelConfig, GraspTrainConfig
+    from ohra.learn.grasp.train import train_grasp
+
+    run = Path(args.runs) / arm
+    if claim_run(run, _key(arm, args)):
+        print(f"{arm}: trained already ({run})", flush=True)
+        return
+    mcfg = GraspModelConfig(**ARMS[arm])
+    tcfg = GraspTrainConfig(steps=args.steps, batch_size=args.batch_size, seed=args.seed, threads=args.threads,
+                            hands=tuple(HANDS), device=args.device, checkpoint_every=500)
+    t0 = time.perf_counter()
+    res = train_grasp(args.data, mcfg, tcfg, run, resume=(run / "checkpoints" / "last.pt").exists(), progress=not args.quiet)
+    n_params = sum(p.numel() for p in res.model.net.parameters())
+    print(f"{arm}: {args.steps} steps in {time.perf_counter() - t0:.0f} s on {args.device} ({n_params / 1e6:.2f} M "
+          f"parameters); final losses {res.metrics['final_losses']}", flush=True)
+
+
+def cmd_train(args: argparse.Namespace) -> None:
+    if args.parallel and len(args.arms) > 1:  # one process per arm, all at once (a GPU has room for them)
+        base = [sys.executable, __file__, "train", "--device", args.device, "--steps", str(args.steps), "--runs", args.runs,
+                "--threads", str(args.threads), "--batch-size", str(args.batch_size), "--seed", str(args.seed),
+                "--quiet", "--data", *args.data] + (["--torch-only"] if args.torch_only else [])
+        procs = [subprocess.Popen(base + ["--arms", arm]) for arm in args.arms]
+        codes = [p.wait() for p in procs]
+        if any(codes):
+            raise SystemExit(f"training failed: exit codes {dict(zip(args.arms, codes))}")
+        return
+    for arm in args.arms:
+        train_arm(arm, args)
+
+
+def cmd_eval(args: argparse.Namespace) -> None:
+    from _common import write_results
+    from grasp_scale_up import baseline, comparison_lines, paired_comparison, rates
+    from grasp_study import PAPER, data_protocol, eval_objects, evaluated, protocol_note
+
+    from _study_cache import cached, eval_key, run_key
+    from ohra.learn.grasp import load_grasp_model
+    from ohra.learn.grasp.refine import RefineSettings
+
+    objects = eval_objects(args.objects_file)
+    protocol = data_protocol(args.data)
+    base_dir = args.baseline
+    base = {"raw": baseline(base_dir, objects, args.n, protocol)}
+    modes = ["raw"] + (["touch"] if args.touch else [])
+    if args.touch:
+        path = base_dir / "eval_unified_touched.json"
+        want = eval_key(run_key(base_dir / "unified"), hands=HANDS, objects=[o.name for o in objects], n=args.n, seed=0,
+                        original=False, protocol=protocol, refine=RefineSettings(touch=True))
+        if (hit := cached(path, want)) is None:
+            raise SystemExit(f"{path}: made with other evaluation settings than this run's")
+        base["touch"] = hit
+    a = argparse.Namespace(**{**vars(args), "runs": args.runs})
+    rows, comps = [], {m: [] for m in modes}
+    study_metrics = json.loads((base_dir / "unified" / "metrics.json").read_text())
+    rows.append({"name": "committed unified (PointNet 256-D)", "device": "cpu",
+                 "train_min": study_metrics["train_seconds_total"] / 60, "params_m": None,
+                 **{m: rates(base[m], HANDS) for m in modes}})
+    for arm in args.arms:
+        run = Path(args.runs) / arm
+        if not (run / "model.pt").exists():
+            print(f"{arm}: not trained ({run}); skipped", file=sys.stderr)
+            continue
+        made, want = run_key(run), _key(arm, args)
+        made.pop("device", None), want.pop("device", None)  # a run trained on a GPU is evaluated here
+        if made != want:
+            raise SystemExit(f"{run}: trained with other settings than this call's (data, steps, seed, batch or model)")
+        model = load_grasp_model(run)
+        m = json.loads((run / "metrics.json").read_text())
+        row = {"name": arm, "device": m.get("device", "cpu"), "train_min": m["train_seconds_total"] / 60,
+               "params_m": sum(p.numel() for p in model.net.parameters()) / 1e6, "model": ARMS[arm]}
+        for mode in modes:
+            ev = evaluated(model, arm, HANDS, objects, False, protocol, a,
+                           refine=RefineSettings(touch=True) if mode == "touch" else False)
+            row[mode] = rates(ev, HANDS)
+            comps[mode].append(paired_comparison(base[mode], ev, HANDS, f"{arm} - committed ({mode})",
+                                                 ("capacity helped", "capacity hurt")))
+        rows.append(row)
+    res = {"hands": HANDS, "n": args.n, "objects": [o.name for o in objects], "data": args.data, "steps": args.steps,
+           "protocol_note": protocol_note(protocol), "rows": rows, "comparisons": comps, "paper": PAPER}
+    write_results(args.name, res, table(res))
+
+
+def table(res: dict) -> str:
+    hands, modes = res["hands"], list(res["comparisons"])
+    lines = [f"Unified grasp model vs network capacity (same data, hands, VAE condition, seed, batch, {res['steps']} steps): "
+             f"{res['n']} grasps per (hand, object) on {len(res['objects'])} unseen objects, protocol {res['protocol_note']}, "
+             "canonical URDFs. Rule written before training (script docstring): pooled paired difference > 2 SE reads as a change.",
+             "", "| model | trained on | train min | parameters [M] | " + " | ".join(
+                 f"{h} ({m})" for m in modes for h in hands) + " |", "|---|---|---|---|" + "---|" * (len(hands) * len(modes))]
+    for r in res["rows"]:
+        lines.append(f"| {r['name']} | {r['device']} | {r['train_min']:.1f} | "
+                     + (f"{r['params_m']:.2f}" if r["params_m"] else "-") + " | "
+                     + " | ".join(f"{100 * r[m]['per_hand'][h]:.1f} %" for m in modes for h in hands) + " |")
+    lines.append("| paper (reported, Isaac Gym, DGCNN 512-D) | GPU | - | - | "
+                 + " | ".join(f"{res['paper'][h]} %" for m in modes for h in hands) + " |")
+    from grasp_scale_up import comparison_lines
+
+    for m in modes:
+        lines += ["", *comparison_lines(res["comparisons"][m], hands, f"paired change vs committed ({m})")]
+    return "\n".join(lines)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("phase", choices=("train", "eval"))
+    ap.add_argument("--data", nargs="+", default=STUDY_DATA,
+                    help="dataset folders (default: the study's 23 committed folders; run from the repository root)")
+    ap.add_argument("--arms", nargs="+", default=list(ARMS), choices=list(ARMS))
+    ap.add_argument("--steps", type=int, default=12000)
+    ap.add_argument("--batch-size", type=int, default=128)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--device", default="cpu", help="torch device of the training (the run key records it)")
+    ap.add_argument("--parallel", action="store_true", help="train the arms in one process each, at once")
+    ap.add_argument("--torch-only", action="store_true", help="stand in for missing Pinocchio/Coal/CasADi/PyBullet")
+    ap.add_argument("--objects-file", type=Path, default=ROOT / "recipes" / "grasp_eval_objects.yaml")
+    ap.add_argument("-n", type=int, default=100)
+    ap.add_argument("--workers", type=int, default=1, help="simulation processes (eval)")
+    ap.add_argument("--touch", action="store_true", help="also evaluate with --refine touch (eval)")
+    ap.add_argument("--runs", default=str(ROOT / "runs" / "grasp_capacity"))
+    ap.add_argument("--baseline", type=Path, default=ROOT / "runs" / "grasp_study")
+    ap.add_argument("--name", default="grasp_capacity")
+    ap.add_argument("--quiet", action="store_true")
+    args = ap.parse_args()
+    if args.torch_only:
+        from _torch_only import stand_in_for_missing
+
+        stood = stand_in_for_missing(force=os.environ.get("OHRA_FORCE_TORCH_ONLY") == "1")
+        if stood:
+            print(f"--torch-only: stand-ins for {', '.join(stood)}", file=sys.stderr)
+    from ohra.errors import OhraError
+
+    try:
+        (cmd_train if args.phase == "train" else cmd_eval)(args)
+    except OhraError as exc:
+        raise SystemExit(f"grasp_capacity: {exc}") from None
+
+
+if __name__ == "__main__":
+    main()
