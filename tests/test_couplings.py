@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -82,6 +83,12 @@ def test_params_json_key_is_optional_and_reference_keys_are_untouched(shadow_bas
     f.write_text(json.dumps(d))
     with pytest.raises(ParamsError, match=r"couplings\[0\].*index_joint9"):
         load_params(f)
+    d["couplings"] = [{"slot": "index_joint3", "driver": "index_joint2", "multiplier": 1.0},
+                      {"slot": "index_joint2", "driver": "index_joint3", "multiplier": 1.0}]
+    f.write_text(json.dumps(d))
+    for read in (load_params, cpl.read_couplings):  # a cycle names the file it is in, like every other params error
+        with pytest.raises(ParamsError, match=rf"{re.escape(str(f))}: couplings: coupling cycle: index_joint2 -> index_joint3"):
+            read(f)
 
 
 def _am(**kw) -> ActionMap:

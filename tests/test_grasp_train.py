@@ -536,3 +536,16 @@ def test_a_vae_condition_on_hands_without_a_base_form_names_the_hand_and_the_tra
     root = write_dataset(tmp_path / "d", hands=("barrett_hand", "leap_2211"), objects=("box", "capsule"))
     with pytest.raises(GraspConfigError, match=r"training hand 'leap_2211' cannot be vae-conditioned .*--condition params"):
         train_grasp(root, tiny_model_config(condition="vae"), tiny_train_config(steps=1), progress=False)
+
+
+def test_a_misspelt_hand_is_named_before_torch_is_imported(tmp_path):
+    """``ohra grasp sample --hand TYPO`` answered after ~5 s of torch imports; the hand is read first."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from ohra.cli.main import main; "
+            f"rc = main(['grasp', 'sample', '--hand', 'TYPO', '--object', 'builtin:box', '-o', {str(tmp_path / 'g.npz')!r}]); "
+            "print(rc, 'torch' in sys.modules)")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert proc.stdout.split() == ["2", "False"], proc.stderr
+    assert "unknown hand 'TYPO'" in proc.stderr

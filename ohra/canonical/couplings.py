@@ -183,7 +183,11 @@ def couplings_from_json_value(value: Any, where: str) -> tuple[Coupling, ...]:
     """Couplings from the value of a params JSON's ``"couplings"`` key (a list of dicts)."""
     if not isinstance(value, list):
         raise ParamsError(f"{where}: '{JSON_KEY}' must be a list of {{slot, driver, multiplier, offset}}")
-    return resolve(coupling_from_dict(v, f"{where}: {JSON_KEY}[{k}]") for k, v in enumerate(value))
+    items = [coupling_from_dict(v, f"{where}: {JSON_KEY}[{k}]") for k, v in enumerate(value)]
+    try:
+        return resolve(items)
+    except ParamsError as exc:  # a cycle or a slot coupled twice: name the file it is in
+        raise ParamsError(f"{where}: {JSON_KEY}: {exc}") from None
 
 
 def read_couplings(path: str | Path) -> tuple[Coupling, ...]:

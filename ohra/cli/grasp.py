@@ -259,15 +259,16 @@ def _output(path: str, suffix: str) -> Path:
 
 
 def _cmd_sample(args: argparse.Namespace) -> int:
+    from ohra.hands import get_hand
+
+    out = _output(args.output, ".npz")
+    params = get_hand(args.hand)  # a misspelt hand is named before seconds of torch imports; read once, here
     from ohra.data.dataset import atomic_write_npz
 
-    from ohra.learn.grasp.condition import resolve_hand
     from ohra.learn.grasp.model import resolve_object
     from ohra.objects.resolve import warn_if_ungraspable
     from ohra.synth import MIN_GRASP_FINGERS
 
-    out = _output(args.output, ".npz")
-    params = resolve_hand(args.hand)  # once: a params JSON is read here, not again by the model
     # the model must read the hand it is conditioned on
     model, note = _load(args.model, [args.condition_hand or args.hand], resolved={args.hand: params})
     obj = resolve_object(args.object, scale=args.scale)
