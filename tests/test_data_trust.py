@@ -224,6 +224,38 @@ def test_the_ray_backend_without_ray_is_refused_before_the_output_folder_is_made
     assert not (tmp_path / "out").exists()  # it was left holding only its lock file
 
 
+def test_a_ray_address_where_nothing_answers_fails_in_seconds_not_at_rays_timeout(monkeypatch):
+    """``--address 10.x.x.x:6379`` of an unreachable host waited minutes for Ray's own timeout."""
+    import socket
+    import time
+
+    from ohra.data.backends import probe_address
+    from ohra.errors import OhraError
+
+    with socket.socket() as s:  # a port nothing listens on: refused at once
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    with pytest.raises(OhraError, match=rf"--address ray://127.0.0.1:{port}: no Ray cluster reachable \(.* at 127.0.0.1:{port} within 5 s\)"):
+        probe_address(f"ray://127.0.0.1:{port}")
+    asked = []
+
+    def silent(where, timeout):  # a host that never answers (sandboxes may accept any outside connection)
+        asked.append((where, timeout))
+        time.sleep(timeout)
+        raise TimeoutError("timed out")
+
+    monkeypatch.setattr(socket, "create_connection", silent)
+    with pytest.raises(OhraError, match=r"10.255.255.1:6379: no Ray cluster reachable \(no answer at 10.255.255.1:6379 within 0.5 s\)"):
+        probe_address("10.255.255.1:6379", timeout=0.5)
+    assert asked == [(("10.255.255.1", 6379), 0.5)]
+    monkeypatch.undo()
+    with socket.socket() as s:  # something listening: passed on to Ray
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        probe_address(f"127.0.0.1:{s.getsockname()[1]}")
+    probe_address("auto")  # left to Ray
+
+
 def test_a_ray_address_without_a_cluster_is_one_line(monkeypatch):
     """``--address auto`` with no cluster running was Ray's ConnectionError traceback, exit 1."""
     ray = pytest.importorskip("ray", reason="the ray extra is not installed")
@@ -237,3 +269,10 @@ def test_a_ray_address_without_a_cluster_is_one_line(monkeypatch):
     monkeypatch.setattr(ray, "init", no_cluster)
     with pytest.raises(OhraError, match=r"--address auto: no Ray cluster reachable \(Could not find any running Ray instance\.\)"):
         list(backends._ray(abs, [1], 1, "auto"))
+    import socket
+
+    with socket.socket() as s:  # a host:port address is probed before Ray is asked (Ray waits minutes on a silent host)
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    with pytest.raises(OhraError, match=rf"127.0.0.1:{port}: no Ray cluster reachable \(connection refused at"):
+        list(backends._ray(abs, [1], 1, f"127.0.0.1:{port}"))

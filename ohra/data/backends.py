@@ -64,6 +64,27 @@ def _ignore_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
+PROBE_TIMEOUT_S = 5.0
+
+
+def probe_address(address: str, timeout: float = PROBE_TIMEOUT_S) -> None:
+    """Refuse a ``host:port`` / ``ray://host:port`` address where nothing accepts a TCP connection within
+    ``timeout`` seconds: Ray itself waits minutes on an unreachable host before failing. ``auto`` and
+    addresses this does not parse are left to Ray."""
+    import socket
+
+    hostport = address.split("://", 1)[1] if "://" in address else address
+    host, _, port = hostport.rpartition(":")
+    if not host or not port.isdigit():
+        return
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
+    except OSError as exc:
+        why = "no answer" if isinstance(exc, TimeoutError) else (exc.strerror or type(exc).__name__).lower()
+        raise OhraError(f"--address {address}: no Ray cluster reachable ({why} at {host}:{port} within {timeout:g} s); "
+                        "check the head node's address and port, or leave --address out for a local cluster") from None
+
+
 def _ray(fn: Callable, tasks: list, workers: int, address: str | None) -> Iterable:
     try:
         import ray
@@ -72,6 +93,7 @@ def _ray(fn: Callable, tasks: list, workers: int, address: str | None) -> Iterab
     started = not ray.is_initialized()
     if started:
         if address:
+            probe_address(address)
             try:
                 ray.init(address=address, log_to_driver=False)
             except ConnectionError as exc:  # no cluster there: one line, not Ray's traceback
