@@ -487,7 +487,7 @@ def test_cli_train_sample_and_errors(cli, dataset, tmp_path, capsys):
     assert "training set" in capsys.readouterr().err
     assert cli(["train", "grasp", "--data", str(tmp_path / "none"), "-o", str(tmp_path / "r2"), "--quiet"]) == 2
     if not torch.cuda.is_available():  # a device this machine lacks: one line, before any data is read
-        assert cli(["train", "grasp", "--data", str(dataset), "--device", "cuda", "-o", str(tmp_path / "r3"), "--quiet"]) == 2
+        assert cli(["train", "grasp", "--data", str(tmp_path / "none"), "--device", "cuda", "-o", str(tmp_path / "r3"), "--quiet"]) == 2
         assert "sees no CUDA GPU" in capsys.readouterr().err
 
 

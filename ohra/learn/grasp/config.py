@@ -6,10 +6,9 @@ so a run directory says exactly what made it.
 
 from __future__ import annotations
 
+import re
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any, TypeVar
-
-import re
 
 from ohra.errors import OhraError, reject_unknown, require_seed
 

@@ -201,6 +201,7 @@ def _prepare(spec: RunSpec, paths: list, ckpt_path: Path | None, resume: bool,
              objects: Mapping[str, ObjectModel] | None, vae_path: str | Path | None) -> _State:
     """Data, condition, network and optimiser; restored from the checkpoint when resuming."""
     cfg, model_cfg = spec.train, spec.model
+    device = _device(cfg.device)  # a missing device is named before seconds of data loading
     td = TrainingData.load(paths, cfg, objects)
     digest = td.digest()
     ckpt = None
@@ -212,7 +213,7 @@ def _prepare(spec: RunSpec, paths: list, ckpt_path: Path | None, resume: bool,
     cond = HandCondition.from_state(ckpt["condition"]) if ckpt else HandCondition.fit(model_cfg.condition, td.params, vae_path)
     t_scale = float(ckpt["t_scale"]) if ckpt else td.translation_scale()
     torch.manual_seed(cfg.seed)
-    net = GraspNet(model_cfg, cond.dim).to(_device(cfg.device))  # initialised on the CPU: same weights on any device
+    net = GraspNet(model_cfg, cond.dim).to(device)  # initialised on the CPU: same weights on any device
     opt = torch.optim.Adam(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     summary = td.summary()
     meta = {"hands": td.hands, "data": spec.data, "data_digest": digest,
