@@ -128,26 +128,37 @@ def cmd_eval(args: argparse.Namespace) -> None:
         base["touch"] = hit
     a = argparse.Namespace(**{**vars(args), "runs": args.runs})
     rows, comps = [], {m: [] for m in modes}
+    from ohra.learn.grasp.config import GraspModelConfig
+    from ohra.learn.grasp.model import GraspNet
+
+    committed = load_grasp_model(base_dir / "unified").net
+    hand_dim = committed.hand_dim
     study_metrics = json.loads((base_dir / "unified" / "metrics.json").read_text())
     rows.append({"name": "committed unified (PointNet 256-D)", "device": "cpu",
-                 "train_min": study_metrics["train_seconds_total"] / 60, "params_m": None,
-                 **{m: rates(base[m], HANDS) for m in modes}})
+                 "train_min": study_metrics["train_seconds_total"] / 60,
+                 "params_m": sum(p.numel() for p in committed.parameters()) / 1e6, **{m: rates(base[m], HANDS) for m in modes}})
     for arm in args.arms:
         run = Path(args.runs) / arm
-        if not (run / "model.pt").exists():
+        if not (run / "metrics.json").exists():
             print(f"{arm}: not trained ({run}); skipped", file=sys.stderr)
             continue
         made, want = run_key(run), _key(arm, args)
         made.pop("device", None), want.pop("device", None)  # a run trained on a GPU is evaluated here
         if made != want:
             raise SystemExit(f"{run}: trained with other settings than this call's (data, steps, seed, batch or model)")
-        model = load_grasp_model(run)
         m = json.loads((run / "metrics.json").read_text())
-        row = {"name": arm, "device": m.get("device", "cpu"), "train_min": m["train_seconds_total"] / 60,
-               "params_m": sum(p.numel() for p in model.net.parameters()) / 1e6, "model": ARMS[arm]}
+        row = {"name": arm, "device": m.get("device", "cpu"), "train_min": m["train_seconds_total"] / 60, "model": ARMS[arm],
+               "params_m": sum(p.numel() for p in GraspNet(GraspModelConfig(**ARMS[arm]), hand_dim).parameters()) / 1e6}
         for mode in modes:
-            ev = evaluated(model, arm, HANDS, objects, False, protocol, a,
-                           refine=RefineSettings(touch=True) if mode == "touch" else False)
+            refine = RefineSettings(touch=True) if mode == "touch" else False
+            # the weights of arms that did not help are not committed: their cached verdicts stand without them
+            key = eval_key(run_key(run), hands=HANDS, objects=[o.name for o in objects], n=args.n, seed=0, original=False,
+                           protocol=protocol, **({"refine": refine} if refine else {}))
+            path = Path(args.runs) / f"eval_{arm}{'_touched' if refine else ''}.json"
+            if (ev := cached(path, key)) is None:
+                if not (run / "model.pt").exists():
+                    raise SystemExit(f"{run}: no model.pt to evaluate ({mode}); train it again (phase train, same settings)")
+                ev = evaluated(load_grasp_model(run), arm, HANDS, objects, False, protocol, a, refine=refine)
             row[mode] = rates(ev, HANDS)
             comps[mode].append(paired_comparison(base[mode], ev, HANDS, f"{arm} - committed ({mode})",
                                                  ("capacity helped", "capacity hurt")))
@@ -163,13 +174,15 @@ def table(res: dict) -> str:
              f"{res['n']} grasps per (hand, object) on {len(res['objects'])} unseen objects, protocol {res['protocol_note']}, "
              "canonical URDFs. Rule written before training (script docstring): pooled paired difference > 2 SE reads as a change.",
              "", "| model | trained on | train min | parameters [M] | " + " | ".join(
-                 f"{h} ({m})" for m in modes for h in hands) + " |", "|---|---|---|---|" + "---|" * (len(hands) * len(modes))]
+                 f"{h} ({m})" for m in modes for h in [*hands, "pooled"]) + " |",
+             "|---|---|---|---|" + "---|" * ((len(hands) + 1) * len(modes))]
     for r in res["rows"]:
         lines.append(f"| {r['name']} | {r['device']} | {r['train_min']:.1f} | "
-                     + (f"{r['params_m']:.2f}" if r["params_m"] else "-") + " | "
-                     + " | ".join(f"{100 * r[m]['per_hand'][h]:.1f} %" for m in modes for h in hands) + " |")
+                     + f"{r['params_m']:.2f} | "
+                     + " | ".join(f"{100 * r[m]['per_hand'][h]:.1f} %" if h in hands else f"{100 * r[m]['pooled']:.1f} %"
+                                  for m in modes for h in [*hands, "pooled"]) + " |")
     lines.append("| paper (reported, Isaac Gym, DGCNN 512-D) | GPU | - | - | "
-                 + " | ".join(f"{res['paper'][h]} %" for m in modes for h in hands) + " |")
+                 + " | ".join(f"{res['paper'][h]} %" if h in hands else "-" for m in modes for h in [*hands, "pooled"]) + " |")
     from grasp_scale_up import comparison_lines
 
     for m in modes:

@@ -183,6 +183,7 @@ def test_sampling_as_the_mirror_image_is_sampling_the_image_on_the_mirrored_obje
     assert not np.allclose(got, model.sample(hand, obj, 6, rotations=R, seed=5, mirror=False))
 
 
+@pytest.mark.e2e  # nine six-direction tests (~9 s)
 def test_in_simulation_robust_grasps_mirrored_hold_with_the_mirror_image_and_not_with_the_hand():
     """Physics is mirror-symmetric: robust grasps of the committed data (they hold under small perturbations;
     single outcomes of marginal grasps flip under a microradian, so only robust ones can be compared) on

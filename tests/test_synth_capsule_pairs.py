@@ -70,6 +70,7 @@ def test_every_finger_pair_is_considered_unless_out_of_reach_or_built_overlappin
     assert (1, 4) not in pairs and (0, 3) not in pairs and (0, 4) in pairs
 
 
+@pytest.mark.e2e  # four Shadow solves (~13 s)
 def test_shadow_solutions_no_longer_self_collide():
     """The recipe's first 4 starts of Shadow on a superquadric: under the sphere samples one solution
     self-collides (Coal) and one more is within 0.5 mm; under the default capsule rows all four

@@ -144,6 +144,7 @@ def _children() -> set[int]:
 
 
 @pytest.mark.browser
+@pytest.mark.e2e  # renders two hands and opens them in Chromium (~16 s)
 def test_compare_overlay_opens_framed_on_the_hands(hands_dir, chromium, tmp_path):
     before = _children()
     html = viz.compare_html("shadow_hand_right", "base", tmp_path / "overlay.html")
