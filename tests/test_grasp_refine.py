@@ -94,6 +94,24 @@ def test_any_canonical_hand_works_leap_variants_included():
     assert np.all(r.min_distance_after >= -RefineSettings().clearance_m - 0.0001), r.min_distance_after
 
 
+def test_a_hand_without_fingers_has_nothing_to_refine_or_measure():
+    """leap_0000 (a palm alone) crashed refinement, touch and nearest-surface choice with numpy reduction errors."""
+    from ohra.learn.grasp.model import nearest_surface
+    from ohra.learn.grasp.refine import finger_clearance, finger_distances
+
+    p = get_hand("leap_0000")
+    obj = ObjectModel.builtin("box")
+    g = np.zeros((3, 31))
+    g[:, 0] = 0.1
+    g[:, 3:9] = matrix_to_rot6d(Rotation.random(3, random_state=0).as_matrix())
+    for touch in (False, True):
+        r = refine_grasps(p, obj, g, RefineSettings(touch=touch))
+        np.testing.assert_array_equal(r.grasps, g)
+        assert np.all(r.steps == 0) and np.all(np.isinf(r.min_distance_before)) and np.all(np.isinf(r.min_distance_after))
+    assert np.all(np.isinf(finger_clearance(p, obj, g))) and finger_distances(p, obj, g).shape == (3, 0)
+    np.testing.assert_array_equal(nearest_surface(p, obj, np.stack([g, g + 0.01], axis=1)), g)
+
+
 def test_bad_input_is_refused():
     hand = HandModel.from_params(get_hand("allegro_hand_left"))
     with pytest.raises(GraspError, match=r"\(N, 31\)"):

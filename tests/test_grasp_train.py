@@ -303,9 +303,64 @@ def test_resume_refuses_other_settings_or_data(dataset, tmp_path):
         train_grasp(dataset, tiny_model_config(), tiny_train_config(), tmp_path / "none", resume=True, progress=False)
 
 
+@pytest.mark.parametrize("kwargs, message", [
+    (dict(steps=2.5), "steps: expected a whole number, got 2.5"),
+    (dict(steps=True), "steps: expected a whole number, got True"),
+    (dict(steps="10"), "steps: expected a whole number, got '10'"),
+    (dict(lr=float("inf")), "lr: expected a finite number, got inf"),
+    (dict(lr=1e-3, lr_min=1.1e-3), r"lr_min \(0.0011\) exceeds lr \(0.001\)"),
+    (dict(point_noise=float("nan")), "point_noise: expected a finite number"),
+    (dict(test_objects="capsule"), "test_objects: expected a tuple of names, got 'capsule'"),
+    (dict(hands="barrett_hand"), "hands: expected a tuple of names"),
+    (dict(device="cuda:00"), "device: expected"),
+    (dict(device=torch.device("cpu")), r"device: expected .* \(a string\)"),
+])
+def test_training_settings_that_are_not_what_they_claim_are_refused_when_made(kwargs, message):
+    """A bare string of test objects was read letter by letter (the object meant to be held out was trained on);
+    floats, bools and numeric strings passed int(); an infinite learning rate trained to NaN."""
+    with pytest.raises(GraspConfigError, match=message):
+        tiny_train_config(**kwargs)
+
+
+def test_the_edges_of_the_training_settings_are_accepted():
+    assert tiny_train_config(steps=np.int64(3), lr=1e-3, lr_min=1e-3, max_per_pair=0).steps == 3
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    (dict(encoder_channels=(16, 0)), r"encoder_channels\[1\] must be >= 1, got 0"),
+    (dict(denoiser_hidden=(64, -5)), r"denoiser_hidden\[1\] must be >= 1"),
+    (dict(joint_blocks=-1), "joint_blocks must be >= 0, got -1"),
+    (dict(n_points=2.5), "n_points: expected a whole number"),
+])
+def test_model_settings_with_empty_layers_are_refused(kwargs, message):
+    with pytest.raises(GraspConfigError, match=message):
+        tiny_model_config(**kwargs)
+    assert tiny_model_config(joint_blocks=0).joint_blocks == 0  # no residual blocks: a valid network
+
+
+def test_a_diverging_run_stops_and_a_model_with_broken_weights_refuses_to_sample(dataset, tmp_path):
+    run = tmp_path / "diverged"
+    with pytest.raises(GraspError, match=r"training diverged at step \d+: loss nan"):
+        train_grasp(dataset, tiny_model_config(), tiny_train_config(lr=1e6, lr_min=0.0), run, progress=False)
+    assert not (run / "model.pt").exists()
+    model = train_grasp(dataset, tiny_model_config(), tiny_train_config(steps=1), progress=False).model
+    with torch.no_grad():
+        next(model.net.joints.parameters()).fill_(float("nan"))
+    with pytest.raises(CheckpointError, match="computes non-finite grasps"):
+        model.sample("barrett_hand", "builtin:capsule", 2, seed=0)
+
+
+def test_a_run_directory_holding_a_run_is_not_trained_over(dataset, tmp_path):
+    train_grasp(dataset, tiny_model_config(), tiny_train_config(steps=2), tmp_path, progress=False)
+    before = (tmp_path / "checkpoints" / "last.pt").read_bytes()
+    with pytest.raises(CheckpointError, match="already holds a training run.*resume=True"):
+        train_grasp(dataset, tiny_model_config(), tiny_train_config(steps=2), tmp_path, progress=False)
+    assert (tmp_path / "checkpoints" / "last.pt").read_bytes() == before
+
+
 # -- devices -----------------------------------------------------------------------------------------
 def test_a_device_is_checked_when_the_settings_are_made_and_when_training_starts(dataset):
-    with pytest.raises(GraspConfigError, match="device: expected 'cpu', 'cuda', 'cuda:N' or 'mps', got 'gpu'"):
+    with pytest.raises(GraspConfigError, match=r"device: expected 'cpu', 'cuda', 'cuda:N' or 'mps' \(a string\), got 'gpu'"):
         tiny_train_config(device="gpu")
     with pytest.raises(GraspConfigError, match="penetration and contact terms run on the CPU only"):
         tiny_train_config(device="cuda", penetration_weight=1.0)

@@ -14,11 +14,38 @@ from ohra.errors import OhraError, reject_unknown, require_seed
 
 ENCODERS = ("pointnet", "dgcnn")
 CONDITIONS = ("vae", "params")
-_DEVICE = re.compile(r"cpu|cuda(:\d+)?|mps")
+_DEVICE = re.compile(r"cpu|cuda(:(0|[1-9]\d{0,3}))?|mps")
 
 
 class GraspConfigError(OhraError, ValueError):
     """A grasp-model or training setting is out of range or unknown."""
+
+
+def _whole(name: str, value: Any, least: int) -> None:
+    """``value`` is a whole number >= ``least`` (not a bool, a float or a numeric string: ``int()`` would take them)."""
+    import numbers
+
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise GraspConfigError(f"{name}: expected a whole number, got {value!r}")
+    if value < least:
+        raise GraspConfigError(f"{name} must be >= {least}, got {value}")
+
+
+def _real(name: str, value: Any, positive: bool = False) -> None:
+    """``value`` is a finite real number >= 0 (> 0 when ``positive``)."""
+    import math
+    import numbers
+
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
+        raise GraspConfigError(f"{name}: expected a finite number, got {value!r}")
+    if value < 0 or (positive and value == 0):
+        raise GraspConfigError(f"{name} must be {'positive' if positive else '>= 0'}, got {value}")
+
+
+def _names(name: str, value: Any) -> None:
+    """``value`` is a tuple of strings (a bare string would be read letter by letter)."""
+    if isinstance(value, str) or not isinstance(value, tuple) or not all(isinstance(v, str) for v in value):
+        raise GraspConfigError(f"{name}: expected a tuple of names, got {value!r}")
 
 
 _S = TypeVar("_S", bound="_JSONSettings")
@@ -75,8 +102,13 @@ class GraspModelConfig(_JSONSettings):
         if self.condition not in CONDITIONS:
             raise GraspConfigError(f"condition: expected one of {list(CONDITIONS)}, got {self.condition!r}")
         for name in ("n_points", "object_dim", "time_embed_dim", "joint_hidden", "train_steps", "inference_steps", "dgcnn_k"):
-            if int(getattr(self, name)) < 1:
-                raise GraspConfigError(f"{name} must be >= 1, got {getattr(self, name)}")
+            _whole(name, getattr(self, name), 1)
+        _whole("joint_blocks", self.joint_blocks, 0)
+        for name in ("encoder_channels", "denoiser_hidden"):
+            if not isinstance(getattr(self, name), tuple):
+                raise GraspConfigError(f"{name}: expected a tuple of widths, got {getattr(self, name)!r}")
+            for k, w in enumerate(getattr(self, name)):
+                _whole(f"{name}[{k}]", w, 1)
         if self.inference_steps > self.train_steps:
             raise GraspConfigError(f"inference_steps ({self.inference_steps}) exceeds train_steps ({self.train_steps})")
         if self.time_embed_dim % 2:
@@ -85,8 +117,7 @@ class GraspModelConfig(_JSONSettings):
             raise GraspConfigError("encoder_channels and denoiser_hidden need at least one width")
         if self.encoder == "dgcnn" and self.dgcnn_k > self.n_points:
             raise GraspConfigError(f"dgcnn_k ({self.dgcnn_k}) exceeds n_points ({self.n_points})")
-        if not self.clip_sample > 0:
-            raise GraspConfigError(f"clip_sample must be positive, got {self.clip_sample}")
+        _real("clip_sample", self.clip_sample, positive=True)
 
 
 
@@ -146,19 +177,19 @@ class GraspTrainConfig(_JSONSettings):
 
     def __post_init__(self) -> None:
         for name in ("steps", "batch_size", "threads", "checkpoint_every", "log_every", "surface_pool"):
-            if int(getattr(self, name)) < 1:
-                raise GraspConfigError(f"{name} must be >= 1, got {getattr(self, name)}")
+            _whole(name, getattr(self, name), 1)
         for name in ("rotated_copies", "objects_per_step", "max_per_pair"):
-            if int(getattr(self, name)) < 0:
-                raise GraspConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
-        if not self.lr > 0:
-            raise GraspConfigError(f"lr must be positive, got {self.lr}")
+            _whole(name, getattr(self, name), 0)
+        _real("lr", self.lr, positive=True)
         for name in ("lr_min", "point_noise", "joint_loss_weight", "condition_noise", "penetration_weight", "penetration_shift",
                      "contact_weight"):
-            if not getattr(self, name) >= 0:
-                raise GraspConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
-        if not _DEVICE.fullmatch(str(self.device)):
-            raise GraspConfigError(f"device: expected 'cpu', 'cuda', 'cuda:N' or 'mps', got {self.device!r}")
+            _real(name, getattr(self, name))
+        if self.lr_min > self.lr:  # the cosine schedule would rise instead of anneal
+            raise GraspConfigError(f"lr_min ({self.lr_min}) exceeds lr ({self.lr})")
+        for name in ("hands", "test_objects", "test_hands"):
+            _names(name, getattr(self, name))
+        if not isinstance(self.device, str) or not _DEVICE.fullmatch(self.device):
+            raise GraspConfigError(f"device: expected 'cpu', 'cuda', 'cuda:N' or 'mps' (a string), got {self.device!r}")
         if self.device != "cpu" and (self.penetration_weight > 0 or self.contact_weight > 0):
             raise GraspConfigError(f"device {self.device!r}: the penetration and contact terms run on the CPU only "
                                    "(train with device='cpu' or set their weights to 0)")

@@ -314,6 +314,10 @@ class GraspModel:
             cond = torch.cat([feat.expand(n, -1), hand_vec.expand(n, -1), torch.from_numpy(r6.astype(np.float32))], dim=-1)
             x = self.net.sample_translation(cond, gen)
             q = clamp_joints(self.net.joints(torch.cat([cond, x], dim=-1)), lower, upper)
+        if not (torch.isfinite(x).all() and torch.isfinite(q).all()):  # clamping passes NaN through
+            where = f" ({self.path})" if self.path else ""
+            raise CheckpointError(f"the grasp model{where} computes non-finite grasps: its weights hold NaN or infinity "
+                                  "(a diverged training run?)")
         return feat, x, q
 
     # -- handedness -------------------------------------------------------------------------------------

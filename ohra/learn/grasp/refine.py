@@ -110,7 +110,14 @@ def _moved_by(hand) -> dict[int, np.ndarray]:
 
 def _per_finger(per_capsule: np.ndarray, finger: np.ndarray) -> np.ndarray:
     """(N, K) per-capsule values -> (N, F) the smallest per finger (thumb-to-little order)."""
+    if not finger.size:  # a hand without fingers (leap_0000)
+        return np.zeros((len(per_capsule), 0))
     return np.stack([per_capsule[:, finger == f].min(axis=1) for f in np.unique(finger)], axis=1)
+
+
+def _nearest(d: np.ndarray) -> np.ndarray:
+    """(N,) the smallest of capsule-sample distances d (N, S, K); +inf for a hand without finger capsules."""
+    return d.min(axis=(1, 2)) if d.shape[1] and d.shape[2] else np.full(len(d), np.inf)
 
 
 def _energy(d: np.ndarray, finger: np.ndarray, s: RefineSettings) -> np.ndarray:
@@ -125,7 +132,7 @@ def _energy(d: np.ndarray, finger: np.ndarray, s: RefineSettings) -> np.ndarray:
 def _penetration(hand, obj, T: np.ndarray, q: np.ndarray, s: RefineSettings) -> tuple[np.ndarray, np.ndarray]:
     """(energy (N,), smallest signed distance (N,)) of grasps with palm poses T (N,4,4) and joints q (N,22)."""
     d, finger = _capsule_distances(hand, obj, T, q, s)
-    return _energy(d, finger, s), d.min(axis=(1, 2))
+    return _energy(d, finger, s), _nearest(d)
 
 
 def finger_clearance(hand, obj, grasps: np.ndarray, settings: RefineSettings | None = None) -> np.ndarray:
@@ -174,7 +181,7 @@ def refine_grasps(hand, obj, grasps: np.ndarray, settings: RefineSettings | None
     movable = np.flatnonzero(hm.upper > hm.lower)
     moved = _moved_by(hm)
     D, finger = _capsule_distances(hm, obj, T, q, s)  # kept in step with q: (N, S, K)
-    E, d0 = _energy(D, finger, s), D.min(axis=(1, 2))
+    E, d0 = _energy(D, finger, s), _nearest(D)
     step = np.full(len(g), float(s.step_rad))
     steps = np.zeros(len(g), dtype=int)
     for _ in range(int(s.iterations)):
@@ -202,7 +209,7 @@ def refine_grasps(hand, obj, grasps: np.ndarray, settings: RefineSettings | None
         q[act[better]], E[act[better]], D[act[better]] = trial[better], E_new[better], D_new[better]
         steps[act[better]] += 1
         step[act[~better]] *= 0.5
-    d1 = D.min(axis=(1, 2))
+    d1 = _nearest(D)
     out = g.astype(np.result_type(g.dtype, np.float32))  # a copy; float64 stays float64
     changed = steps > 0
     out[changed, 9:] = q[changed]

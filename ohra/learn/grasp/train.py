@@ -27,7 +27,7 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 import torch
 
-from ohra.errors import CheckpointError, ParamsError
+from ohra.errors import CheckpointError, GraspError, ParamsError
 from ohra.learn.grasp.condition import HandCondition
 from ohra.learn.grasp.config import GraspConfigError, GraspModelConfig, GraspTrainConfig, RunSpec
 from ohra.learn.grasp.contact import FingerCapsules, SDFGrids, contact_gap, penetration
@@ -252,6 +252,9 @@ def _loop(st: _State, spec: RunSpec, ckpt_path: Path | None, progress: bool,
             group["lr"] = lr
         batch = make_batch(st.td, cfg, spec.model.n_points, s, *st.tables, st.model.t_scale).to(cfg.device)
         terms = train_step(net, batch, cfg.joint_loss_weight, st.contact)
+        if not torch.isfinite(terms["total"]):  # a diverged run would save a model that samples NaN grasps
+            raise GraspError(f"training diverged at step {s + 1}: loss {float(terms['total'])} at lr {lr:.3g}; lower the "
+                             "learning rate (no model is written; checkpoints of earlier steps are kept)")
         opt.zero_grad(set_to_none=True)
         terms["total"].backward()
         opt.step()
@@ -298,6 +301,9 @@ def train_grasp(data: str | Path | Sequence[str | Path], model_cfg: GraspModelCo
     # one writer per run folder: a second process resuming the same run would interleave checkpoints
     lock = folder_lock(run, "grasp training run") if run is not None else contextlib.nullcontext()
     with lock, torch_settings(cfg.threads):
+        if not resume and ckpt_path is not None and ckpt_path.exists():  # it would be trained over from step 0
+            raise CheckpointError(f"{run} already holds a training run ({ckpt_path}); resume=True continues it, "
+                                  "or choose another run_dir")
         st = _prepare(spec, paths, ckpt_path, resume, objects, vae_path)
         if run is not None:
             write_text(run / "config.json", json.dumps(spec.to_dict(), indent=1) + "\n")
