@@ -227,6 +227,8 @@ def test_bad_inputs_raise_ohra_errors(vae_model, capsule):
     for n in (0, -3, 2.5, True, "4"):
         with pytest.raises(GraspError, match="n must be a positive integer"):
             vae_model.sample("barrett_hand", capsule, n)
+    with pytest.raises(GraspError, match="centre must be True or False, got 'no'"):  # "no" centred the object
+        vae_model.sample("barrett_hand", capsule, 2, centre="no")
     with pytest.raises(GraspError, match=r"expected shape \(3, 3, 3\)"):
         vae_model.sample("barrett_hand", capsule, 3, rotations=np.eye(3)[None].repeat(2, 0))
     with pytest.raises(GraspError, match=r"expected shape \(2, 3, 3\) or \(2, 6\), got \(3, 6\)"):  # as passed

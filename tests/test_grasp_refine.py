@@ -112,6 +112,15 @@ def test_a_hand_without_fingers_has_nothing_to_refine_or_measure():
     np.testing.assert_array_equal(nearest_surface(p, obj, np.stack([g, g + 0.01], axis=1)), g)
 
 
+@pytest.mark.parametrize("kwargs", [dict(touch="no"), dict(clearance_m=float("nan")), dict(iterations=2.5),
+                                    dict(samples_per_capsule=True), dict(step_rad="0.03")])
+def test_settings_that_would_be_misread_are_refused(kwargs):
+    """touch="no" switched touch on; a NaN clearance silently refined nothing; 2.5 iterations passed int()."""
+    with pytest.raises(GraspError, match="RefineSettings: "):
+        RefineSettings(**kwargs)
+    assert RefineSettings(touch=np.bool_(True), iterations=np.int64(3)).touch
+
+
 def test_bad_input_is_refused():
     hand = HandModel.from_params(get_hand("allegro_hand_left"))
     with pytest.raises(GraspError, match=r"\(N, 31\)"):

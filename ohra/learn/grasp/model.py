@@ -247,6 +247,8 @@ class GraspModel:
         if isinstance(candidates, bool) or not isinstance(candidates, (int, np.integer)) or candidates < 1:
             raise GraspError(f"candidates must be a positive integer, got {candidates!r}")
         k = int(candidates)
+        if not isinstance(centre, (bool, np.bool_)):  # "no" would centre the object
+            raise GraspError(f"centre must be True or False, got {centre!r}")
         seed = require_seed(seed, GraspError)
         params = resolve_hand(hand)
         obj = resolve_object(obj)

@@ -50,6 +50,16 @@ class RefineSettings:
         return f"RefineSettings({', '.join(shown + (['touch=True'] if self.touch else []))})"
 
     def __post_init__(self) -> None:
+        import numbers
+
+        reals = (self.clearance_m, self.step_rad, self.fd_rad)
+        if any(isinstance(v, bool) or not isinstance(v, numbers.Real) or not np.isfinite(v) for v in reals):
+            raise GraspError(f"RefineSettings: clearance_m, step_rad and fd_rad must be finite numbers, got {self}")
+        counts = (self.iterations, self.samples_per_capsule)
+        if any(isinstance(v, bool) or not isinstance(v, numbers.Integral) for v in counts):
+            raise GraspError(f"RefineSettings: iterations and samples_per_capsule must be whole numbers, got {self}")
+        if not isinstance(self.touch, (bool, np.bool_)):  # "no" would switch it on
+            raise GraspError(f"RefineSettings: touch must be True or False, got {self.touch!r}")
         if self.clearance_m < 0 or self.step_rad <= 0 or self.fd_rad <= 0:
             raise GraspError(f"RefineSettings: clearance_m >= 0, step_rad > 0 and fd_rad > 0 needed, got {self}")
         if int(self.iterations) < 0 or int(self.samples_per_capsule) < 2:
