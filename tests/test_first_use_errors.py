@@ -92,7 +92,7 @@ def test_evaluate_model_takes_one_hand_by_itself():
         evaluate_model(object(), "leap_2211", "builtin:box", n=1, original=True, allow_seen=True)
 
 
-def test_evaluate_model_refuses_a_bad_seed_protocol_or_a_repeated_hand_or_object_before_simulating():
+def test_evaluate_model_refuses_a_bad_seed_protocol_or_a_repeated_hand_or_object_before_simulating(tmp_path):
     from ohra.learn.grasp.evaluate import evaluate_model
     from ohra.learn.grasp.model import load_grasp_model
 
@@ -105,6 +105,10 @@ def test_evaluate_model_refuses_a_bad_seed_protocol_or_a_repeated_hand_or_object
         evaluate_model(leap, "leap_2211", "procedural:box:1234", n=1, protocol=3)
     with pytest.raises(GraspError, match=r"hand\(s\) \['leap_2211'\] given more than once"):
         evaluate_model(leap, ["leap_2211", "leap_2211"], "procedural:box:1234", n=1)
+    spelled = tmp_path / "mine.json"  # the same hand by another spelling was counted twice, with the same grasps
+    spelled.write_text(ohra.get_hand("leap_2211").to_json())
+    with pytest.raises(GraspError, match=r"hands \['leap_2211', '.*mine.json'\] are the same hand"):
+        evaluate_model(leap, ["leap_2211", str(spelled)], "procedural:box:1234", n=1)
     with pytest.raises(GraspError, match=r"object\(s\) \['box-1234'\] given more than once"):
         evaluate_model(leap, "leap_2211", ["procedural:box:1234", "procedural:box:1234"], n=1)
 

@@ -495,8 +495,8 @@ def test_hands_given_as_params_keep_apart_in_the_report(dataset, monkeypatch):
     monkeypatch.setattr(ohra.sim, "GraspEvaluator", _RecordingEvaluator)
     monkeypatch.setattr(_RecordingEvaluator, "hands", [])
     a, b = get_hand("barrett_hand"), get_hand("shadow_hand_right")
-    rep = evaluate_model(model, [a, b, "barrett_hand"], ["builtin:capsule"], n=2, seed=5)
-    labels = [hand_key(a), hand_key(b), "barrett_hand"]
+    rep = evaluate_model(model, [a, b, "allegro_hand_left"], ["builtin:capsule"], n=2, seed=5)
+    labels = [hand_key(a), hand_key(b), "allegro_hand_left"]
     assert [p.hand for p in rep.pairs] == labels == _RecordingEvaluator.hands
     assert list(rep.per_hand()) == labels and all(r["n"] == 2 for r in rep.per_hand().values())
     assert [p["hand"] for p in json.loads(rep.to_json())["pairs"]] == labels

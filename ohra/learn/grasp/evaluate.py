@@ -371,6 +371,12 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
     twice = sorted(name for name, k in Counter(name for name, *_ in resolved).items() if k > 1)
     if twice:
         raise GraspError(f"hand(s) {twice} given more than once")
+    by_content: dict[str, list[str]] = {}
+    for name, params, *_ in resolved:  # one hand by two spellings (a name and its params JSON) would count twice
+        by_content.setdefault(hand_key(params), []).append(name)
+    same = [names for names in by_content.values() if len(names) > 1]
+    if same:
+        raise GraspError(f"hands {same[0]} are the same hand (identical canonical parameters), given more than once")
     pairs = []
     resume = Path(resume_dir) if resume_dir is not None else None
     resumed = 0
