@@ -85,6 +85,8 @@ def require_seed(seed: object, error: type[OhraError], what: str = "seed") -> in
 
     if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or int(seed) < 0:
         raise error(f"{what} must be a whole number >= 0, got {seed!r}")
+    if int(seed) >= 2**63:  # stored as int64 beside what it made (npz, JSON), and torch seeds stop at 2**64
+        raise error(f"{what} must be below 2**63, got {seed!r}")
     return int(seed)
 
 

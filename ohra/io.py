@@ -33,6 +33,18 @@ def umask_mode() -> int:
     return 0o666 & ~mask
 
 
+def check_suffix(path: str | Path, suffix: str, flag: str = "-o") -> Path:
+    """``path`` when its file name ends in ``suffix`` (any case) after a name of its own; else
+    :class:`~ohra.errors.OutputPathError` naming ``flag`` (``-o .npz`` is a hidden file without a suffix)."""
+    from ohra.errors import OutputPathError
+
+    path = Path(path)
+    if path.suffix.lower() != suffix.lower():
+        hint = f" (a file name is needed before {suffix})" if path.name.lower() == suffix.lower() else ""
+        raise OutputPathError(f"{flag} must end in {suffix}, got {path}{hint}")
+    return path
+
+
 def check_output(path: str | Path, folder: bool = False) -> Path:
     """``path`` if a file (``folder=True``: a folder) can be written there, checked before any work is done:
     not an existing folder (a file), no parent component that is a file, and the nearest existing folder

@@ -35,6 +35,7 @@ def test_eval_reports_success_rate_and_writes_json(setup, capsys):
     assert rc == 0 and "1/2 succeeded (50.0 %)" in out
     rep = json.loads((tmp / "r.json").read_text())
     assert rep["n"] == 2 and [g["success"] for g in rep["grasps"]] == [True, False]
+    assert rep["form"] in ("base", "extended") and "grasps_made_for" not in rep  # a plain array: made for nothing known
     assert rep["protocol"]["friction"] == 3.0 and rep["object_info"]["mass_kg"] > 0
     assert (tmp / "s.png").read_bytes()[:4] == b"\x89PNG"
     assert rep["protocol"]["dt"] == pytest.approx(1 / 240)
@@ -177,8 +178,14 @@ def test_a_sampled_grasp_file_says_which_hand_and_form_it_was_made_for(tmp_path,
     capsys.readouterr()
     rc, _, err = _run(capsys, out, "--hand", "allegro_hand_left", "--object", "builtin:box")
     assert rc == 0 and forms[-1] == "base" and "note" not in err
-    rc, _, err = _run(capsys, out, "--hand", "allegro_hand_left", "--object", "builtin:box", "--form", "extended")
+    rc, _, err = _run(capsys, out, "--hand", "allegro_hand_left", "--object", "builtin:box", "--form", "extended",
+                      "-o", tmp_path / "ext.json")
     assert rc == 0 and forms[-1] == "extended" and "sampled for the base form of allegro_hand_left" in err
+    # the report says which form it simulated and what the grasps were made for (two reports differed in outcomes only)
+    rep = json.loads((tmp_path / "ext.json").read_text())
+    assert (rep["hand"], rep["form"]) == ("allegro_hand_left", "extended")
+    assert rep["grasps_made_for"] == {"hand": "allegro_hand_left", "form": "base", "object_name": "box",
+                                      "object_hash": ObjectModel.builtin("box").mesh_hash}
 
 
 def test_a_dataset_shard_evaluated_on_another_hand_or_object_says_so(tmp_path, capsys):

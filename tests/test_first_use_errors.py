@@ -99,6 +99,10 @@ def test_evaluate_model_refuses_a_bad_seed_protocol_or_a_repeated_hand_or_object
     leap = load_grasp_model("leap")
     with pytest.raises(GraspError, match="seed must be a whole number >= 0, got -1"):
         evaluate_model(leap, "leap_2211", "procedural:box:1234", n=1, seed=-1)
+    with pytest.raises(GraspError, match=r"seed must be below 2\*\*63, got 9223372036854775808"):  # not storable as int64
+        evaluate_model(leap, "leap_2211", "procedural:box:1234", n=1, seed=2**63)
+    with pytest.raises(GraspError, match=r"seed must be below 2\*\*63"):  # was a traceback when the .npz was written
+        leap.sample("leap_2211", "procedural:box:1234", 1, seed=2**63)
     with pytest.raises(GraspError, match="unknown protocol preset 'nosuch'"):
         evaluate_model(leap, "leap_2211", "procedural:box:1234", n=1, protocol="nosuch")
     with pytest.raises(GraspError, match="protocol must be an ohra.sim.Protocol, a preset name or None, got int"):

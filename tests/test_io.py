@@ -244,3 +244,15 @@ def test_a_lock_on_a_file_is_one_error_and_a_failed_job_leaves_no_empty_folder(t
         with folder_lock(tmp_path / "mine"):  # a folder the caller made stays
             raise ValueError
     assert (tmp_path / "mine").is_dir()
+
+
+def test_an_output_suffix_is_checked_in_any_case_and_a_bare_suffix_is_named_as_such(tmp_path):
+    """``-o UP.JSON`` was refused by one command and taken by another; ``-o .npz`` said "must end in .npz, got .npz"."""
+    from ohra.errors import OutputPathError
+    from ohra.io import check_suffix
+
+    assert check_suffix(tmp_path / "UP.JSON", ".json") == tmp_path / "UP.JSON"
+    with pytest.raises(OutputPathError, match=r"-o must end in .npz, got .npz \(a file name is needed before .npz\)"):
+        check_suffix(".npz", ".npz")
+    with pytest.raises(OutputPathError, match=r"--render must end in .png, got .*r.txt$"):
+        check_suffix(tmp_path / "r.txt", ".png", "--render")

@@ -157,13 +157,11 @@ def run(args: argparse.Namespace) -> int:
                          "already simulates the original URDF with its own: give one of them")
     if args.meshcat and args.original:
         raise GraspError("--meshcat draws canonical hands only; drop --original")
-    from ohra.io import check_output
+    from ohra.io import check_output, check_suffix
 
     for out, suffix, flag in ((args.output, ".json", "-o"), (args.render, ".png", "--render"), (args.meshcat, ".html", "--meshcat")):
-        if out:  # all checked before anything is simulated or written
-            check_output(out)
-            if Path(out).suffix.lower() != suffix:  # a PNG written into r.txt, a report into sheet.png
-                raise GraspError(f"{flag} must end in {suffix}, got {out}")
+        if out:  # all checked before anything is simulated or written: a PNG written into r.txt, a report into sheet.png
+            check_suffix(check_output(out), suffix, flag)
     grasps, made = load_grasp_file(args.grasps, args.key)  # made: what `ohra grasp sample` recorded, if anything
     if made.get("hand") and made["hand"] != str(args.hand):
         from ohra.hands.resolve import resolve_hand
@@ -217,8 +215,13 @@ def run(args: argparse.Namespace) -> int:
                           address=args.address, resume=partial)
     wall = time.perf_counter() - t0
     ev.close()
-    rep.meta.update({"grasp_file": str(args.grasps), "original_hand": bool(args.original), "inertials": args.inertials, "wall_s": wall,
-                     "object_info": obj.describe()})
+    from ohra.canonical.params import ExtendedParams
+
+    form = "extended" if isinstance(get_hand(args.hand, args.form), ExtendedParams) else "base"  # the form simulated
+    made_for = {k: v for k, v in made.items() if k in ("hand", "form", "object_name", "object_hash", "made")}
+    rep.meta.update({"grasp_file": str(args.grasps), "hand": str(args.hand), "form": form, "original_hand": bool(args.original),
+                     "inertials": args.inertials, "wall_s": wall, "object_info": obj.describe(),
+                     **({"grasps_made_for": made_for} if made_for else {})})
     if args.output:
         from ohra.io import write_json
 

@@ -250,12 +250,9 @@ def _load(model: str | None, hands: Sequence[str] = (), resolved: Mapping[str, P
 
 def _output(path: str, suffix: str) -> Path:
     """``-o`` checked before any work: the file type it must have, not a folder."""
-    from ohra.io import check_output
+    from ohra.io import check_output, check_suffix
 
-    out = Path(path)
-    if out.suffix != suffix:
-        raise OhraError(f"-o must end in {suffix}, got {out}")
-    return check_output(out)  # not a folder, no parent that is a file
+    return check_output(check_suffix(path, suffix))  # not a folder, no parent that is a file
 
 
 def _cmd_sample(args: argparse.Namespace) -> int:

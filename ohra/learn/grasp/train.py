@@ -68,7 +68,10 @@ def _tables(cond: HandCondition, data: TrainingData) -> tuple[torch.Tensor, torc
 
 def _device(name: str) -> torch.device:
     """The torch device ``name``, or :class:`GraspConfigError` when this machine has none such."""
-    dev = torch.device(name)
+    try:
+        dev = torch.device(name)
+    except RuntimeError as exc:
+        raise GraspConfigError(f"device {name!r}: {exc}") from None
     if dev.type == "cuda" and not torch.cuda.is_available():
         raise GraspConfigError(f"device {name!r}: this torch ({torch.__version__}) sees no CUDA GPU")
     if dev.type == "cuda" and (dev.index or 0) >= torch.cuda.device_count():
