@@ -477,9 +477,9 @@ def test_grasp_eval_keeps_its_table_aligned_for_long_hand_labels(tmp_path, capsy
     """A hand given as a file is labelled by its path: the columns after it stay under each other."""
     from ohra.cli.main import main
 
-    deep = tmp_path / "a_folder_with_a_rather_long_name" / "leap_2211.json"
+    deep = tmp_path / "a_folder_with_a_rather_long_name" / "leap_2212.json"
     deep.parent.mkdir()
-    get_hand("leap_2211").to_json(deep)
+    get_hand("leap_2212").to_json(deep)  # another hand: the same one by two spellings is refused
     argv = ["grasp", "eval", "--model", "leap", "--hands", "leap_2211", str(deep), "--objects", "builtin:box", "-n", "1",
             "--quiet"]
     assert main(argv) == 0
