@@ -6,6 +6,8 @@ so a run directory says exactly what made it.
 
 from __future__ import annotations
 
+import math
+import numbers
 import re
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any, TypeVar
@@ -23,8 +25,6 @@ class GraspConfigError(OhraError, ValueError):
 
 def _whole(name: str, value: Any, least: int) -> None:
     """``value`` is a whole number >= ``least`` (not a bool, a float or a numeric string: ``int()`` would take them)."""
-    import numbers
-
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
         raise GraspConfigError(f"{name}: expected a whole number, got {value!r}")
     if value < least:
@@ -33,9 +33,6 @@ def _whole(name: str, value: Any, least: int) -> None:
 
 def _real(name: str, value: Any, positive: bool = False) -> None:
     """``value`` is a finite real number >= 0 (> 0 when ``positive``)."""
-    import math
-    import numbers
-
     if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
         raise GraspConfigError(f"{name}: expected a finite number, got {value!r}")
     if value < 0 or (positive and value == 0):
