@@ -75,12 +75,12 @@ def train_arm(arm: str, args: argparse.Namespace) -> None:
     from _study_cache import claim_run
 
     from ohra.learn.grasp.config import GraspModelConfig, GraspTrainConfig
-    from ohra.learn.grasp.train import _device, train_grasp
+    from ohra.learn.grasp.train import torch_device, train_grasp
 
     mcfg = GraspModelConfig(**ARMS[arm])
     tcfg = GraspTrainConfig(steps=args.steps, batch_size=args.batch_size, seed=args.seed, threads=args.threads,
                             hands=tuple(HANDS), device=args.device, checkpoint_every=500)
-    _device(args.device)  # a missing device stops here, before the run folder is claimed under its key
+    torch_device(args.device)  # a missing device stops here, before the run folder is claimed under its key
     run = Path(args.runs) / arm
     if claim_run(run, _key(arm, args)):
         print(f"{arm}: trained already ({run})", flush=True)

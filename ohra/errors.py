@@ -90,6 +90,30 @@ def require_seed(seed: object, error: type[OhraError], what: str = "seed") -> in
     return int(seed)
 
 
+def require_whole(value: object, error: type[OhraError], what: str, least: int) -> int:
+    """``value`` as an int when it is a whole number >= ``least``, or ``error`` naming ``what``: a bool, a float
+    or a numeric string is refused (``int()`` would take them and truncate)."""
+    import numbers
+
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise error(f"{what}: expected a whole number, got {value!r}")
+    if value < least:
+        raise error(f"{what} must be >= {least}, got {value}")
+    return int(value)
+
+
+def require_finite(value: object, error: type[OhraError], what: str, positive: bool = False) -> float:
+    """``value`` as a float when it is a finite real number >= 0 (> 0 when ``positive``), or ``error`` naming ``what``."""
+    import math
+    import numbers
+
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
+        raise error(f"{what}: expected a finite number, got {value!r}")
+    if value < 0 or (positive and value == 0):
+        raise error(f"{what} must be {'positive' if positive else '>= 0'}, got {value}")
+    return float(value)
+
+
 def user_stacklevel() -> int:
     """The ``stacklevel`` that attributes a warning to the first frame outside ohra (and ``functools``, whose
     ``cached_property`` runs some of ohra's checks): a notebook user sees their own line, not ohra's internals.

@@ -290,10 +290,9 @@ def _cmd_parse(args: argparse.Namespace) -> int:
 
 def _cmd_compare(args: argparse.Namespace) -> int:
     from ohra.errors import OhraError
-    from ohra.hands.resolve import resolve_hand
+    from ohra.hands.resolve import keep_mesh_warnings, resolve_hand
     from ohra.io import check_output
     from ohra.original.fidelity import compare
-    from ohra.original.hand import MissingMeshWarning
 
     if args.samples < 1:
         raise OhraError(f"--samples must be >= 1 (random configurations compared), got {args.samples}")
@@ -303,7 +302,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         # the parse's notes are not this command's output; a missing mesh is: the fidelity numbers (and the
         # surface column) are measured on the geometry that is there
         warnings.simplefilter("ignore")
-        warnings.simplefilter("default", MissingMeshWarning)
+        keep_mesh_warnings()
         ref = resolve_hand(args.hand, _natural_form(args))
         rep = compare(ref, ref.form, samples=args.samples, surface=not args.no_surface)
     print(json.dumps(rep.to_dict(), indent=2) if args.json else rep.table(surface_hint="--no-surface skipped it"))

@@ -70,7 +70,7 @@ class HandRef:
         sp = self.require_spec("a fidelity report")
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # the measurement's notes are kept below
-            _keep_mesh_warnings()
+            keep_mesh_warnings()
             m = measure(self.original(), sp, self.form)
         notes = list(m.notes) + override_notes(sp, self.params)
         return ParseResult(self.params, self.form, sp, m, self.params, None, notes)
@@ -82,11 +82,11 @@ def _parse_cached(path: Path, mtime: float, form: str):
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the parse's notes travel in its result
-        _keep_mesh_warnings()
+        keep_mesh_warnings()
         return parse(path, form, fit_params=True)
 
 
-def _keep_mesh_warnings() -> None:
+def keep_mesh_warnings() -> None:
     """Inside a block that ignores warnings, still show a missing mesh: what is measured on the original hand
     (fingertips, link surfaces) changes without it."""
     from ohra.original.hand import MissingMeshWarning
@@ -169,4 +169,4 @@ def resolve_hand(ref: Any, form: str | None = None, spec: str | Path | None = No
     )
 
 
-__all__ = ["HandRef", "resolve_hand", "parse_spec_file"]
+__all__ = ["HandRef", "resolve_hand", "parse_spec_file", "keep_mesh_warnings"]

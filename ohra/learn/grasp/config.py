@@ -6,13 +6,11 @@ so a run directory says exactly what made it.
 
 from __future__ import annotations
 
-import math
-import numbers
 import re
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any, TypeVar
 
-from ohra.errors import OhraError, reject_unknown, require_seed
+from ohra.errors import OhraError, reject_unknown, require_finite, require_seed, require_whole
 
 ENCODERS = ("pointnet", "dgcnn")
 CONDITIONS = ("vae", "params")
@@ -24,19 +22,11 @@ class GraspConfigError(OhraError, ValueError):
 
 
 def _whole(name: str, value: Any, least: int) -> None:
-    """``value`` is a whole number >= ``least`` (not a bool, a float or a numeric string: ``int()`` would take them)."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise GraspConfigError(f"{name}: expected a whole number, got {value!r}")
-    if value < least:
-        raise GraspConfigError(f"{name} must be >= {least}, got {value}")
+    require_whole(value, GraspConfigError, name, least)
 
 
 def _real(name: str, value: Any, positive: bool = False) -> None:
-    """``value`` is a finite real number >= 0 (> 0 when ``positive``)."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
-        raise GraspConfigError(f"{name}: expected a finite number, got {value!r}")
-    if value < 0 or (positive and value == 0):
-        raise GraspConfigError(f"{name} must be {'positive' if positive else '>= 0'}, got {value}")
+    require_finite(value, GraspConfigError, name, positive)
 
 
 def _names(name: str, value: Any) -> None:

@@ -44,7 +44,9 @@ class DDIMScheduler:
 
     def add_noise(self, x0: torch.Tensor, noise: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
         """x_t = sqrt(abar_t) x0 + sqrt(1 - abar_t) noise; ``t`` (B,) integer levels."""
-        ab = self.alphas_cumprod.to(t.device)[t].unsqueeze(-1)
+        if self.alphas_cumprod.device != t.device:  # once per device, not a copy every training step
+            self.alphas_cumprod = self.alphas_cumprod.to(t.device)
+        ab = self.alphas_cumprod[t].unsqueeze(-1)
         return ab.sqrt() * x0 + (1.0 - ab).sqrt() * noise
 
     def timesteps(self, n: int | None = None) -> list[int]:

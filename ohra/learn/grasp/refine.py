@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ohra.errors import GraspError
+from ohra.errors import GraspError, require_finite, require_whole
 
 
 @dataclass(frozen=True, repr=False)
@@ -50,20 +50,13 @@ class RefineSettings:
         return f"RefineSettings({', '.join(shown + (['touch=True'] if self.touch else []))})"
 
     def __post_init__(self) -> None:
-        import numbers
-
-        reals = (self.clearance_m, self.step_rad, self.fd_rad)
-        if any(isinstance(v, bool) or not isinstance(v, numbers.Real) or not np.isfinite(v) for v in reals):
-            raise GraspError(f"RefineSettings: clearance_m, step_rad and fd_rad must be finite numbers, got {self}")
-        counts = (self.iterations, self.samples_per_capsule)
-        if any(isinstance(v, bool) or not isinstance(v, numbers.Integral) for v in counts):
-            raise GraspError(f"RefineSettings: iterations and samples_per_capsule must be whole numbers, got {self}")
+        require_finite(self.clearance_m, GraspError, "RefineSettings: clearance_m")
+        for name in ("step_rad", "fd_rad"):
+            require_finite(getattr(self, name), GraspError, f"RefineSettings: {name}", positive=True)
+        require_whole(self.iterations, GraspError, "RefineSettings: iterations", 0)
+        require_whole(self.samples_per_capsule, GraspError, "RefineSettings: samples_per_capsule", 2)
         if not isinstance(self.touch, (bool, np.bool_)):  # "no" would switch it on
             raise GraspError(f"RefineSettings: touch must be True or False, got {self.touch!r}")
-        if self.clearance_m < 0 or self.step_rad <= 0 or self.fd_rad <= 0:
-            raise GraspError(f"RefineSettings: clearance_m >= 0, step_rad > 0 and fd_rad > 0 needed, got {self}")
-        if int(self.iterations) < 0 or int(self.samples_per_capsule) < 2:
-            raise GraspError(f"RefineSettings: iterations >= 0 and samples_per_capsule >= 2 needed, got {self}")
 
 
 def as_refine_settings(refine: "bool | RefineSettings | None") -> RefineSettings | None:

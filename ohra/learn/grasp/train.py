@@ -66,7 +66,7 @@ def _tables(cond: HandCondition, data: TrainingData) -> tuple[torch.Tensor, torc
     return hand, present
 
 
-def _device(name: str) -> torch.device:
+def torch_device(name: str) -> torch.device:
     """The torch device ``name``, or :class:`GraspConfigError` when this machine has none such."""
     try:
         dev = torch.device(name)
@@ -204,7 +204,7 @@ def _prepare(spec: RunSpec, paths: list, ckpt_path: Path | None, resume: bool,
              objects: Mapping[str, ObjectModel] | None, vae_path: str | Path | None) -> _State:
     """Data, condition, network and optimiser; restored from the checkpoint when resuming."""
     cfg, model_cfg = spec.train, spec.model
-    device = _device(cfg.device)  # a missing device is named before seconds of data loading
+    device = torch_device(cfg.device)  # a missing device is named before seconds of data loading
     td = TrainingData.load(paths, cfg, objects)
     digest = td.digest()
     ckpt = None
@@ -333,4 +333,4 @@ def train_grasp(data: str | Path | Sequence[str | Path], model_cfg: GraspModelCo
     return GraspTrainResult(model, metrics, run)
 
 
-__all__ = ["train_grasp", "GraspTrainResult", "learning_rate", "heldout_losses", "train_step", "ContactTerm", "loss_terms"]
+__all__ = ["torch_device", "train_grasp", "GraspTrainResult", "learning_rate", "heldout_losses", "train_step", "ContactTerm", "loss_terms"]
