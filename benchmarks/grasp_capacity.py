@@ -13,14 +13,24 @@ hands, VAE condition, seed, batch (128), learning rate and steps (12,000), three
   feature, denoiser (1024, 512, 256), joint network 512 wide with 3 blocks;
 - ``dgcnn512-wide``: both.
 
-and evaluates each exactly as the study evaluated its unified model (100 grasps per (hand, unseen
+Stop 52 adds two arms for the other candidate cause of imprecise fingers: the paper's joint network
+regresses the joints given the sampled translation, i.e. it predicts their conditional mean, which for
+a multimodal set of finger placements is none of them (half the sampled fingers are sunk, a third hover):
+
+- ``diffq``: the 22 joints diffused together with the translation (``GraspModelConfig.diffuse_joints``;
+  per-joint standardisation; no joint network), the study's widths;
+- ``diffq-wide``: the same with the ``wide`` arm's denoiser (1024, 512, 256), since the denoiser now
+  carries the joints too.
+
+The script trains each arm and evaluates it exactly as the study evaluated its unified model (100 grasps per (hand, unseen
 object) of ``recipes/grasp_eval_objects.yaml``, sampling seed 0, the data's protocol, canonical URDFs),
 paired over the same wrist rotations with the committed evaluation ``runs/grasp_study/eval_unified.json``.
 
 How it is read, written before any of these models was trained (stop 51):
 pooled over the three hands (3,900 paired grasps), an arm whose success exceeds the committed unified
 model's by more than two standard errors reads as "capacity helped", below minus two as "capacity hurt",
-otherwise "no change detectable"; per-hand differences are shown, not read. One training seed, one
+otherwise "no change detectable"; per-hand differences are shown, not read. The same rule, written in
+stop 52 before either was trained, reads the two ``diffq`` arms ("diffused joints helped/hurt"). One training seed, one
 sampling seed. ``--touch`` adds the same comparison with test-time finger refinement (``--refine touch``)
 against ``runs/grasp_study/eval_unified_touched.json``. The shipped model and Tables 4-6 stay the committed
 study's whatever this shows (an arm that wins is the candidate for the next full study).
@@ -60,7 +70,13 @@ ARMS: dict[str, dict] = {
              "joint_hidden": 512, "joint_blocks": 3},
     "dgcnn512-wide": {"encoder": "dgcnn", "encoder_channels": (64, 64, 128, 256), "object_dim": 512, "dgcnn_k": 20,
                       "denoiser_hidden": (1024, 512, 256), "joint_hidden": 512, "joint_blocks": 3},
+    # stop 52: the joints diffused with the translation (no joint network), at the study's widths and wider
+    "diffq": {"diffuse_joints": True},
+    "diffq-wide": {"diffuse_joints": True, "denoiser_hidden": (1024, 512, 256)},
 }
+# how a pooled change is read, per arm (the rule itself is the docstring's)
+VERDICTS = {arm: ("diffused joints helped", "diffused joints hurt") if ARMS[arm].get("diffuse_joints")
+            else ("capacity helped", "capacity hurt") for arm in ARMS}
 
 
 def _key(arm: str, args: argparse.Namespace) -> dict:
@@ -162,7 +178,7 @@ def cmd_eval(args: argparse.Namespace) -> None:
                 ev = evaluated(load_grasp_model(run), arm, HANDS, objects, False, protocol, a, refine=refine)
             row[mode] = rates(ev, HANDS)
             comps[mode].append(paired_comparison(base[mode], ev, HANDS, f"{arm} - committed ({mode})",
-                                                 ("capacity helped", "capacity hurt")))
+                                                 VERDICTS[arm]))
         rows.append(row)
     res = {"hands": HANDS, "n": args.n, "objects": [o.name for o in objects], "data": args.data, "steps": args.steps,
            "protocol_note": protocol_note(protocol), "rows": rows, "comparisons": comps, "paper": PAPER}

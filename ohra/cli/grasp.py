@@ -1,7 +1,7 @@
 """``ohra grasp sample|eval`` and ``ohra train grasp``: the cross-embodiment grasp model from the shell.
 
     ohra train grasp --data DIR [DIR ...] [--hands H ...] [--test-objects O ...] --condition vae|params
-                     [--encoder pointnet|dgcnn] [--steps N] [--batch-size B] [--seed S] [--threads T]
+                     [--encoder pointnet|dgcnn] [--diffuse-joints] [--steps N] [--batch-size B] [--seed S] [--threads T]
                      -o RUN [--resume]
     ohra grasp sample --hand H --object O [-n 100] [--seed S] [--refine [open|touch]] [--centre] [--candidates K] [--mirror auto|on|off] [--condition-hand H] [--model RUN] -o grasps.npz
     ohra grasp eval --hands H ... --objects O ... [-n 100] [--seed S] [--original [--collisions canonical] | --inertials original] [--condition-hand H] [--refine [open|touch]] [--centre] [--candidates K] [--mirror auto|on|off] [--model RUN] [-o report.json]
@@ -128,6 +128,9 @@ def register_train(train_sub: Any) -> None:
     p.add_argument("--encoder", choices=ENCODERS, default=m.encoder, help="object encoder (default pointnet)")
     p.add_argument("--object-dim", type=int, default=m.object_dim,
                    help=f"object feature size (default {m.object_dim}; the paper's DGCNN: 512)")
+    p.add_argument("--diffuse-joints", action="store_true",
+                   help="diffuse the 22 joints with the wrist translation (no joint network; default: the paper's joint "
+                        "network given the sampled translation)")
     p.add_argument("--steps", type=int, default=t.steps, help=f"training steps (default {t.steps})")
     p.add_argument("--batch-size", type=int, default=t.batch_size)
     p.add_argument("--lr", type=float, default=t.lr)
@@ -176,7 +179,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
     out = Path(args.output)
     if not args.resume and (out / "checkpoints" / "last.pt").exists():
         raise OhraError(f"{out} already holds a training run; pass --resume to continue it or choose another -o")
-    mcfg = GraspModelConfig(encoder=args.encoder, condition=args.condition, object_dim=args.object_dim)
+    mcfg = GraspModelConfig(encoder=args.encoder, condition=args.condition, object_dim=args.object_dim,
+                            diffuse_joints=args.diffuse_joints)
     tcfg = GraspTrainConfig(steps=args.steps, batch_size=args.batch_size, lr=args.lr, seed=args.seed, threads=args.threads, device=args.device,
                             rotated_copies=args.rotated_copies, objects_per_step=args.objects_per_step,
                             max_per_pair=args.max_per_pair, checkpoint_every=args.checkpoint_every,

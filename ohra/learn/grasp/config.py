@@ -65,8 +65,9 @@ class GraspModelConfig(_JSONSettings):
     on one CPU core) or ``"dgcnn"`` (the paper's edge convolutions, k neighbours; ~3 clouds/s, i.e.
     days per run on a CPU). ``condition``: ``"vae"`` (frozen VAE mean latent, the unified model) or
     ``"params"`` (normalised raw canonical parameters, for hands the VAE cannot encode, e.g. LEAP
-    variants). Diffusion: x0 prediction over the wrist translation, ``train_steps`` noise levels,
-    DDIM with ``inference_steps`` at sampling time.
+    variants). Diffusion: x0 prediction over the wrist translation (and, with ``diffuse_joints``, the
+    22 joints too, in place of the joint network), ``train_steps`` noise levels, DDIM with
+    ``inference_steps`` at sampling time.
     """
 
     encoder: str = "pointnet"
@@ -82,6 +83,9 @@ class GraspModelConfig(_JSONSettings):
     train_steps: int = 1000
     inference_steps: int = 10
     clip_sample: float = 4.0  # |x0| bound in normalised translation units (std of the training translations)
+    # the 22 joints as part of the diffusion (x = [translation, joints], each joint standardised by the training
+    # data's mean and spread; no joint network) instead of the paper's joint network given the sampled translation
+    diffuse_joints: bool = False
 
     def __post_init__(self) -> None:
         if self.encoder not in ENCODERS:
@@ -105,6 +109,8 @@ class GraspModelConfig(_JSONSettings):
         if self.encoder == "dgcnn" and self.dgcnn_k > self.n_points:
             raise GraspConfigError(f"dgcnn_k ({self.dgcnn_k}) exceeds n_points ({self.n_points})")
         _real("clip_sample", self.clip_sample, positive=True)
+        if not isinstance(self.diffuse_joints, bool):
+            raise GraspConfigError(f"diffuse_joints: expected True or False, got {self.diffuse_joints!r}")
 
 
 

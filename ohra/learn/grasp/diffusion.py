@@ -83,7 +83,8 @@ def timestep_embedding(t: torch.Tensor, dim: int) -> torch.Tensor:
 
 
 class Denoiser(nn.Module):
-    """MLP x0-predictor: ([x_t (3), condition, time embedding]) -> x0 (3).
+    """MLP x0-predictor: ([x_t (x_dim), condition, time embedding]) -> x0 (x_dim); x_dim = 3 (the wrist
+    translation) or 25 (translation and joints).
 
     The first layer is split into a condition part and an (x_t, time) part: the condition is the
     same at every sampling step, so :meth:`project_condition` runs once per sample and each of the
@@ -93,6 +94,7 @@ class Denoiser(nn.Module):
     def __init__(self, cond_dim: int, hidden: tuple[int, ...] = (512, 256), time_dim: int = 64, x_dim: int = 3):
         super().__init__()
         self.time_dim = int(time_dim)
+        self.x_dim = int(x_dim)
         self.cond_in = nn.Linear(cond_dim, hidden[0])
         self.xt_in = nn.Linear(x_dim + time_dim, hidden[0], bias=False)
         layers: list[nn.Module] = []
@@ -105,16 +107,16 @@ class Denoiser(nn.Module):
         return self.cond_in(cond)
 
     def forward(self, x_t: torch.Tensor, t: torch.Tensor, cond_h: torch.Tensor) -> torch.Tensor:
-        """x_t (B, 3), integer levels t (B,), projected condition (B, hidden[0]) -> x0 (B, 3)."""
+        """x_t (B, x_dim), integer levels t (B,), projected condition (B, hidden[0]) -> x0 (B, x_dim)."""
         h = cond_h + self.xt_in(torch.cat([x_t, timestep_embedding(t, self.time_dim)], dim=-1))
         return self.body(h)
 
     def forward_level(self, x_t: torch.Tensor, t: int, cond_h: torch.Tensor) -> torch.Tensor:
         """:meth:`forward` with one level ``t`` for the whole batch (sampling): the time part of the
         first layer is one row, broadcast."""
-        w = self.xt_in.weight  # (hidden, 3 + time_dim)
+        w = self.xt_in.weight  # (hidden, x_dim + time_dim)
         temb = timestep_embedding(torch.tensor([t], device=w.device), self.time_dim)
-        h = cond_h + x_t @ w[:, :3].T + temb @ w[:, 3:].T
+        h = cond_h + x_t @ w[:, :self.x_dim].T + temb @ w[:, self.x_dim:].T
         return self.body(h)
 
 

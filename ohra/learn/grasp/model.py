@@ -43,6 +43,7 @@ MODEL_FORMAT = "ohra-grasp-model"
 CHECKPOINT_FORMAT = "ohra-grasp-checkpoint"
 DEFAULT_MODEL = "grasp_default"
 CLOUD_SEED = 0  # surface sample of an object at inference (fixed: same object, same cloud)
+N_JOINTS = 22
 _Y_FLIP = np.diag(PALM_MIRROR)  # the reflection through an x-z plane as factors (S = M = diag(1, -1, 1))
 ObjectLike = Union[ObjectModel, str, Path]
 
@@ -56,36 +57,69 @@ class GraspNet(nn.Module):
         self.hand_dim = int(hand_dim)
         self.encoder = make_encoder(cfg)
         self.cond_dim = cfg.object_dim + self.hand_dim + 6
-        self.denoiser = Denoiser(self.cond_dim, tuple(cfg.denoiser_hidden), cfg.time_embed_dim)
-        self.joints = JointNet(self.cond_dim + 3, cfg.joint_hidden, cfg.joint_blocks)
+        self.diffuse_joints = bool(cfg.diffuse_joints)
+        x_dim = 3 + (N_JOINTS if self.diffuse_joints else 0)
+        self.denoiser = Denoiser(self.cond_dim, tuple(cfg.denoiser_hidden), cfg.time_embed_dim, x_dim=x_dim)
+        self.joints: JointNet | None = None
+        if self.diffuse_joints:  # standardisation of the diffused joints (the training data's; in the state dict)
+            self.register_buffer("q_mean", torch.zeros(N_JOINTS))
+            self.register_buffer("q_std", torch.ones(N_JOINTS))
+        else:
+            self.joints = JointNet(self.cond_dim + 3, cfg.joint_hidden, cfg.joint_blocks)
         self.scheduler = DDIMScheduler(cfg.train_steps, cfg.inference_steps)
+
+    def set_joint_statistics(self, q: np.ndarray, present: np.ndarray, floor: float = 0.05) -> None:
+        """Per-joint mean and spread [rad] of training joints ``q`` (G, 22) over the rows where the joint is
+        ``present`` (G, 22); a joint no row has keeps (0, 1), a spread under ``floor`` becomes ``floor``
+        (a joint the data never moves would be divided by ~0). Only for ``diffuse_joints`` models."""
+        if not self.diffuse_joints:
+            raise GraspError("set_joint_statistics: this network has a joint network, not diffused joints")
+        q, m = np.asarray(q, dtype=np.float64), np.asarray(present, dtype=bool)
+        count = m.sum(axis=0)
+        mean = np.where(count > 0, (q * m).sum(axis=0) / np.maximum(count, 1), 0.0)
+        var = np.where(count > 0, (((q - mean) * m) ** 2).sum(axis=0) / np.maximum(count, 1), 1.0)
+        std = np.where(count > 0, np.maximum(np.sqrt(var), floor), 1.0)
+        self.q_mean.copy_(torch.from_numpy(mean.astype(np.float32)))
+        self.q_std.copy_(torch.from_numpy(std.astype(np.float32)))
 
     def losses(self, obj_feat: torch.Tensor, hand: torch.Tensor, rot6d: torch.Tensor, t_norm: torch.Tensor,
                q: torch.Tensor, present: torch.Tensor, generator: torch.Generator) -> dict[str, torch.Tensor]:
         """Training losses of a batch (B rows): SmoothL1 of the x0 estimate (normalised translation)
-        at a uniformly random noise level, and SmoothL1 of the joints (present joints only) given the
-        true translation."""
+        at a uniformly random noise level, and SmoothL1 of the joints (present joints only): the joint
+        network's [rad] given the true translation, or, with ``diffuse_joints``, the x0 estimate's joints
+        in standardised units (the same noise level as the translation's)."""
         cond = torch.cat([obj_feat, hand, rot6d], dim=-1)
         b = len(cond)
+        if self.diffuse_joints:  # an absent joint's value is no information: 0 standard units, whatever the data holds
+            x_true = torch.cat([t_norm, torch.where(present, (q - self.q_mean) / self.q_std, 0.0)], dim=-1)
+        else:
+            x_true = t_norm
         # drawn on the CPU generator whatever the device: a batch's noise is the same on every device
         levels = torch.randint(0, self.scheduler.train_steps, (b,), generator=generator).to(t_norm.device)
-        noise = torch.randn(t_norm.shape, generator=generator).to(t_norm.device)
-        x_t = self.scheduler.add_noise(t_norm, noise, levels)
+        noise = torch.randn(x_true.shape, generator=generator).to(t_norm.device)
+        x_t = self.scheduler.add_noise(x_true, noise, levels)
         x0 = self.denoiser(x_t, levels, self.denoiser.project_condition(cond))
-        l_diff = F.smooth_l1_loss(x0, t_norm)
-        q_hat = self.joints(torch.cat([cond, t_norm], dim=-1))
+        l_diff = F.smooth_l1_loss(x0[:, :3], t_norm)
+        if self.diffuse_joints:
+            err = F.smooth_l1_loss(x0[:, 3:], x_true[:, 3:], reduction="none")
+        else:
+            err = F.smooth_l1_loss(self.joints(torch.cat([cond, t_norm], dim=-1)), q, reduction="none")
         mask = present.float()
-        l_joint = (F.smooth_l1_loss(q_hat, q, reduction="none") * mask).sum() / mask.sum().clamp_min(1.0)
+        l_joint = (err * mask).sum() / mask.sum().clamp_min(1.0)
         return {"diffusion": l_diff, "joints": l_joint}
 
-    def sample_translation(self, cond: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
-        """(B, cond_dim) conditions -> (B, 3) normalised translations by DDIM."""
+    def sample_grasp(self, cond: torch.Tensor, generator: torch.Generator) -> tuple[torch.Tensor, torch.Tensor]:
+        """(B, cond_dim) conditions -> (B, 3) normalised translations by DDIM and (B, 22) joints [rad],
+        unclamped: the joint network's given the sampled translation, or the diffused ones."""
         cond_h = self.denoiser.project_condition(cond)
 
         def predict(x: torch.Tensor, t: int) -> torch.Tensor:
             return self.denoiser.forward_level(x, t, cond_h)
 
-        return self.scheduler.sample(predict, (len(cond), 3), generator, clip=self.cfg.clip_sample)
+        x = self.scheduler.sample(predict, (len(cond), self.denoiser.x_dim), generator, clip=self.cfg.clip_sample)
+        if self.diffuse_joints:
+            return x[:, :3], x[:, 3:] * self.q_std + self.q_mean
+        return x, self.joints(torch.cat([cond, x], dim=-1))
 
 
 CENTRE_WARN = 0.1
@@ -314,8 +348,8 @@ class GraspModel:
         with torch.inference_mode():
             feat = self.net.encoder(cloud[None])
             cond = torch.cat([feat.expand(n, -1), hand_vec.expand(n, -1), torch.from_numpy(r6.astype(np.float32))], dim=-1)
-            x = self.net.sample_translation(cond, gen)
-            q = clamp_joints(self.net.joints(torch.cat([cond, x], dim=-1)), lower, upper)
+            x, q = self.net.sample_grasp(cond, gen)
+            q = clamp_joints(q, lower, upper)
         if not (torch.isfinite(x).all() and torch.isfinite(q).all()):  # clamping passes NaN through
             where = f" ({self.path})" if self.path else ""
             raise CheckpointError(f"the grasp model{where} computes non-finite grasps: its weights hold NaN or infinity "

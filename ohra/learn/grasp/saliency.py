@@ -58,8 +58,8 @@ def condition_saliency(model: GraspModel, hand: Any, obj: Any, n: int = 64, seed
     cond = torch.cat([feat, c, r6], dim=-1)
     gen = torch.Generator().manual_seed(int(rng.integers(2**62)))
     with torch.enable_grad():
-        x = net.sample_translation(cond, gen)
-        y = torch.cat([x * model.t_scale, net.joints(torch.cat([cond, x], dim=-1))], dim=-1)  # (n, 25)
+        x, q = net.sample_grasp(cond, gen)
+        y = torch.cat([x * model.t_scale, q], dim=-1)  # (n, 25)
         sq = torch.zeros_like(c)
         for k in range(y.shape[1]):
             (g,) = torch.autograd.grad(y[:, k].sum(), c, retain_graph=k + 1 < y.shape[1])

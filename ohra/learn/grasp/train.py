@@ -83,10 +83,11 @@ def torch_device(name: str) -> torch.device:
 
 def _check_resume(ckpt: dict[str, Any], spec: RunSpec, digest: str, path: Path) -> None:
     old = ckpt["spec"]
-    if old["model"] != spec.model.to_dict():
+    old_model = {**GraspModelConfig().to_dict(), **old["model"]}  # settings added since the checkpoint: their defaults
+    if old_model != spec.model.to_dict():
         new_model = spec.model.to_dict()
-        diff = [f"{k}={old['model'].get(k)!r}, this run asks for {new_model.get(k)!r}"
-                for k in sorted(set(old["model"]) | set(new_model)) if old["model"].get(k) != new_model.get(k)]
+        diff = [f"{k}={old_model.get(k)!r}, this run asks for {new_model.get(k)!r}"
+                for k in sorted(set(old_model) | set(new_model)) if old_model.get(k) != new_model.get(k)]
         raise CheckpointError(f"{path}: cannot resume, the checkpoint's model was made with {'; '.join(diff)}")
     new_train = spec.train.to_dict()
     defaults = GraspTrainConfig().to_dict()  # settings added since the checkpoint was made: their defaults
@@ -205,6 +206,9 @@ def _prepare(spec: RunSpec, paths: list, ckpt_path: Path | None, resume: bool,
     """Data, condition, network and optimiser; restored from the checkpoint when resuming."""
     cfg, model_cfg = spec.train, spec.model
     device = torch_device(cfg.device)  # a missing device is named before seconds of data loading
+    if model_cfg.diffuse_joints and (cfg.penetration_weight > 0 or cfg.contact_weight > 0):
+        raise GraspConfigError("the penetration and contact terms act on the joint network, which a diffuse_joints model "
+                               "has not: set their weights to 0 or diffuse_joints=False")
     td = TrainingData.load(paths, cfg, objects)
     digest = td.digest()
     ckpt = None
@@ -216,14 +220,18 @@ def _prepare(spec: RunSpec, paths: list, ckpt_path: Path | None, resume: bool,
     cond = HandCondition.from_state(ckpt["condition"]) if ckpt else HandCondition.fit(model_cfg.condition, td.params, vae_path)
     t_scale = float(ckpt["t_scale"]) if ckpt else td.translation_scale()
     torch.manual_seed(cfg.seed)
-    net = GraspNet(model_cfg, cond.dim).to(device)  # initialised on the CPU: same weights on any device
+    tables = _tables(cond, td)
+    net = GraspNet(model_cfg, cond.dim)  # initialised on the CPU: same weights on any device
+    if model_cfg.diffuse_joints and ckpt is None:
+        net.set_joint_statistics(td.q, tables[1].numpy()[td.hand_idx])
+    net = net.to(device)
     opt = torch.optim.Adam(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     summary = td.summary()
     meta = {"hands": td.hands, "data": spec.data, "data_digest": digest,
             **{k: summary[k] for k in ("train_objects", "test_objects", "per_hand")}}
     terms = loss_terms(cfg)
     contact = ContactTerm.for_data(td, cfg, t_scale) if cfg.penetration_weight > 0 or cfg.contact_weight > 0 else None
-    state = _State(td, GraspModel(net, cond, t_scale, model_cfg, meta), opt, _tables(cond, td),
+    state = _State(td, GraspModel(net, cond, t_scale, model_cfg, meta), opt, tables,
                    window=({k: 0.0 for k in terms}, 0), contact=contact)
     if ckpt is not None:
         try:
