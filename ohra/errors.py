@@ -90,15 +90,17 @@ def require_seed(seed: object, error: type[OhraError], what: str = "seed") -> in
     return int(seed)
 
 
-def require_whole(value: object, error: type[OhraError], what: str, least: int) -> int:
-    """``value`` as an int when it is a whole number >= ``least``, or ``error`` naming ``what``: a bool, a float
-    or a numeric string is refused (``int()`` would take them and truncate)."""
+def require_whole(value: object, error: type[OhraError], what: str, least: int, most: int | None = None) -> int:
+    """``value`` as an int when it is a whole number in [``least``, ``most``], or ``error`` naming ``what``: a bool,
+    a float or a numeric string is refused (``int()`` would take them and truncate)."""
     import numbers
 
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
         raise error(f"{what}: expected a whole number, got {value!r}")
     if value < least:
         raise error(f"{what} must be >= {least}, got {value}")
+    if most is not None and value > most:
+        raise error(f"{what} must be <= {most:,}, got {value:,}")
     return int(value)
 
 

@@ -61,6 +61,14 @@ def test_packing_keeps_every_array_bit_for_bit_in_one_file_per_hand(ds):
     assert np.array_equal(after.grasps(), grasps) and np.array_equal(GraspDataset(ds, which="post").grasps(), post)
 
 
+def test_the_report_line_gives_small_sizes_in_kilobytes_not_as_zero_megabytes():
+    from ohra.data.pack import PackReport
+
+    line = PackReport("d", 1, 2, 2, 14_200, 9_000).line()
+    assert "14.2 kB -> 9.0 kB of shard files" in line
+    assert "812 B -> 3.4 MB" in PackReport("d", 1, 2, 2, 812, 3_400_000).line()
+
+
 def test_unpacking_restores_each_shard_byte_for_byte(ds):
     shards = _shard_bytes(ds)
     pack(ds)
@@ -140,7 +148,7 @@ def test_cli_packs_and_reports_sizes_and_a_missing_manifest_is_one_line(ds, tmp_
     run = lambda *a: subprocess.run([sys.executable, "-m", "ohra.data", "pack", *a], capture_output=True, text=True)  # noqa: E731
     ok = run(str(ds))
     assert ok.returncode == 0, ok.stderr
-    assert "4 pairs of 2 hands packed" in ok.stdout and "MB ->" in ok.stdout
+    assert "4 pairs of 2 hands packed" in ok.stdout and "kB ->" in ok.stdout  # a tiny folder: not "0.0 MB"
     bad = run(str(tmp_path / "nothing"))
     lines = [ln for ln in bad.stderr.splitlines() if ln.strip()]
     assert bad.returncode == 2 and len(lines) == 1 and "dataset folder not found" in lines[0]

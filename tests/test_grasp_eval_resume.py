@@ -102,6 +102,17 @@ def test_a_procedural_training_object_exported_to_a_mesh_file_is_still_refused(t
         with pytest.raises(DatasetError, match=r"'my_box' .* is in the model's training set \(as 'box-1'\)"):
             check_unseen(model, [ObjectModel.load(path)])
     check_unseen(model, [ObjectModel.procedural("box", 1001), ObjectModel.builtin("box")])
+    # a uniformly scaled copy near 1 is the same object (a rounding or unit slip); a clearly other size is not
+    for scale, seen in ((1.001, True), (0.95, True), (1.2, False)):
+        mesh = ObjectModel.procedural("box", 1).mesh.copy()
+        mesh.apply_scale(scale)
+        path = tmp_path / f"box_x{scale}.stl"
+        mesh.export(path)
+        if seen:
+            with pytest.raises(DatasetError, match=r"as 'box-1'"):
+                check_unseen(model, [ObjectModel.load(path)])
+        else:
+            check_unseen(model, [ObjectModel.load(path)])
 
 
 def test_a_ycb_training_object_exported_to_another_file_is_still_refused(tmp_path, objects_dir):

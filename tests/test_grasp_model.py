@@ -137,6 +137,22 @@ def test_translations_are_denormalised(vae_model, capsule):
     assert vae_model.t_scale == pytest.approx(np.sqrt(np.mean(r_train**2) / 3), rel=1e-5)
 
 
+def test_rotations_slightly_off_orthonormal_come_out_as_rotations_and_one_rot6d_serves_one_grasp(vae_model, capsule):
+    """Matrices within the 1e-4 tolerance are taken as the nearest rotation, so every grasp's rot6d holds two
+    orthonormal columns; for n = 1 a (6,) rot6d is taken like a (3, 3) matrix."""
+    R = Rotation.random(4, random_state=5).as_matrix()
+    noisy = R + np.random.default_rng(0).uniform(-2e-5, 2e-5, R.shape)
+    g = vae_model.sample("barrett_hand", capsule, 4, rotations=noisy, seed=0)
+    a, b = g[:, 3:6], g[:, 6:9]
+    np.testing.assert_allclose(np.linalg.norm(a, axis=1), 1.0, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(b, axis=1), 1.0, atol=1e-12)
+    np.testing.assert_allclose(np.einsum("ni,ni->n", a, b), 0.0, atol=1e-12)
+    np.testing.assert_allclose(a, R[:, :, 0], atol=1e-4)  # the nearest rotation: the one meant
+    one = np.concatenate([R[0, :, 0], R[0, :, 1]])
+    np.testing.assert_allclose(vae_model.sample("barrett_hand", capsule, 1, rotations=one, seed=0),
+                               vae_model.sample("barrett_hand", capsule, 1, rotations=R[0], seed=0), atol=1e-6)
+
+
 def test_same_seed_same_grasps(vae_model, capsule):
     a = vae_model.sample("shadow_hand_right", capsule, 8, seed=11)
     b = vae_model.sample("shadow_hand_right", capsule, 8, seed=11)
@@ -165,6 +181,27 @@ def test_centre_makes_grasps_follow_a_mesh_whose_origin_lies_beside_it(vae_model
     np.testing.assert_allclose(moved[:, 3:], at_origin[:, 3:], atol=1e-6)
     with pytest.warns(ObjectWarning, match=r"15\.7 cm from its mesh frame's origin.*centre=True"):
         vae_model.sample("allegro_hand_left", box(shift), 2, seed=3)
+
+
+def test_a_millimetre_mesh_is_named_as_such_once_not_as_an_off_centre_one(vae_model):
+    """The library call warns like the CLI: a mesh in millimetres gets the size warning with the scale that
+    fixes it (its 150 mm offset is a units problem, not a frame one), once per object."""
+    import trimesh
+
+    from ohra.errors import ObjectWarning
+
+    mesh = trimesh.creation.box(extents=(50.0, 70.0, 90.0))  # a 5 x 7 x 9 cm box written in millimetres
+    mesh.apply_translation((150.0, 0.0, 0.0))
+    obj = ObjectModel(mesh, "box_mm")
+    with pytest.warns(ObjectWarning) as got:
+        vae_model.sample("barrett_hand", obj, 2, seed=0)
+    messages = [str(w.message) for w in got if issubclass(w.category, ObjectWarning)]
+    assert len(messages) == 1 and "box_mm" in messages[0] and "scale 0.001" in messages[0], messages
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ObjectWarning)
+        vae_model.sample("barrett_hand", obj, 2, seed=1)  # said once
 
 
 def _push_joints(model, value: float) -> None:
@@ -239,6 +276,8 @@ def test_bad_inputs_raise_ohra_errors(vae_model, capsule):
         vae_model.sample("barrett_hand", capsule, 1, rotations=np.diag([1.0, 1.0, -1.0]))
     with pytest.raises(GraspError, match="NaN"):
         vae_model.sample("barrett_hand", capsule, 1, rotations=np.full((1, 6), np.nan))
+    with pytest.raises(GraspError, match="expected real numbers, got complex"):
+        vae_model.sample("barrett_hand", capsule, 1, rotations=np.eye(3)[None] + 1e-3j)
     with pytest.raises(HandNotFoundError, match="no_such_hand"):
         vae_model.sample("no_such_hand", capsule, 1)
     with pytest.raises(ObjectError, match="no_such_object"):

@@ -153,6 +153,20 @@ def test_bad_data_raise(tmp_path, dataset):
         TrainingData.load(dataset, tiny_train_config(test_hands=("allegro_hand_left", "barrett_hand", "shadow_hand_right")))
 
 
+def test_a_test_object_in_no_dataset_is_warned_about_by_the_library(dataset):
+    """A misspelt test object would let the object meant be trained on: the library says so, not only the CLI."""
+    from ohra.errors import ObjectWarning
+
+    with pytest.warns(ObjectWarning, match=r"test object\(s\) capsuel are in none of the datasets"):
+        td = TrainingData.load(dataset, tiny_train_config(test_objects=("capsule", "capsuel")))
+    assert "capsule" not in {o.name for o in td.objects}
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ObjectWarning)
+        TrainingData.load(dataset, tiny_train_config(test_objects=("capsule",)))
+
+
 def test_batches_are_robot_balanced_and_deterministic(tmp_path):
     root = write_dataset(tmp_path, objects=("sphere", "box"), counts={"allegro_hand_left": 60, "barrett_hand": 3,
                                                                       "shadow_hand_right": 6})
@@ -267,6 +281,13 @@ def test_resume_equals_an_uninterrupted_run(dataset, tmp_path):
     assert longer.metrics["history"][-1]["step"] == 8
 
 
+def test_a_resume_with_no_step_left_keeps_the_training_time(dataset, tmp_path):
+    first = train_grasp(dataset, tiny_model_config(), tiny_train_config(), tmp_path / "r", progress=False).metrics
+    again = train_grasp(dataset, tiny_model_config(), tiny_train_config(), tmp_path / "r", resume=True, progress=False).metrics
+    assert again["steps_this_run"] == 0
+    assert again["train_seconds_total"] == first["train_seconds_total"] == first["history"][-1]["elapsed_s"]
+
+
 def test_a_run_another_process_is_training_is_refused_and_left_alone(dataset, tmp_path):
     """Two processes resuming one run would interleave its checkpoints: the second fails at once."""
     import subprocess
@@ -331,6 +352,8 @@ def test_the_edges_of_the_training_settings_are_accepted():
     (dict(denoiser_hidden=(64, -5)), r"denoiser_hidden\[1\] must be >= 1"),
     (dict(joint_blocks=-1), "joint_blocks must be >= 0, got -1"),
     (dict(n_points=2.5), "n_points: expected a whole number"),
+    (dict(object_dim=2**40), "object_dim must be <= 65,536, got 1,099,511,627,776"),  # was torch's allocation traceback
+    (dict(denoiser_hidden=(512, 65537)), r"denoiser_hidden\[1\] must be <= 65,536"),
 ])
 def test_model_settings_with_empty_layers_are_refused(kwargs, message):
     with pytest.raises(GraspConfigError, match=message):

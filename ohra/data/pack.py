@@ -46,7 +46,12 @@ class PackReport:
 
     def line(self) -> str:
         return (f"{self.path}: {self.packed} pairs of {self.hands} hands packed ({self.folded} loose shards folded in), "
-                f"{self.bytes_before / 1e6:.1f} MB -> {self.bytes_after / 1e6:.1f} MB of shard files")
+                f"{_size(self.bytes_before)} -> {_size(self.bytes_after)} of shard files")
+
+
+def _size(n: int) -> str:
+    """Bytes as a short size that does not read 0.0 for a small folder: 812 B, 14.2 kB, 3.4 MB."""
+    return f"{n} B" if n < 1000 else f"{n / 1e3:.1f} kB" if n < 1e6 else f"{n / 1e6:.1f} MB"
 
 
 @functools.lru_cache(maxsize=256)

@@ -21,8 +21,13 @@ class GraspConfigError(OhraError, ValueError):
     """A grasp-model or training setting is out of range or unknown."""
 
 
-def _whole(name: str, value: Any, least: int) -> None:
-    require_whole(value, GraspConfigError, name, least)
+MAX_WIDTH = 65536
+"""Largest layer width (and object feature size, point count) a model setting takes: wider is a typo that would end in
+an allocation failure (a 2**40-wide layer), not a model."""
+
+
+def _whole(name: str, value: Any, least: int, most: int | None = None) -> None:
+    require_whole(value, GraspConfigError, name, least, most)
 
 
 def _real(name: str, value: Any, positive: bool = False) -> None:
@@ -93,13 +98,13 @@ class GraspModelConfig(_JSONSettings):
         if self.condition not in CONDITIONS:
             raise GraspConfigError(f"condition: expected one of {list(CONDITIONS)}, got {self.condition!r}")
         for name in ("n_points", "object_dim", "time_embed_dim", "joint_hidden", "train_steps", "inference_steps", "dgcnn_k"):
-            _whole(name, getattr(self, name), 1)
+            _whole(name, getattr(self, name), 1, MAX_WIDTH if name in ("n_points", "object_dim", "time_embed_dim", "joint_hidden") else None)
         _whole("joint_blocks", self.joint_blocks, 0)
         for name in ("encoder_channels", "denoiser_hidden"):
             if not isinstance(getattr(self, name), tuple):
                 raise GraspConfigError(f"{name}: expected a tuple of widths, got {getattr(self, name)!r}")
             for k, w in enumerate(getattr(self, name)):
-                _whole(f"{name}[{k}]", w, 1)
+                _whole(f"{name}[{k}]", w, 1, MAX_WIDTH)
         if self.inference_steps > self.train_steps:
             raise GraspConfigError(f"inference_steps ({self.inference_steps}) exceeds train_steps ({self.train_steps})")
         if self.time_embed_dim % 2:

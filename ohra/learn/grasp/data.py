@@ -17,6 +17,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Mapping, Sequence
@@ -26,7 +27,7 @@ import torch
 
 from ohra.canonical.params import BaseParams, ExtendedParams, load_params
 from ohra.data import GraspDataset, read_manifest
-from ohra.errors import DatasetError, ObjectError, OhraError
+from ohra.errors import DatasetError, ObjectError, ObjectWarning, OhraError, user_stacklevel
 from ohra.learn.grasp.config import GraspTrainConfig
 from ohra.objects.model import ObjectModel
 from ohra.objects.procedural import same_procedural_object
@@ -222,6 +223,10 @@ class TrainingData:
             if o in test_names:
                 test[o] = str(sh.get("object", {}).get("mesh_hash", ""))
         test_hashes = {h for h in test.values() if h}
+        absent = sorted(n for n in cfg.test_objects if not test[n])
+        if absent:  # an evaluation object absent by design, or a typo that would let the object meant be trained on
+            warnings.warn(f"test object(s) {', '.join(absent)} are in none of the datasets (nothing to hold out by that "
+                          "name; check the spelling if they should be)", ObjectWarning, stacklevel=user_stacklevel())
         test_hand_keys = _test_hand_keys(roots, cfg.test_hands)
         if set(cfg.test_hands) & set(cfg.hands):
             raise DatasetError(f"hand(s) {sorted(set(cfg.test_hands) & set(cfg.hands))} are both training and test hands")

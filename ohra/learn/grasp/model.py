@@ -144,17 +144,21 @@ def nearest_surface(params: Any, obj: ObjectModel, candidates: np.ndarray) -> np
 
 
 def as_rotations(rotations: Any, n: int) -> np.ndarray:
-    """(n, 3, 3) rotation matrices from matrices (n, 3, 3), rot6d (n, 6) or a scipy ``Rotation``."""
+    """(n, 3, 3) rotation matrices from matrices (n, 3, 3), rot6d (n, 6) or a scipy ``Rotation`` (for ``n`` = 1
+    also one (3, 3) or (6,)). Matrices within 1e-4 of orthonormal are replaced by the nearest rotation (SVD), so the
+    grasps' rot6d columns are orthonormal whatever rounding the caller's matrices carry."""
     from scipy.spatial.transform import Rotation
 
     if isinstance(rotations, Rotation):
         rotations = rotations.as_matrix()
+    if np.iscomplexobj(rotations):  # float() would drop the imaginary part with only a ComplexWarning
+        raise GraspError("rotations: expected real numbers, got complex ones")
     try:
         r = np.asarray(rotations, dtype=float)
     except (TypeError, ValueError):
         raise GraspError(f"rotations: expected numbers, got {type(rotations).__name__}") from None
     given = r.shape  # named in the error as the caller passed it, not as converted below
-    if r.ndim == 2 and r.shape == (3, 3) and n == 1:
+    if n == 1 and r.shape in ((3, 3), (6,)):  # one rotation for one grasp, as a matrix or as rot6d
         r = r[None]
     if r.ndim == 2 and r.shape[1] == 6:
         from ohra.rotations import rot6d_to_matrix
@@ -170,7 +174,8 @@ def as_rotations(rotations: Any, n: int) -> np.ndarray:
     bad = np.flatnonzero((err > 1e-4) | (np.linalg.det(r) < 0))
     if bad.size:
         raise GraspError(f"rotations[{int(bad[0])}] is not a rotation matrix (orthonormal, det +1)")
-    return r
+    u, _, vt = np.linalg.svd(r)  # the nearest rotations: the grasps' rot6d is then orthonormal to float precision
+    return u @ vt
 
 
 def random_rotations(n: int, rng: np.random.Generator) -> np.ndarray:
@@ -286,12 +291,8 @@ class GraspModel:
         seed = require_seed(seed, GraspError)
         params = resolve_hand(hand)
         obj = resolve_object(obj)
+        self.object_warnings(obj, centre)
         offset = object_offset(obj)
-        if not centre and float(np.linalg.norm(offset)) > CENTRE_WARN:
-            warnings.warn(f"object {obj.name!r}: its bounding-box centre lies {100 * np.linalg.norm(offset):.1f} cm from its "
-                          f"mesh frame's origin, over {100 * CENTRE_WARN:g} cm (the shipped models' training objects lie "
-                          "within that): grasps sampled in that frame can miss the object; pass centre=True (--centre)", ObjectWarning,
-                          stacklevel=user_stacklevel())
         shift = offset if centre else np.zeros(3)
         rng = np.random.default_rng(seed)
         rots = random_rotations(n, rng) if rotations is None else as_rotations(rotations, n)
@@ -333,6 +334,26 @@ class GraspModel:
             if timing is not None:
                 timing["refine_seconds"] = time.perf_counter() - t1
         return out
+
+    def object_warnings(self, obj: ObjectModel, centre: bool = False) -> None:
+        """Warn (:class:`~ohra.errors.ObjectWarning`, once per object and model) when ``obj`` is outside the graspable
+        size range (:func:`~ohra.objects.resolve.size_problem`: a mesh in millimetres, say; the warning names the
+        scale that fixes it) or, when not ``centre``, lies farther than :data:`CENTRE_WARN` from its mesh frame's origin.
+        A mis-scaled mesh gets only the size warning: its offset is in the wrong units too. :meth:`sample` calls it."""
+        from ohra.objects.resolve import size_problem
+
+        key = f"warned:{obj.mesh_hash}:{bool(centre)}"
+        if key in self._cache:
+            return
+        self._cache[key] = True
+        offset = float(np.linalg.norm(object_offset(obj)))
+        if (problem := size_problem(obj)) is not None:
+            warnings.warn(f"{problem}; grasps on it say little about a hand", ObjectWarning, stacklevel=user_stacklevel())
+        elif not centre and offset > CENTRE_WARN:
+            warnings.warn(f"object {obj.name!r}: its bounding-box centre lies {100 * offset:.1f} cm from its "
+                          f"mesh frame's origin, over {100 * CENTRE_WARN:g} cm (the shipped models' training objects lie "
+                          "within that): grasps sampled in that frame can miss the object; pass centre=True (--centre)", ObjectWarning,
+                          stacklevel=user_stacklevel())
 
     def _run(self, obj: ObjectModel, hand_vec: torch.Tensor, r6: np.ndarray, lower: torch.Tensor, upper: torch.Tensor,
              gen: torch.Generator, shift: np.ndarray | None = None, mirror: bool = False) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:

@@ -324,7 +324,8 @@ def train_grasp(data: str | Path | Sequence[str | Path], model_cfg: GraspModelCo
         n_steps, h = cfg.steps - first, st.history
         metrics: dict[str, Any] = {
             "steps": cfg.steps, "steps_this_run": n_steps, "train_seconds_this_run": seconds,
-            "train_seconds_total": before + seconds,
+            # time to the last step over all sessions (as the history records it: a resume with no step left adds 0)
+            "train_seconds_total": float(h[-1]["elapsed_s"]) if h else before + seconds,
             "steps_per_s": n_steps / seconds if seconds > 0 and n_steps else None,
             "grasps_per_s": n_steps * cfg.batch_size / seconds if seconds > 0 and n_steps else None,
             "final_losses": {k: h[-1][k] for k in loss_terms(cfg)} if h else {},
