@@ -113,6 +113,42 @@ def test_sampled_joints_are_the_denoised_ones_destandardised(run):
     np.testing.assert_allclose(q.numpy(), np.tile(want.numpy(), (3, 1)), rtol=1e-5, atol=1e-6)
 
 
+def test_each_steps_joint_estimate_is_held_within_the_hands_limits_and_absent_joints_at_their_training_zero(run):
+    """Given the hand's limits and present joints, every DDIM step's x0 estimate of a joint lies within the limits
+    (in standard units) and an absent joint's is 0, the value training saw; the outputs for absent joints are never
+    trained (masked loss), so left free they would feed untrained values into the next step."""
+    res, _ = run
+    net = res.model.net
+    p = get_hand("barrett_hand")
+    lower = torch.tensor(np.asarray(p.joint_lowers), dtype=torch.float32)
+    upper = torch.tensor(np.asarray(p.joint_uppers), dtype=torch.float32)
+    present = torch.from_numpy(np.asarray(p.present_joints, dtype=bool))
+    last = net.denoiser.body[-1]
+    state = {k: v.clone() for k, v in last.state_dict().items()}
+    seen = []
+    orig = net.scheduler.step
+
+    def spy(x_t, x0, t, t_prev):
+        seen.append(x0.clone())
+        return orig(x_t, x0, t, t_prev)
+
+    net.scheduler.step = spy
+    try:
+        with torch.no_grad():
+            last.weight.zero_()
+            last.bias.fill_(9.0)  # every estimate far beyond every limit
+            x, q = net.sample_grasp(torch.zeros(2, net.cond_dim), torch.Generator().manual_seed(0), lower, upper, present)
+    finally:
+        last.load_state_dict(state)
+        del net.scheduler.step
+    up_std = (upper - net.q_mean) / net.q_std
+    for x0 in seen:
+        assert torch.all(x0[:, 3:][:, ~present] == 0.0)
+        torch.testing.assert_close(x0[:, 3:][:, present], up_std[present].expand(2, -1))
+    torch.testing.assert_close(q[:, present], upper[present].expand(2, -1))
+    torch.testing.assert_close(q[:, ~present], net.q_mean[~present].expand(2, -1))  # 0 standard units (clamped to 0 later)
+
+
 @pytest.mark.parametrize("value", [6.0, -6.0])
 @pytest.mark.parametrize("hand", ["allegro_hand_left", "barrett_hand"])
 def test_diffused_joints_are_clamped_to_the_hand_and_absent_ones_are_zero(run, hand, value):
@@ -140,10 +176,14 @@ def test_a_saved_model_samples_identically_and_a_run_resumes(run, dataset, tmp_p
     g = res.model.sample("shadow_hand_right", "builtin:capsule", 5, seed=4)
     assert g.shape == (5, 31) and np.all(np.isfinite(g))
     np.testing.assert_array_equal(load_grasp_model(folder).sample("shadow_hand_right", "builtin:capsule", 5, seed=4), g)
+    ckpt_path = folder / "checkpoints" / "last.pt"
+    ckpt = load_torch_file(ckpt_path, "ohra-grasp-checkpoint")
+    ckpt["model"]["q_mean"] = torch.full((22,), 0.123)  # a sentinel: refitting on the same data would not keep it
+    atomic_save(ckpt, ckpt_path)
     longer = train_grasp(dataset, tiny_model_config(diffuse_joints=True), tiny_train_config(steps=8), folder, resume=True,
                          progress=False)
     assert longer.metrics["history"][-1]["step"] == 8
-    torch.testing.assert_close(longer.model.net.q_mean, res.model.net.q_mean)  # kept from the checkpoint, not refitted
+    torch.testing.assert_close(longer.model.net.q_mean, torch.full((22,), 0.123))  # kept from the checkpoint, not refitted
 
 
 def test_a_checkpoint_made_before_the_option_existed_resumes(dataset, tmp_path):

@@ -51,7 +51,7 @@ class PackReport:
 
 def _size(n: int) -> str:
     """Bytes as a short size that does not read 0.0 for a small folder: 812 B, 14.2 kB, 3.4 MB."""
-    return f"{n} B" if n < 1000 else f"{n / 1e3:.1f} kB" if n < 1e6 else f"{n / 1e6:.1f} MB"
+    return f"{n} B" if n < 1000 else f"{n / 1e3:.1f} kB" if n < 999_950 else f"{n / 1e6:.1f} MB"  # never "1000.0 kB"
 
 
 @functools.lru_cache(maxsize=256)

@@ -87,7 +87,9 @@ class GraspModelConfig(_JSONSettings):
     joint_blocks: int = 2
     train_steps: int = 1000
     inference_steps: int = 10
-    clip_sample: float = 4.0  # |x0| bound in normalised translation units (std of the training translations)
+    # |x0| bound in normalised translation units (RMS of the training translations); diffused joints are held within
+    # the sampled hand's limits instead
+    clip_sample: float = 4.0
     # the 22 joints as part of the diffusion (x = [translation, joints], each joint standardised by the training
     # data's mean and spread; no joint network) instead of the paper's joint network given the sampled translation
     diffuse_joints: bool = False

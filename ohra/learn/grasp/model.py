@@ -108,18 +108,35 @@ class GraspNet(nn.Module):
         l_joint = (err * mask).sum() / mask.sum().clamp_min(1.0)
         return {"diffusion": l_diff, "joints": l_joint}
 
-    def sample_grasp(self, cond: torch.Tensor, generator: torch.Generator) -> tuple[torch.Tensor, torch.Tensor]:
-        """(B, cond_dim) conditions -> (B, 3) normalised translations by DDIM and (B, 22) joints [rad],
-        unclamped: the joint network's given the sampled translation, or the diffused ones."""
+    def sample_grasp(self, cond: torch.Tensor, generator: torch.Generator, lower: torch.Tensor | None = None,
+                     upper: torch.Tensor | None = None, present: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """(B, cond_dim) conditions -> (B, 3) normalised translations by DDIM and (B, 22) joints [rad]: the joint
+        network's given the sampled translation (unclamped), or the diffused ones.
+
+        Diffused joints: given the hand's limits ``lower``/``upper`` [rad] and ``present`` mask (22,), each step's x0
+        estimate of the joints is held within the limits and an absent joint's at 0, its training value (the loss
+        never trains those outputs, so left free they would carry untrained values into the next step's input);
+        without them the joints are clipped at ``clip_sample`` standard units like the translation."""
         cond_h = self.denoiser.project_condition(cond)
+        clip = self.cfg.clip_sample
 
         def predict(x: torch.Tensor, t: int) -> torch.Tensor:
             return self.denoiser.forward_level(x, t, cond_h)
 
-        x = self.scheduler.sample(predict, (len(cond), self.denoiser.x_dim), generator, clip=self.cfg.clip_sample)
-        if self.diffuse_joints:
-            return x[:, :3], x[:, 3:] * self.q_std + self.q_mean
-        return x, self.joints(torch.cat([cond, x], dim=-1))
+        if not self.diffuse_joints:
+            x = self.scheduler.sample(predict, (len(cond), 3), generator, clip=clip)
+            return x, self.joints(torch.cat([cond, x], dim=-1))
+        lo = torch.full((N_JOINTS,), -clip, device=self.q_mean.device) if lower is None else (lower - self.q_mean) / self.q_std
+        up = torch.full((N_JOINTS,), clip, device=self.q_mean.device) if upper is None else (upper - self.q_mean) / self.q_std
+        if present is not None:
+            lo, up = torch.where(present, lo, 0.0), torch.where(present, up, 0.0)
+
+        def bounded(x: torch.Tensor, t: int) -> torch.Tensor:
+            x0 = predict(x, t)
+            return torch.cat([x0[:, :3].clamp(-clip, clip), torch.maximum(torch.minimum(x0[:, 3:], up), lo)], dim=-1)
+
+        x = self.scheduler.sample(bounded, (len(cond), self.denoiser.x_dim), generator)
+        return x[:, :3], x[:, 3:] * self.q_std + self.q_mean
 
 
 CENTRE_WARN = 0.1
@@ -151,12 +168,14 @@ def as_rotations(rotations: Any, n: int) -> np.ndarray:
 
     if isinstance(rotations, Rotation):
         rotations = rotations.as_matrix()
-    if np.iscomplexobj(rotations):  # float() would drop the imaginary part with only a ComplexWarning
-        raise GraspError("rotations: expected real numbers, got complex ones")
     try:
-        r = np.asarray(rotations, dtype=float)
+        r = np.asarray(rotations)
+        complex_ = np.iscomplexobj(r)  # float() would drop the imaginary part with only a ComplexWarning
+        r = r.real.astype(float) if complex_ else r.astype(float)
     except (TypeError, ValueError):
         raise GraspError(f"rotations: expected numbers, got {type(rotations).__name__}") from None
+    if complex_:
+        raise GraspError("rotations: expected real numbers, got complex ones")
     given = r.shape  # named in the error as the caller passed it, not as converted below
     if n == 1 and r.shape in ((3, 3), (6,)):  # one rotation for one grasp, as a matrix or as rot6d
         r = r[None]
@@ -174,8 +193,12 @@ def as_rotations(rotations: Any, n: int) -> np.ndarray:
     bad = np.flatnonzero((err > 1e-4) | (np.linalg.det(r) < 0))
     if bad.size:
         raise GraspError(f"rotations[{int(bad[0])}] is not a rotation matrix (orthonormal, det +1)")
-    u, _, vt = np.linalg.svd(r)  # the nearest rotations: the grasps' rot6d is then orthonormal to float precision
-    return u @ vt
+    off = np.flatnonzero(err > 1e-12)  # exact ones stay bit for bit (a given rotation reproduces earlier runs)
+    if off.size:
+        u, _, vt = np.linalg.svd(r[off])  # the nearest rotations: the grasps' rot6d is orthonormal to float precision
+        r = r.copy()
+        r[off] = u @ vt
+    return r
 
 
 def random_rotations(n: int, rng: np.random.Generator) -> np.ndarray:
@@ -315,7 +338,8 @@ class GraspModel:
         if self.threads and self.threads != old_threads:
             torch.set_num_threads(int(self.threads))
         try:
-            feat, x, q = self._run(obj, hand_vec, r6, lower, upper, gen, shift, mirror=flip)
+            feat, x, q = self._run(obj, hand_vec, r6, lower, upper, gen, shift, mirror=flip,
+                                   present=torch.from_numpy(np.asarray(net_params.present_joints, dtype=bool)))
         finally:
             if torch.get_num_threads() != old_threads:
                 torch.set_num_threads(old_threads)
@@ -356,7 +380,8 @@ class GraspModel:
                           stacklevel=user_stacklevel())
 
     def _run(self, obj: ObjectModel, hand_vec: torch.Tensor, r6: np.ndarray, lower: torch.Tensor, upper: torch.Tensor,
-             gen: torch.Generator, shift: np.ndarray | None = None, mirror: bool = False) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+             gen: torch.Generator, shift: np.ndarray | None = None, mirror: bool = False,
+             present: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """The networks: object feature, normalised translations (n, 3), clamped joints (n, 22); the
         object's surface points are seen reflected through the mesh frame's x-z plane when ``mirror``, then
         moved by ``-shift`` [m] (translations come out in that frame)."""
@@ -369,7 +394,7 @@ class GraspModel:
         with torch.inference_mode():
             feat = self.net.encoder(cloud[None])
             cond = torch.cat([feat.expand(n, -1), hand_vec.expand(n, -1), torch.from_numpy(r6.astype(np.float32))], dim=-1)
-            x, q = self.net.sample_grasp(cond, gen)
+            x, q = self.net.sample_grasp(cond, gen, lower, upper, present)
             q = clamp_joints(q, lower, upper)
         if not (torch.isfinite(x).all() and torch.isfinite(q).all()):  # clamping passes NaN through
             where = f" ({self.path})" if self.path else ""
