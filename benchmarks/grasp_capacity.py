@@ -187,7 +187,7 @@ def cmd_eval(args: argparse.Namespace) -> None:
 
 def table(res: dict) -> str:
     hands, modes = res["hands"], list(res["comparisons"])
-    lines = [f"Unified grasp model vs network capacity (same data, hands, VAE condition, seed, batch, {res['steps']} steps): "
+    lines = [f"Unified grasp model vs other networks: more capacity, diffused joints (same data, hands, VAE condition, seed, batch, {res['steps']} steps): "
              f"{res['n']} grasps per (hand, object) on {len(res['objects'])} unseen objects, protocol {res['protocol_note']}, "
              "canonical URDFs. Rule written before training (script docstring): pooled paired difference > 2 SE reads as a change.",
              "", "| model | trained on | train min | parameters [M] | " + " | ".join(
