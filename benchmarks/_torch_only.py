@@ -38,3 +38,34 @@ def stand_in_for_missing(names: tuple[str, ...] = SIM_STACK, force: bool = False
             sys.modules[name] = _Missing(name)
             done.append(name)
     return done
+
+
+def train_in_parallel(script: str, args, option: str, items: list[str]) -> None:
+    """Run ``script train`` once per item (``option ITEM``), all at once, with the training settings of ``args``
+    (a GPU has room for several runs; each draws its batches on its own CPU cores). Exits naming the failed ones."""
+    import subprocess
+
+    base = [sys.executable, script, "train", "--device", args.device, "--steps", str(args.steps), "--runs", args.runs,
+            "--threads", str(args.threads), "--batch-size", str(args.batch_size), "--seed", str(args.seed), "--quiet",
+            "--data", *args.data] + (["--torch-only"] if args.torch_only else [])
+    procs = [subprocess.Popen(base + [option, item]) for item in items]
+    codes = [p.wait() for p in procs]
+    if any(codes):
+        raise SystemExit(f"training failed: exit codes {dict(zip(items, codes))}")
+
+
+def run_phase(args, train, evaluate, prog: str) -> None:
+    """The two-phase benchmarks' entry: stand-ins under ``--torch-only`` (all of them with
+    ``OHRA_FORCE_TORCH_ONLY=1``), then ``train(args)`` or ``evaluate(args)``; an ohra error is one line."""
+    import os
+
+    if args.torch_only:
+        stood = stand_in_for_missing(force=os.environ.get("OHRA_FORCE_TORCH_ONLY") == "1")
+        if stood:
+            print(f"--torch-only: stand-ins for {', '.join(stood)}", file=sys.stderr)
+    from ohra.errors import OhraError
+
+    try:
+        (train if args.phase == "train" else evaluate)(args)
+    except OhraError as exc:
+        raise SystemExit(f"{prog}: {exc}") from None

@@ -50,8 +50,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -109,14 +107,10 @@ def train_arm(arm: str, args: argparse.Namespace) -> None:
 
 
 def cmd_train(args: argparse.Namespace) -> None:
-    if args.parallel and len(args.arms) > 1:  # one process per arm, all at once (a GPU has room for them)
-        base = [sys.executable, __file__, "train", "--device", args.device, "--steps", str(args.steps), "--runs", args.runs,
-                "--threads", str(args.threads), "--batch-size", str(args.batch_size), "--seed", str(args.seed),
-                "--quiet", "--data", *args.data] + (["--torch-only"] if args.torch_only else [])
-        procs = [subprocess.Popen(base + ["--arms", arm]) for arm in args.arms]
-        codes = [p.wait() for p in procs]
-        if any(codes):
-            raise SystemExit(f"training failed: exit codes {dict(zip(args.arms, codes))}")
+    if args.parallel and len(args.arms) > 1:  # one process per arm, all at once
+        from _torch_only import train_in_parallel
+
+        train_in_parallel(__file__, args, "--arms", args.arms)
         return
     for arm in args.arms:
         train_arm(arm, args)
@@ -229,18 +223,9 @@ def main() -> None:
     ap.add_argument("--name", default="grasp_capacity")
     ap.add_argument("--quiet", action="store_true")
     args = ap.parse_args()
-    if args.torch_only:
-        from _torch_only import stand_in_for_missing
+    from _torch_only import run_phase
 
-        stood = stand_in_for_missing(force=os.environ.get("OHRA_FORCE_TORCH_ONLY") == "1")
-        if stood:
-            print(f"--torch-only: stand-ins for {', '.join(stood)}", file=sys.stderr)
-    from ohra.errors import OhraError
-
-    try:
-        (cmd_train if args.phase == "train" else cmd_eval)(args)
-    except OhraError as exc:
-        raise SystemExit(f"grasp_capacity: {exc}") from None
+    run_phase(args, cmd_train, cmd_eval, "grasp_capacity")
 
 
 if __name__ == "__main__":

@@ -29,8 +29,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -80,14 +78,10 @@ def train_model(name: str, args: argparse.Namespace) -> None:
 
 
 def cmd_train(args: argparse.Namespace) -> None:
-    if args.parallel and len(args.models) > 1:
-        base = [sys.executable, __file__, "train", "--device", args.device, "--steps", str(args.steps), "--runs", args.runs,
-                "--threads", str(args.threads), "--batch-size", str(args.batch_size), "--seed", str(args.seed), "--quiet",
-                "--data", *args.data] + (["--torch-only"] if args.torch_only else [])
-        procs = [subprocess.Popen(base + ["--models", m]) for m in args.models]
-        codes = [p.wait() for p in procs]
-        if any(codes):
-            raise SystemExit(f"training failed: exit codes {dict(zip(args.models, codes))}")
+    if args.parallel and len(args.models) > 1:  # one process per model, all at once
+        from _torch_only import train_in_parallel
+
+        train_in_parallel(__file__, args, "--models", args.models)
         return
     for m in args.models:
         train_model(m, args)
@@ -198,18 +192,9 @@ def main() -> None:
     args = ap.parse_args()
     if args.seed == 0:
         raise SystemExit("--seed 0 is the committed study's training seed; give another")
-    if args.torch_only:
-        from _torch_only import stand_in_for_missing
+    from _torch_only import run_phase
 
-        stood = stand_in_for_missing(force=os.environ.get("OHRA_FORCE_TORCH_ONLY") == "1")
-        if stood:
-            print(f"--torch-only: stand-ins for {', '.join(stood)}", file=sys.stderr)
-    from ohra.errors import OhraError
-
-    try:
-        (cmd_train if args.phase == "train" else cmd_eval)(args)
-    except OhraError as exc:
-        raise SystemExit(f"grasp_train_seeds: {exc}") from None
+    run_phase(args, cmd_train, cmd_eval, "grasp_train_seeds")
 
 
 if __name__ == "__main__":
