@@ -458,3 +458,79 @@ def test_a_urdf_in_millimetres_is_named_as_such(tmp_path, no_hands_root):
     spec.write_text(MIMIC_SPEC.replace("urdf: toy_mimic.urdf", "urdf: toy_mm.urdf"))
     with pytest.raises(ParseError, match=r"m from the palm frame: is toy_mm\.urdf written in millimetres\?"):
         parse(spec, "extended", fit_params=False)
+
+
+CLAW_URDF = """<?xml version="1.0"?>
+<robot name="toy_claw">
+  <link name="palm"><collision><geometry><box size="0.02 0.08 0.05"/></geometry><origin xyz="0 0 0.025"/></collision></link>
+{fingers}
+</robot>
+"""
+CLAW_FINGER = """  <link name="{f}1"><collision><geometry><cylinder radius="0.008" length="0.04"/></geometry><origin xyz="0 0 0.02"/></collision></link>
+  <link name="{f}2"><collision><geometry><cylinder radius="0.008" length="0.03"/></geometry><origin xyz="0 0 0.015"/></collision></link>
+  <link name="{f}_tip"/>
+  <joint name="{f}_a" type="revolute"><parent link="palm"/><child link="{f}1"/><origin xyz="0 {y} 0.05"/><axis xyz="0 {ay} 0"/><limit lower="{lo}" upper="{up}"/></joint>
+  <joint name="{f}_b" type="revolute"><parent link="{f}1"/><child link="{f}2"/><origin xyz="0 0 0.04"/><axis xyz="0 {ay} 0"/><limit lower="{lo}" upper="{up}"/></joint>
+  <joint name="{f}_t" type="fixed"><parent link="{f}2"/><child link="{f}_tip"/><origin xyz="0 0 0.03"/></joint>"""
+
+
+def _claw(folder: Path, middle_axis: int, lo: float, up: float = 1.0, signs: int = 1) -> Path:
+    """Two fingers side by side (index about +y, range [lo, 1] when ``up`` > 0, else [0, 1]: positive angles curl it
+    toward +x); the middle finger's URDF axis is ``middle_axis`` * y, its range [lo, up], its slots carry ``signs``."""
+    fingers = [CLAW_FINGER.format(f="i", y=0.02, ay=1, lo=lo if up > 0 else 0.0, up=1.0), CLAW_FINGER.format(f="m", y=-0.02, ay=middle_axis, lo=lo, up=up)]
+    (folder / "claw.urdf").write_text(CLAW_URDF.format(fingers="\n".join(fingers)))
+    spec = folder / "claw.yaml"
+    spec.write_text("name: toy_claw\nurdf: claw.urdf\npalm_origin: [0, 0, 0, 0, 0, 0]\n"
+                    "joints: {index_joint3: i_a, index_joint4: i_b, "
+                    f"middle_joint3: {{joint: m_a, sign: {signs}}}, middle_joint4: {{joint: m_b, sign: {signs}}}}}\n"
+                    "forms: {base: {}, extended: {}}\n")
+    return spec
+
+
+@pytest.mark.parametrize("lo, up, named", [
+    (-1.0, 1.0, r"positive flexion curls finger middle toward -x .* while index curls toward \+x"),  # D'Claw-like
+    (-1.0, 0.0, r"finger middle flexes toward negative canonical angles while index flexes toward positive ones"),
+])
+def test_one_finger_whose_flexion_signs_are_all_reversed_is_named(tmp_path, no_hands_root, lo, up, named):
+    """A finger turning about -y in the URDF, mapped with sign +1 in both slots, curls toward the back of the hand for
+    positive canonical angles, yet its slots agree with each other (no per-slot advice) and the extended fit
+    reproduced it exactly: it parsed with a perfect fidelity table (one finger of two is no majority for the
+    palm-frame rules). A symmetric range (D'Claw's) says so through the curl, a one-sided one through its sign."""
+    spec = _claw(tmp_path, middle_axis=-1, lo=lo, up=up)
+    for form in ("base", "extended"):
+        with pytest.raises(SpecError, match=named + r".*: the signs of its flexion joints are reversed \(middle: middle_joint3 "
+                                                    r"\(joint 'm_a', sign \+1\), middle_joint4 \(joint 'm_b', sign \+1\)\)"):
+            parse(spec, form, fit_params=False)
+    ok = _claw(tmp_path, middle_axis=-1, lo=lo, up=up, signs=-1)  # the fix the message names
+    for form in ("base", "extended"):
+        assert parse(ok, form, fit_params=False).params is not None
+
+
+def test_both_fingers_opening_with_a_symmetric_range_is_refused(tmp_path, no_hands_root):
+    """No range to tell a turned palm frame from reversed signs: the error offers both."""
+    spec = _claw(tmp_path, middle_axis=-1, lo=-1.0)
+    spec.write_text(spec.read_text().replace("index_joint3: i_a, index_joint4: i_b",
+                                             "index_joint3: {joint: i_a, sign: -1}, index_joint4: {joint: i_b, sign: -1}"))
+    with pytest.raises(SpecError, match=r"curls every finger \(index, middle\) toward -x .*rotate palm_origin by pi about z"):
+        parse(spec, "extended", fit_params=False)
+
+
+@pytest.mark.assets
+def test_a_leap_finger_with_every_flexion_sign_flipped_is_refused_in_the_extended_form(hands_dir, tmp_path):
+    """Flipping all of the index finger's flexion slots together (j1 at the palm, j3, j4) passed the extended
+    form with the same fidelity as the right spec: its range turns negative while the other fingers' stay positive."""
+    import yaml
+
+    d = yaml.safe_load(registry.spec_path("leap_hand_right").read_text())
+    d["urdf"] = str(hands_dir / d["urdf"])
+    ext = d["forms"]["extended"]["joints"]
+    ext["index_joint1"] = {"joint": ext["index_joint1"], "sign": -1}
+    for s in ("index_joint3", "index_joint4"):
+        d["joints"][s] = {"joint": d["joints"][s], "sign": -1}
+    spec = tmp_path / "flipped.yaml"
+    spec.write_text(yaml.safe_dump(d))
+    with pytest.raises(SpecError, match=r"finger index flexes toward negative canonical angles while middle, little flex toward "
+                                        r"positive ones.*index_joint1 \(joint '1', sign -1\), index_joint3"):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            parse(spec, "extended", fit_params=False)

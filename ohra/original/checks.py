@@ -12,6 +12,9 @@ negative). These checks look at the measured fingers (non-thumb fingers with a f
   by pi; nor within 45 deg of ``+-y``: a frame turned by about pi/2 about z);
 * flexion range: the canonical flexion range lies mostly on the positive side (fingers flex far
   more than they hyperextend);
+* finger by finger: positive flexion curls each finger toward ``+x`` and no finger's range is mostly
+  negative while the others' are positive (one finger whose flexion signs were all flipped together
+  passes the majority rules and the per-slot axis checks, and the extended fit reproduces it exactly);
 
 and when one fails they say which of palm frame, signs or handedness is wrong.
 """
@@ -134,8 +137,46 @@ def check_palm_frame(m: Measurement, spec: HandSpec, form: str) -> list[str]:
             f"by pi about z (rpy yaw + 3.1416) and {fix}"
         )
     if neg and len(neg) > len(mids) / 2:
-        raise SpecError(f"{where}: fingers {', '.join(neg)} flex toward negative canonical angles: the signs of their "
-                        f"flexion joints are reversed (canonical flexion is positive, toward the palm normal +x)")
+        raise SpecError(f"{where}: finger{'s' if len(neg) > 1 else ''} {', '.join(neg)} flex{'' if len(neg) > 1 else 'es'} "
+                        f"toward negative canonical angles: the signs of {'their' if len(neg) > 1 else 'its'} flexion joints "
+                        "are reversed (canonical flexion is positive, toward the palm normal +x)")
+    # the rules above need most fingers to agree; one finger (of two, three, four) whose flexion signs were all
+    # flipped together passes them, and the per-slot axis checks too (its own flexion axis flips with its signs),
+    # while the fit reproduces the original exactly with positive angles opening that finger
+    spec_form = spec.form(form)
+
+    def named_slots(fs: list[str]) -> str:
+        # every mapped slot of the finger turning about its flexion axis (j1 too: LEAP's extended form flexes there)
+        def turning(f: str) -> list[str]:
+            fm = m.fingers[f]
+            return [s for s in fm.slots if float(fm.a[s] @ fm.y) > 0.9]
+
+        return "; ".join(f"{f}: " + ", ".join(f"{s} (joint {spec_form.slots[s].name!r}, sign {spec_form.slots[s].sign:+g})"
+                                               for s in turning(f)) for f in fs)
+
+    def verb(fs: list[str], v: str) -> str:
+        return v if len(fs) > 1 else v + ("es" if v.endswith("x") else "s")
+
+    if neg:
+        pos = [f for f, sgn in mids if sgn > 0]
+        raise SpecError(f"{where}: finger{'s' if len(neg) > 1 else ''} {', '.join(neg)} flex{'' if len(neg) > 1 else 'es'} "
+                        f"toward negative canonical angles while {', '.join(pos)} {verb(pos, 'flex')} toward positive ones: the signs of "
+                        f"{'their' if len(neg) > 1 else 'its'} flexion joints are reversed ({named_slots(neg)}); flip each "
+                        "of those signs (canonical flexion is positive, toward the palm normal +x)")
+    # what is left to check finger by finger: positive flexion must curl the tip toward +x (this also covers fingers
+    # whose range is symmetric, e.g. D'Claw's, which say nothing through their range's sign)
+    flexing = [f for f in fingers if _flexion_slots(m, f)]
+    opening = [f for f in flexing if float(np.cross(m.fingers[f].y, m.fingers[f].z)[0]) < 0]
+    closing = [f for f in flexing if f not in opening]
+    if opening:
+        if closing:
+            raise SpecError(f"{where}: positive flexion curls finger{'s' if len(opening) > 1 else ''} {', '.join(opening)} "
+                            f"toward -x of the palm frame (the back of the hand) while {', '.join(closing)} {verb(closing, 'curl')} toward +x: "
+                            f"the signs of {'their' if len(opening) > 1 else 'its'} flexion joints are reversed "
+                            f"({named_slots(opening)}); flip each of those signs")
+        raise SpecError(f"{where}: positive flexion curls every finger ({', '.join(opening)}) toward -x of the palm frame: "
+                        "either the palm normal +x points to the back of the hand (rotate palm_origin by pi about z, rpy "
+                        "yaw + 3.1416) or every flexion sign is reversed")
     if named and thumb and named != thumb:
         return [f"check: the thumb sits on the {thumb}-hand side (y {'>' if thumb == 'right' else '<'} 0) of the palm "
                 f"frame although the hand is named {named}"]
