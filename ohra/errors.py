@@ -68,6 +68,10 @@ class ObjectWarning(UserWarning):
     """Something about an object was estimated or approximated (mass properties, its simulated body)."""
 
 
+class HandWarning(UserWarning):
+    """Something about a hand was approximated (a canonical form that follows its original poorly)."""
+
+
 def reject_unknown(keys: Iterable[str], known: Iterable[str], error: type[OhraError], source: str, what: str) -> None:
     """Raise ``error`` naming ``source`` and the keys not in ``known`` (sorted, with the known ones)
     when there are any; ``what`` names the kind of key, e.g. ``"PPO setting(s)"``. Shared by the

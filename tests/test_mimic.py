@@ -534,3 +534,24 @@ def test_a_leap_finger_with_every_flexion_sign_flipped_is_refused_in_the_extende
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             parse(spec, "extended", fit_params=False)
+
+
+def test_a_spec_form_that_fits_its_original_poorly_is_named_once_where_it_is_used(tmp_path, no_hands_root, monkeypatch):
+    """`python -m ohra.synth --hand SPEC` (and the grasp commands) silently used a D'Claw base form ~5 cm off its
+    original (keypoint RMS 47 mm; the extended form: 0.14 mm): a warning names the fit and the extended form. The
+    toy claw fits exactly, so the threshold is moved below its RMS to plant the poor fit."""
+    from ohra.errors import HandWarning
+    from ohra.hands import resolve as rs
+
+    spec = _claw(tmp_path, middle_axis=1, lo=-1.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", HandWarning)
+        assert rs.resolve_hand(spec).form == "base"  # a good fit: silent
+    monkeypatch.setattr(rs, "POOR_FIT_MM", -1.0)
+    rs._warned_fits.clear()
+    with pytest.warns(HandWarning, match=r"claw.yaml: its base form follows the original URDF poorly \(keypoint RMS 0 mm.*"
+                                         r"ohra hand compare claw.yaml.*the extended form may follow it"):
+        rs.resolve_hand(spec)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", HandWarning)
+        rs.resolve_hand(spec)  # once per spec file and form

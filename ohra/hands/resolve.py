@@ -23,9 +23,14 @@ from typing import Any
 
 from ohra.canonical.couplings import Coupling, read_couplings
 from ohra.canonical.params import BaseParams, ExtendedParams, Params, load_params
-from ohra.errors import HandNotFoundError, ParamsError
+from ohra.errors import HandNotFoundError, HandWarning, ParamsError
 
 SPEC_SUFFIXES = (".yaml", ".yml")
+# keypoint RMS after the fit [mm] beyond which a spec's form is called a poor fit: the registered hands' forms fit
+# within 16.6 mm (LEAP's base form, whose 22.6 mm mean fingertip error is already a stated miss of its 8 mm target);
+# a hand the template cannot express (D'Claw's fingers at 120 deg in the base form) fits at ~47 mm
+POOR_FIT_MM = 25.0
+_warned_fits: set[tuple[Path, float, str]] = set()
 
 
 @dataclass
@@ -103,7 +108,16 @@ def parse_spec_file(path: str | Path, form: str | None = None):
     if form is None:
         form = "base" if "base" in sp.forms else next(iter(sp.forms))
     sp.form(form)
-    return _parse_cached(p, p.stat().st_mtime, form)
+    mtime = p.stat().st_mtime
+    res = _parse_cached(p, mtime, form)
+    if res.fit is not None and res.fit.final_rms_mm > POOR_FIT_MM and (p, mtime, form) not in _warned_fits:
+        _warned_fits.add((p, mtime, form))
+        other = (f"; the extended form may follow it (ohra hand parse {p.name} --extended --fit -o HAND.json, then use "
+                 "HAND.json)") if form == "base" and "extended" in sp.forms else ""
+        warnings.warn(f"hand spec {p}: its {form} form follows the original URDF poorly (keypoint RMS {res.fit.final_rms_mm:.0f} mm "
+                      f"after the fit; registered hands: at most 17 mm), so grasps or policies made on it may not carry over to "
+                      f"the original; `ohra hand compare {p.name}` shows where{other}", HandWarning, stacklevel=2)
+    return res
 
 
 def _in_form(params: Params, form: str | None, where: str) -> Params:
