@@ -204,3 +204,44 @@ def test_a_dataset_shard_evaluated_on_another_hand_or_object_says_so(tmp_path, c
     assert f"{shard} holds grasps of box (mesh " in err and "evaluating them on --object builtin:sphere" in err
     assert main(["eval", shard, "--hand", "leap_2220", "--object", "builtin:box", "--quiet"]) == 0
     assert f"{shard} was synthesised for leap_3303; evaluating it on --hand leap_2220" in capsys.readouterr().err
+
+
+def test_grasps_sampled_on_a_millimetre_mesh_are_evaluated_at_the_scale_they_were_sampled_at(setup, capsys):
+    """`ohra grasp sample --scale 0.001` wrote no scale: `ohra eval` of the file on the same mesh without --scale read
+    it in metres (an 80 m box: a size warning and 0 of 8) although the file said which object it was made for."""
+    pytest.importorskip("torch", reason="sampling needs the learn extra")
+    tmp, _, _, _ = setup
+    mm = tmp / "box_mm.stl"
+    pinch_box().mesh.apply_scale(1000.0).export(str(mm))
+    out = tmp / "g_mm.npz"
+    assert main(["grasp", "sample", "--hand", "allegro_hand_left", "--object", str(mm), "--scale", "0.001", "-n", "2",
+                 "-o", str(out)]) == 0
+    with np.load(out) as d:
+        assert float(d["scale"]) == 0.001
+    capsys.readouterr()
+    rc, _, err = _run(capsys, out, "--hand", "allegro_hand_left", "--object", mm)
+    assert rc == 0 and "--scale 0.001 from" in err and "warning" not in err and "holds grasps of" not in err
+    rc, _, err = _run(capsys, out, "--hand", "allegro_hand_left", "--object", mm, "--scale", "1")  # as asked: the 80 m box
+    assert rc == 0 and "ohra: warning: object 'box_mm'" in err and "--scale 0.001 from" not in err
+
+
+def test_a_bare_object_word_lists_the_built_in_shapes_and_a_speck_names_its_units(tmp_path):
+    """`--object cube` said only "not found"; a 3 cm torus given --scale 0.001 (meant for another, millimetre mesh)
+    was called flat."""
+    import trimesh
+
+    from ohra.errors import ObjectError
+    from ohra.objects.resolve import resolve_object
+
+    with pytest.raises(ObjectError, match=r"not found: cube \(built-in objects: builtin:sphere, builtin:box.*procedural:FAMILY:SEED"):
+        resolve_object("cube")
+    with pytest.raises(ObjectError, match=r"not found: .*cube.obj$"):  # a file name gets no list
+        resolve_object(str(tmp_path / "cube.obj"))
+    torus = tmp_path / "torus.obj"
+    trimesh.creation.torus(0.04, 0.015).export(str(torus))
+    with pytest.raises(ObjectError, match=r"is flat: .*only 0.11 mm across, so its units are likely wrong"):
+        resolve_object(str(torus), scale=0.001)
+    sheet = tmp_path / "sheet.obj"  # a 10 cm sheet: flat, and not a units problem
+    trimesh.Trimesh([[0, 0, 0], [0.1, 0, 0], [0, 0.1, 0], [0.1, 0.1, 0]], [[0, 1, 2], [1, 3, 2]]).export(str(sheet))
+    with pytest.raises(ObjectError, match=r"is flat: .*needs volume$"):
+        resolve_object(str(sheet))

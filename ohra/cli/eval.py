@@ -118,7 +118,8 @@ def load_grasp_file(path: str | Path, key: str | None = None) -> tuple[np.ndarra
             key = "grasps" if "grasps" in names else (names[0] if len(names) == 1 else None)
         if key is None or key not in names:
             raise GraspError(f"{path}: no array {key or 'grasps'!r} (arrays: {', '.join(names) or 'none'}); use --key")
-        info = {k: str(data[k]) for k in ("hand", "form", "model", "object_name", "object_hash") if k in names and data[k].ndim == 0}
+        info = {k: str(data[k]) for k in ("hand", "form", "model", "object", "object_name", "object_hash", "scale")
+                if k in names and data[k].ndim == 0}
         return np.asarray(data[key]), info or _shard_info(path)
 
 
@@ -182,6 +183,10 @@ def run(args: argparse.Namespace) -> int:
                   f"{args.form} form as --form asks", file=sys.stderr)
     if args.limit is not None:
         grasps = grasps[: args.limit]
+    if args.scale is None and made.get("scale") and float(made["scale"]) != 1.0 and made.get("object") == str(args.object):
+        # the grasps were sampled on this file read at another scale (a millimetre mesh): read it the same way
+        args.scale = float(made["scale"])
+        print(f"ohra: note: --scale {args.scale:g} from {args.grasps} (the scale its grasps were sampled at)", file=sys.stderr)
     objs = resolve_objects(args.object, scale=args.scale)
     if len(objs) != 1:
         raise ObjectError(f"--object must name one object, {args.object!r} names {len(objs)}")

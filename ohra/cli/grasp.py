@@ -293,6 +293,7 @@ def _cmd_sample(args: argparse.Namespace) -> int:
                            # and how, so that the file can be made again: object (as given, its name and mesh hash),
                            # seed and the sampling options
                            "object": np.array(str(args.object)), "object_name": np.array(obj.name),
+                           "scale": np.array(float(obj.file_scale)),  # ohra eval reads the object at it again
                            "object_hash": np.array(obj.mesh_hash), "seed": np.array(int(args.seed)),
                            "refine": np.array(str(args.refine or "none")), "candidates": np.array(int(args.candidates)),
                            "centre": np.array(bool(args.centre)),

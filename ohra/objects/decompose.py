@@ -43,8 +43,12 @@ def check_solid(mesh: trimesh.Trimesh, label: str) -> None:
     _, _, axes = np.linalg.svd(c, full_matrices=False)
     extent = np.ptp(c @ axes.T, axis=0)  # along the principal axes, largest first
     if extent[-1] < MIN_THICKNESS_M:
+        # a whole object below a centimetre is a units problem first (e.g. --scale 0.001 given to every object of a
+        # command, one of them already in metres): say so rather than call a 3 cm torus flat
+        units = (f"; the whole object is only {1e3 * extent[0]:.3g} mm across, so its units are likely wrong (a --scale "
+                 "meant for millimetre meshes given to one already in metres?)") if extent[0] < 0.01 else ""
         raise ObjectError(f"object {label!r} is flat: {1e3 * extent[-1]:.3g} mm thick across its thinnest principal axis "
-                          f"(extents {', '.join(f'{1e3 * e:.3g}' for e in extent)} mm); a graspable object needs volume")
+                          f"(extents {', '.join(f'{1e3 * e:.3g}' for e in extent)} mm); a graspable object needs volume{units}")
 
 
 def load_convex_pieces(path: Path, scale: np.ndarray | None = None) -> list[trimesh.Trimesh]:

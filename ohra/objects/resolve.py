@@ -80,6 +80,9 @@ def parse_procedural(spec: str) -> ObjectModel:
 def _from_path(p: Path, scale: float | None) -> list[ObjectModel]:
     if not p.exists():
         hint = f" (the built-in object: builtin:{p.name})" if str(p) in builtin_object_names() else ""
+        if not hint and not p.suffix and len(p.parts) == 1:  # a bare word: perhaps a built-in shape by another name
+            hint = (f" (built-in objects: {', '.join('builtin:' + n for n in builtin_object_names())}; procedural shapes: "
+                    "procedural:FAMILY:SEED)")
         head, sep, rest = str(p).partition(":")
         if sep and head.lower() in ("builtin", "procedural") and head != head.lower():  # the prefixes are lower case
             hint = f" (the {head.lower()} object: {head.lower()}:{rest})"
