@@ -51,6 +51,7 @@ from ohra.learn.grasp.train import train_grasp  # noqa: E402
 from ohra.hands import get_hand  # noqa: E402
 from ohra.sim import Protocol, SimHand  # noqa: E402
 from ohra.sim.bullet import urdf_joint_damping  # noqa: E402
+from ohra.sim.hands import ORIGINAL_SQUEEZE  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = {"allegro_hand_left": 84.2, "barrett_hand": 88.1, "shadow_hand_right": 62.9}  # OHRA Table 5, Isaac Gym
@@ -112,6 +113,8 @@ def evaluated(model, key: str, hands: list[str], objects: list, original: bool, 
         extra["collisions"] = collisions
     if candidates > 1:  # likewise
         extra["candidates"] = int(candidates)
+    if original:  # the squeeze directions of an original hand (SimHand.squeeze_reference): older replays are not reused
+        extra["squeeze"] = ORIGINAL_SQUEEZE
     ekey = eval_key(run_key(Path(args.runs) / key), hands=hands, objects=[o.name for o in objects], n=args.n, seed=seed,
                     original=original, protocol=protocol, **extra)
     if (hit := cached(path, ekey)) is not None:

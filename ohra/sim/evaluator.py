@@ -37,7 +37,7 @@ from ohra.objects.model import ObjectModel
 from ohra.objects.resolve import resolve_object
 from ohra.canonical.params import BaseParams, ExtendedParams, Params
 from ohra.rotations import check_grasps, grasp_to_pose, pose_to_grasp
-from ohra.sim.controller import closes_positive, squeeze_targets
+from ohra.sim.controller import squeeze_targets
 from ohra.sim.hands import SimHand
 from ohra.sim.protocol import COM_OFFSET_WARN, DIRECTION_NAMES, DIRECTIONS, Protocol
 from ohra.sim.world import World
@@ -140,9 +140,8 @@ def run_grasp(world: World, grasp: np.ndarray, mode: str = "eval") -> GraspResul
     pen = 0.0
     for cp in pb.getClosestPoints(world.body, obj, 0.0, physicsClientId=c):
         pen = max(pen, -float(cp[8]))
-    axis, link_z, origin = world.joint_frames()
     toward = world.obj_inertial[:3, 3] if prot.object_point == "com" else None  # the object starts at the origin
-    q_reset, q_target = squeeze_targets(qs, hand.lower, hand.upper, closes_positive(axis, link_z, origin, toward), prot.outer, prot.inner,
+    q_reset, q_target = squeeze_targets(qs, hand.lower, hand.upper, world.closes_positive(T_palm, qc, toward), prot.outer, prot.inner,
                                        couple=hand.project_sim if hand.coupled else None)
     world.set_joints(q_reset)
     world.drive_joints(q_target)

@@ -37,6 +37,11 @@ def _finger_of_slot(k: int) -> int:
     raise IndexError(k)
 
 
+# which squeeze directions an original hand's evaluation used (part of the caches' keys): its canonical twin's,
+# mapped through the action map (stop 53); before, the original's own joint frames decided
+ORIGINAL_SQUEEZE = "canonical-twin"
+
+
 @dataclass
 class SimHand:
     """A hand as the simulator loads it.
@@ -53,6 +58,11 @@ class SimHand:
         mimic: joint name -> (driven joint name, multiplier, offset) for URDF mimic joints.
         couplings: a canonical hand's joint couplings (:mod:`ohra.canonical.couplings`): the
             controller projects its poses and targets onto them (:meth:`project_sim`).
+        squeeze_reference: an original hand's canonical twin (same params and form). The squeeze
+            controller decides which way each joint closes on the twin and maps it through the action
+            map's signs (:meth:`squeeze_map`): the reference rule reads a link's direction off its frame's
+            +z, true of canonical links but not of many original URDFs' (Allegro's thumb joint 13, LEAP,
+            DexHand's thumb), whose fingers then squeezed open. None: the hand's own frames decide.
     """
 
     name: str
@@ -70,6 +80,7 @@ class SimHand:
     link_finger: dict[str, int]
     mimic: dict[str, tuple[str, float, float]] = field(default_factory=dict)
     couplings: tuple = ()
+    squeeze_reference: "SimHand | None" = None
 
     def __post_init__(self) -> None:
         # a hand without one driven joint would fail deep in PyBullet calls on empty joint lists
@@ -94,6 +105,17 @@ class SimHand:
     @property
     def canonical(self) -> bool:
         return self.action_map is None
+
+    def squeeze_map(self) -> tuple[np.ndarray, np.ndarray]:
+        """(index into ``squeeze_reference.joints``, whether the sign flips) for each driven joint: a joint closes
+        toward its positive side when its canonical slot does on the twin, unless its slot's sign is negative."""
+        ref = self.squeeze_reference
+        if ref is None or self.action_map is None:
+            raise GraspError(f"hand {self.name!r} has no canonical twin to take its squeeze directions from")
+        slot = {sm.name: (s, sm.sign) for s, sm in self.action_map.slots.items()}
+        idx = np.array([ref.joints.index(slot[j][0]) for j in self.joints], dtype=int)
+        flip = np.array([slot[j][1] < 0 for j in self.joints], dtype=bool)
+        return idx, flip
 
     def to_sim(self, q: np.ndarray) -> np.ndarray:
         """Canonical (..., 22) -> simulator vector (..., len(joints))."""
@@ -240,7 +262,9 @@ class SimHand:
     def _original_of(cls, oh, action_map, params: Params, name: str) -> "SimHand":
         lo = np.asarray(params.joint_lowers, float)
         up = np.asarray(params.joint_uppers, float)
-        return cls.from_original(_absolute_text(oh), action_map, name=f"{name}:original", canon_limits=(lo, up))
+        hand = cls.from_original(_absolute_text(oh), action_map, name=f"{name}:original", canon_limits=(lo, up))
+        twin = cls.from_params(params, name=f"{name}:canonical", couplings=tuple(getattr(action_map, "couplings", ()) or ()))
+        return replace(hand, squeeze_reference=twin)
 
 
 def _absolute_text(oh) -> str:

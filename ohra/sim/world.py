@@ -22,6 +22,7 @@ import numpy as np
 import pybullet as pb
 
 from ohra.sim.bullet import convex_pieces_shape, load_hand
+from ohra.sim.controller import closes_positive
 from ohra.objects.model import ObjectModel
 from ohra.rotations import matrix_to_quat, quat_to_matrix
 from ohra.sim.hands import SimHand
@@ -44,6 +45,7 @@ class World:
 
     def __init__(self, hand: SimHand, obj: ObjectModel, protocol: Protocol):
         self.hand, self.obj, self.protocol = hand, obj, protocol
+        self._twin: World | None = None  # the canonical twin's world (squeeze directions of an original hand)
         self.client = pb.connect(pb.DIRECT)
         c = self.client
         pb.setGravity(0, 0, 0, physicsClientId=c)
@@ -236,7 +238,26 @@ class World:
         v, _ = pb.getBaseVelocity(self.obj_body, physicsClientId=c)
         return np.asarray(pos), np.asarray(v)
 
+    def closes_positive(self, T_world_palm: np.ndarray, q_canonical: np.ndarray, toward: np.ndarray | None) -> np.ndarray:
+        """(J,) bool per driven joint: a positive rotation closes it onto ``toward`` (world; None: the origin), by the
+        reference rule (:func:`~ohra.sim.controller.closes_positive`) on the hand's own joint frames as they stand,
+        or, for a hand with a canonical twin (``SimHand.squeeze_reference``), on the twin posed at the same grasp
+        (``q_canonical``, (22,)) and mapped through the action map's signs."""
+        ref = self.hand.squeeze_reference
+        if ref is None:
+            return closes_positive(*self.joint_frames(), toward)
+        if self._twin is None:  # one more DIRECT client per world, made on first use
+            self._twin = World(ref, self.obj, self.protocol)
+        qr = ref.project_sim(np.clip(ref.to_sim(np.clip(q_canonical, ref.canon_lower, ref.canon_upper)), ref.lower, ref.upper))
+        self._twin.set_hand_pose(T_world_palm @ ref.T_palm_root)
+        self._twin.set_joints(qr)
+        idx, flip = self.hand.squeeze_map()
+        return closes_positive(*self._twin.joint_frames(), toward)[idx] ^ flip
+
     def close(self) -> None:
+        if self._twin is not None:
+            self._twin.close()
+            self._twin = None
         if self.client is not None and pb.isConnected(self.client):
             pb.disconnect(self.client)
         self.client = None

@@ -452,6 +452,8 @@ def _resume_settings(model: GraspModel, n: int, original: bool, inertials: str, 
     """Everything a pair's outcome depends on besides its hand, object and seed (the resume key)."""
     import hashlib
 
+    from ohra.sim.hands import ORIGINAL_SQUEEZE
+
     h = hashlib.sha256()
     for k, v in model.net.state_dict().items():  # the weights themselves, not the path they came from
         h.update(k.encode())
@@ -461,7 +463,8 @@ def _resume_settings(model: GraspModel, n: int, original: bool, inertials: str, 
     return {"model": h.hexdigest()[:16], "t_scale": float(model.t_scale), "n": int(n), "original": bool(original), "inertials": inertials, "collisions": collisions,
             "protocol": json.dumps(protocol.__dict__ if protocol is not None else "default", sort_keys=True, default=str),
             "refine": None if rs is None else json.dumps(asdict(rs), sort_keys=True, default=str), "centre": bool(centre),
-            "candidates": int(candidates), "condition_hand": cond, "format": 1}
+            "candidates": int(candidates), "condition_hand": cond, "format": 1,
+            **({"squeeze": ORIGINAL_SQUEEZE} if original else {})}  # an original pair made before the twin is not reused
 
 
 def _pair_key(settings: dict, name: str, params: Any, obj: Any, seed: int, condition: np.ndarray,
