@@ -59,6 +59,7 @@ from ohra.objects.model import ObjectModel, resolve_objects  # noqa: E402
 from ohra.paths import objects_root  # noqa: E402
 from ohra.rotations import grasp_to_pose  # noqa: E402
 from ohra.sim import GraspEvaluator, SimHand  # noqa: E402
+from ohra.sim.hands import ORIGINAL_SQUEEZE  # noqa: E402
 from ohra.synth.init import initial_poses  # noqa: E402
 from ohra.synth.nlp import GraspNLP, NLPSettings  # noqa: E402
 
@@ -135,10 +136,15 @@ def run_object(ref, spec: str, starts: int, seed: int, reeval: bool) -> dict:
         old = None
     obj = None
     if old and not reeval:
-        if "canonical_origmass" in old:
+        if "canonical_origmass" in old and old.get("original_squeeze") == ORIGINAL_SQUEEZE:
             return old
         obj = resolve_objects(str(objects_root() / spec) if spec.startswith("ycb/") else spec)[0]
-        old["canonical_origmass"] = outcomes(origmass_evaluator(ref, obj), np.array(old["grasps"]).reshape(-1, 31))
+        kept = np.array(old["grasps"]).reshape(-1, 31)
+        if "canonical_origmass" not in old:
+            old["canonical_origmass"] = outcomes(origmass_evaluator(ref, obj), kept)
+        if old.get("original_squeeze") != ORIGINAL_SQUEEZE:  # replayed before the original squeezed like its twin
+            old["original"] = outcomes(GraspEvaluator.original(HAND, obj, form=ref.form), kept)
+            old["original_squeeze"] = ORIGINAL_SQUEEZE
         _write(f, old)
         return old
     obj = obj or resolve_objects(str(objects_root() / spec) if spec.startswith("ycb/") else spec)[0]
@@ -152,7 +158,8 @@ def run_object(ref, spec: str, starts: int, seed: int, reeval: bool) -> dict:
     heavy = outcomes(origmass_evaluator(ref, obj), grasps)
     row = {"form": ref.form, "object": obj.name, "spec": spec, "starts": starts, "seed": seed, "grasps": grasps.tolist(),
            "max_residual_rad": res, "canonical": canon, "original": orig, "canonical_shifted": floor,
-           "canonical_origmass": heavy, "contact_gaps_m": gaps, "seconds": time.perf_counter() - t}
+           "canonical_origmass": heavy, "contact_gaps_m": gaps, "seconds": time.perf_counter() - t,
+           "original_squeeze": ORIGINAL_SQUEEZE}
     _write(f, row)
     return row
 
