@@ -249,3 +249,17 @@ def test_an_interrupted_starting_state_generation_continues_to_the_same_states(t
     for a, b in ((whole.q, again.q), (whole.target, again.target), (whole.obj_pos, again.obj_pos)):
         np.testing.assert_array_equal(a, b)
     assert again.attempts == whole.attempts and not partial.exists()
+
+
+def test_a_hand_that_keeps_no_starting_state_is_told_why(tmp_path, monkeypatch):
+    """D'Claw (a claw, not a palm-up hand) ended with "none of N perturbed grasps survived 1.5 s" and nothing on why:
+    the error now counts each rejection reason, and says what most falls mean."""
+    from ohra.sim.rotation import grasps as G
+
+    monkeypatch.setenv("OHRA_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(G, "MAX_ATTEMPTS_PER_GRASP", 3)
+    reasons = iter([G.REJECTIONS[1], G.REJECTIONS[1], G.REJECTIONS[5]])
+    monkeypatch.setattr(G, "_rejection", lambda *a, **k: next(reasons))  # planted: two falls, one with too few contacts
+    with pytest.raises(G.GraspGenerationError, match=r"none of 3 perturbed grasps survived .*: object fell \(2\), too few hand "
+                                                   r"contacts \(1\) \(a hand that cannot hold the object palm up"):
+        G.generate(resolve(RotationConfig(grasp_count=1)))

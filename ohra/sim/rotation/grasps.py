@@ -32,6 +32,7 @@ import re
 import sys
 import warnings
 import zipfile
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -229,22 +230,34 @@ def _label(spec: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "-", spec)
 
 
-def _keep(scene: RotationScene, start: np.ndarray, before) -> bool:
-    """Keep a settled sample: its centre of mass in place (half the termination margins; ``start`` is where it
-    began, world [m]), still since ``before``
-    (the state ``STILL_TIME`` s earlier), and touched by ``min_contacts`` hand links."""
+REJECTIONS = ("non-finite state", "object fell", "object left the hand", "object still moving", "object still turning",
+              "too few hand contacts")
+
+
+def _rejection(scene: RotationScene, start: np.ndarray, before) -> str | None:
+    """Why a settled sample is not kept (one of :data:`REJECTIONS`), None when it is: its centre of mass in place
+    (half the termination margins; ``start`` is where it began, world [m]), still since ``before`` (the state
+    ``STILL_TIME`` s earlier), and touched by ``min_contacts`` hand links."""
     cfg, s = scene.cfg, scene.read()
     if not (np.all(np.isfinite(s.obj_com)) and np.all(np.isfinite(s.q))):
-        return False
+        return REJECTIONS[0]
     if s.obj_com[2] < start[2] - cfg.fall_height / 2:
-        return False
+        return REJECTIONS[1]
     if np.linalg.norm(s.obj_com - start) > cfg.max_distance / 2:
-        return False
+        return REJECTIONS[2]
     if np.linalg.norm(s.obj_com - before.obj_com) > STILL_MOVE[0]:
-        return False
+        return REJECTIONS[3]
     if abs(delta_yaw(before.obj_quat, s.obj_quat)) > STILL_MOVE[1]:
-        return False
-    return scene.hand_contacts() >= cfg.min_contacts
+        return REJECTIONS[4]
+    return None if scene.hand_contacts() >= cfg.min_contacts else REJECTIONS[5]
+
+
+def _keep(scene: RotationScene, start: np.ndarray, before, rejected: Counter | None = None) -> bool:
+    """Whether to keep a settled sample (:func:`_rejection`); ``rejected`` counts the reasons of the others."""
+    why = _rejection(scene, start, before)
+    if why is not None and rejected is not None:
+        rejected[why] += 1
+    return why is None
 
 
 PARTIAL_EVERY = 25  # kept states between two saves of an unfinished generation
@@ -272,6 +285,7 @@ def generate(task: Task, progress: bool | None = False, partial: Path | None = N
         key = cache_key(task)
         if partial is not None:
             attempts = _resume_partial(partial, key, hold, rng, (Q, T, P, O))
+        rejected: Counter = Counter()  # this call's rejections, for the error below
         bar = _bar(cfg.grasp_count, f"grasps {hand.name}", progress)
         bar.update(len(Q))
         while len(Q) < cfg.grasp_count and attempts < MAX_ATTEMPTS_PER_GRASP * cfg.grasp_count:
@@ -285,7 +299,7 @@ def generate(task: Task, progress: bool | None = False, partial: Path | None = N
                 scene.step()
                 if k + 1 == check:
                     before = scene.read()
-            if _keep(scene, com, before):
+            if _keep(scene, com, before, rejected):
                 s = scene.read()
                 Q.append(s.q)
                 T.append(q)
@@ -298,8 +312,11 @@ def generate(task: Task, progress: bool | None = False, partial: Path | None = N
     finally:
         scene.close()
     if not Q:
+        why = ", ".join(f"{k} ({n})" for k, n in rejected.most_common())
         raise GraspGenerationError(f"{hand.name} with {task.obj.name}: none of {attempts} perturbed grasps survived "
-                                   f"{cfg.settle_time} s (noise +-{r} rad)")
+                                   f"{cfg.settle_time} s (noise +-{r} rad)" + (f": {why}" if why else "")
+                                   + (" (a hand that cannot hold the object palm up, or a holding pose that does not "
+                                      "close on it)" if rejected.get(REJECTIONS[1], 0) > attempts / 2 else ""))
     if len(Q) < cfg.grasp_count:
         warnings.warn(f"{hand.name}: only {len(Q)} of {cfg.grasp_count} starting states after {attempts} attempts",
                       stacklevel=user_stacklevel())
