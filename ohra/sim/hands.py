@@ -178,12 +178,14 @@ class SimHand:
 
     @classmethod
     def from_original(cls, urdf: str | Path, action_map, name: str | None = None,
-                      canon_limits: tuple[np.ndarray, np.ndarray] | None = None) -> "SimHand":
+                      canon_limits: tuple[np.ndarray, np.ndarray] | None = None, params: Params | None = None) -> "SimHand":
         """An original hand URDF (path, or text with absolute mesh paths) driven through ``action_map``.
 
         ``canon_limits`` defaults to the original limits mapped to canonical slots
         (``action_map.limits_to_canonical``). Unmapped original joints are locked at the action
-        map's value for them (0 unless ``unmapped_default`` says otherwise).
+        map's value for them (0 unless ``unmapped_default`` says otherwise). ``params``: the hand's canonical
+        params (the form ``action_map`` maps to), whose canonical twin then sets the squeeze directions
+        (``squeeze_reference``); without them the URDF's own link frames do.
         """
         path = None
         if isinstance(urdf, Path) or not str(urdf).lstrip().startswith("<"):
@@ -222,9 +224,12 @@ class SimHand:
         finger_of_joint.update({n: finger_of_joint[m[0]] for n, m in mimic.items()})
         link_finger = _link_fingers(prepared, finger_of_joint)
         T = np.linalg.inv(xyzrpy_to_matrix(action_map.palm_origin))  # root in palm: inverse of palm in root
-        return cls(name or (path.stem if path else "original_hand"), prepared, joints, lim[drive_a, 0], lim[drive_a, 1],
+        label = name or (path.stem if path else "original_hand")
+        twin = None if params is None else cls.from_params(params, name=label.replace(":original", "") + ":canonical",
+                                                          couplings=tuple(getattr(action_map, "couplings", ()) or ()))
+        return cls(label, prepared, joints, lim[drive_a, 0], lim[drive_a, 1],
                    np.asarray(lo_c, float), np.asarray(up_c, float), drive_a, probe, action_map, T, joint_finger,
-                   link_finger, mimic)
+                   link_finger, mimic, squeeze_reference=twin)
 
     @classmethod
     def registered_original(cls, name: str, form: str | None = None) -> "SimHand":
@@ -262,9 +267,7 @@ class SimHand:
     def _original_of(cls, oh, action_map, params: Params, name: str) -> "SimHand":
         lo = np.asarray(params.joint_lowers, float)
         up = np.asarray(params.joint_uppers, float)
-        hand = cls.from_original(_absolute_text(oh), action_map, name=f"{name}:original", canon_limits=(lo, up))
-        twin = cls.from_params(params, name=f"{name}:canonical", couplings=tuple(getattr(action_map, "couplings", ()) or ()))
-        return replace(hand, squeeze_reference=twin)
+        return cls.from_original(_absolute_text(oh), action_map, name=f"{name}:original", canon_limits=(lo, up), params=params)
 
 
 def _absolute_text(oh) -> str:
