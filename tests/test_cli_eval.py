@@ -116,8 +116,11 @@ def test_a_dataset_folder_for_grasps_names_a_shard_to_pass_and_an_empty_file_say
     assert rc == 2 and "is a folder" in err and "pinch/box-0123abcd.npz" in err and len(err.strip().splitlines()) == 1
     empty = tmp / "empty.npz"
     np.savez(empty, grasps=np.zeros((0, 31)))
-    rc, out, _ = _run(capsys, empty, "--hand", hand, "--object", mesh)
+    report = tmp / "empty.json"
+    rc, out, _ = _run(capsys, empty, "--hand", hand, "--object", mesh, "-o", report)
     assert rc == 0 and "holds no grasps; nothing was simulated" in out and "0/0" not in out
+    written = json.loads(report.read_text())
+    assert written["n"] == 0 and written["success_rate"] is None  # no grasps is not a 0 % success rate
 
 
 def test_a_file_that_is_not_numpy_and_a_variant_replayed_on_its_original_say_what_is_wrong(tmp_path, capsys):

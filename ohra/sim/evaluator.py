@@ -93,7 +93,9 @@ class EvalReport:
 
     @property
     def success_rate(self) -> float:
-        return float(self.success.mean()) if self.results else 0.0
+        """Fraction of grasps that passed; NaN for a report of no grasps (0/0 is not a 0 % success rate,
+        which averages over reports would silently count)."""
+        return float(self.success.mean()) if self.results else float("nan")
 
     @property
     def post_grasps(self) -> np.ndarray:
@@ -115,7 +117,8 @@ class EvalReport:
         return {
             **self.meta,
             "mode": self.mode, "protocol": asdict(self.protocol), "n": len(self.results),
-            "successes": int(self.success.sum()), "success_rate": self.success_rate,
+            "successes": int(self.success.sum()),
+            "success_rate": self.success_rate if self.results else None,  # JSON has no NaN: null for no grasps
             "clamped_joints_grasps": self.clamped_count,
             "early_exits": int(sum(r.early_exit for r in self.results)),
             "grasps": [r.to_dict() for r in self.results],
