@@ -128,9 +128,11 @@ def evaluated(model, key: str, hands: list[str], objects: list, original: bool, 
     t0 = time.perf_counter()
     out = {"per_hand": {}, "pairs": [], "success": {}}
     if todo:
+        # each finished (hand, object) pair is kept under out/ (keyed by the weights and every setting), so an
+        # interrupted evaluation -- 25-45 min for an original-URDF replay -- resumes at its next pair
         rep = evaluate_model(model, todo, objects, n=args.n, seed=seed, original=original, protocol=protocol,
                              workers=args.workers, inertials=inertials, refine=settings or False, collisions=collisions,
-                             candidates=candidates)
+                             candidates=candidates, resume_dir=ROOT / "out" / "eval_pairs" / Path(args.runs).name)
         out = {"per_hand": rep.per_hand(), "pairs": [{"hand": p.hand, "object": p.object, "successes": int(p.success.sum()),
                                                       "n": int(len(p.success))} for p in rep.pairs],
                "success": {p.hand + "/" + p.object: p.success.astype(int).tolist() for p in rep.pairs}}
