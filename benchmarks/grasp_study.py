@@ -2,7 +2,8 @@
 unseen objects, canonical -> original replay. Resumable: every training run and every evaluation
 is cached under ``--runs`` and reused when it was made with the same settings (``_study_cache.py``:
 a run of other data, hands or steps stops the study with one line; an evaluation of other objects,
-grasps per pair or protocol is redone); an interrupted study loses at most one unfinished step.
+grasps per pair or protocol is redone); an interrupted study loses at most one unfinished step (a training run from
+its last checkpoint, an evaluation from its last finished (hand, object) pair, kept under out/eval_pairs/).
 
 Models, all with the same architecture, steps, batch size and seed (the same budget):
 ``unified`` (every hand of the data, VAE condition), ``specific-<hand>`` (one hand's grasps
