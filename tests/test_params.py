@@ -10,9 +10,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+import ohra
 from ohra import ParamsError
 from ohra.canonical.params import JOINT_NAMES, BaseParams, ExtendedParams, load_params
 from ohra.canonical.urdfgen import render
+from ohra.hands.registry import registered_forms
 
 
 # -- round trips ------------------------------------------------------------------------------
@@ -92,6 +94,22 @@ def test_left_hand_is_detected(shadow_base):
     xyz = shadow_base.finger_xyz * np.array([1, -1, 1])
     p = BaseParams.from_dict({**shadow_base.to_dict(), "finger_xyz": xyz})
     assert p.handedness == "left"
+
+
+def test_a_thumb_on_the_centre_line_leaves_the_side_to_the_fingers(shadow_base):
+    """Parse round-off (Barrett's extended thumb at y = -1e-6 m) must not make a right hand left;
+    10 um off the x-z plane is on it, 20 um is a side."""
+    xyz = shadow_base.finger_xyz.copy()
+    for thumb_y, side in ((-5e-6, "right"), (-2e-5, "left")):
+        xyz[0, 1] = thumb_y
+        assert BaseParams.from_dict({**shadow_base.to_dict(), "finger_xyz": xyz}).handedness == side
+
+
+def test_every_registered_hand_has_one_side_in_both_forms():
+    for name in ohra.list_hands():
+        sides = {form: ohra.get_hand(name, form).handedness for form in registered_forms(name)}
+        assert len(set(sides.values())) == 1, f"{name}: {sides}"
+        assert sides[next(iter(sides))] == ("left" if name.endswith("_left") else "right"), f"{name}: {sides}"
 
 
 # -- base <-> extended -------------------------------------------------------------------------------

@@ -661,13 +661,18 @@ class ExtendedParams(_ParamsMixin):
 Params = Union[BaseParams, ExtendedParams]
 
 
+# A base position this close to the palm's x-z plane is on it: parse round-off (Barrett's extended
+# thumb sits at y = -1e-6 m) must not decide a hand's side.
+SIDE_TOLERANCE = 1e-5  # m
+
+
 def _handedness(ys: np.ndarray, present: np.ndarray) -> str:
-    if present[0] and ys[0] != 0:
+    if present[0] and abs(ys[0]) > SIDE_TOLERANCE:
         return "right" if ys[0] > 0 else "left"
-    # Without a thumb, the little finger sits on -y of a right hand.
-    if present[4] and ys[4] != 0:
+    # Without a thumb off the centre line, the little finger sits on -y of a right hand.
+    if present[4] and abs(ys[4]) > SIDE_TOLERANCE:
         return "right" if ys[4] < 0 else "left"
-    if present[1] and ys[1] != 0:
+    if present[1] and abs(ys[1]) > SIDE_TOLERANCE:
         return "right" if ys[1] > 0 else "left"
     return "right"
 

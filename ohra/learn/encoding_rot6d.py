@@ -46,6 +46,7 @@ from typing import Any
 
 import numpy as np
 
+from ohra.canonical.params import SIDE_TOLERANCE
 from ohra.learn.encoding import (
     AXIS_CATEGORIES, DECODE_LOWER, DECODE_UPPER, LatentError, _as_batch, _decode_discrete, _encode_discrete,
     _spread_knuckles, project_vectors,
@@ -90,13 +91,14 @@ RIGHT_FORM_LOWER[THUMB_Y] = 0.0
 # -- stand-ins for absent parts ----------------------------------------------------------------------
 def is_left(v82: Any) -> np.ndarray:
     """(N,) True for left hands: by the thumb base's side (+y: right), else by the little finger's
-    (-y: right), else by the index's (+y: right), as :attr:`BaseParams.handedness`; right if none."""
+    (-y: right), else by the index's (+y: right), as :attr:`BaseParams.handedness` (a base within
+    ``SIDE_TOLERANCE`` of y = 0 decides nothing); right if none."""
     v = np.atleast_2d(np.asarray(v82, dtype=float))
     _, fingers = finger_reach(v)
     y = v[:, XYZ].reshape(-1, 5, 3)[:, :, 1]
     side = np.zeros(len(v))
     for f, right_sign in ((1, 1.0), (4, -1.0), (0, 1.0)):  # lowest priority first, overwritten by higher ones
-        ok = fingers[:, f] & (y[:, f] != 0.0)
+        ok = fingers[:, f] & (np.abs(y[:, f]) > SIDE_TOLERANCE)
         side[ok] = right_sign * np.sign(y[ok, f])
     return side < 0
 
