@@ -324,3 +324,74 @@ def test_fingers_that_no_radius_can_separate_are_named(tmp_path, monkeypatch):
     said = [n for n in res.notes if "intersect at rest" in n]
     assert len(said) == 1 and said[0].startswith("approximation: canonical fingers intersect at rest (index and middle;")
     assert "no grasp can be synthesised" in said[0]
+
+
+# The carrier hand on a wrist: 'forearm' -> wrist_j -> 'palm'.
+WRIST_URDF = CARRIER_URDF.replace(
+    '<link name="palm">',
+    '<link name="forearm"/>\n  <joint name="wrist_j" type="revolute"><parent link="forearm"/><child link="palm"/>'
+    '<axis xyz="0 1 0"/><limit lower="-0.5" upper="0.5"/></joint>\n  <link name="palm">',
+)
+
+
+@pytest.mark.parametrize("joint, said", [
+    ("wrist_j", "error"),  # above the palm: moves the middle and ring fingers too
+    ("carrier_j", "note"),  # a palm piece: moves the ring finger, not the middle
+])
+def test_a_finger_slot_on_a_joint_that_moves_every_other_finger_is_refused(tmp_path, monkeypatch, capsys, joint, said):
+    """Mapping a wrist (or arm) joint to a finger slot parsed a wrong hand without a word (the palm
+    frame rode on the forearm, Shadow's WRJ2 as index_joint1: 49 mm mean fingertip error, exit 0)."""
+    monkeypatch.setenv("OHRA_HANDS_ROOT", str(tmp_path / "no_assets_here"))
+    (tmp_path / "toy_wrist.urdf").write_text(WRIST_URDF)
+    (tmp_path / "toy_wrist.yaml").write_text(
+        CARRIER_SPEC.replace("toy_carrier", "toy_wrist").replace("index_joint2: index_a,", f"index_joint1: {joint}, index_joint2: index_a,"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ParseWarning)
+        if said == "error":
+            with pytest.raises(OhraError, match=r"toy_wrist\.yaml: slot 'index_joint1' maps joint 'wrist_j', which moves every "
+                                                r"other finger too: middle \('middle_a' \.\.\.\), ring \('ring_a' \.\.\.\)"):
+                parse(tmp_path / "toy_wrist.yaml", "base", fit_params=False)
+            from ohra.cli import main
+
+            assert main(["hand", "parse", str(tmp_path / "toy_wrist.yaml"), "-o", str(tmp_path / "p.json")]) == 2
+            err = capsys.readouterr().err
+            assert "above the palm" in err and "Traceback" not in err and not (tmp_path / "p.json").exists()
+            return
+        res = parse(tmp_path / "toy_wrist.yaml", "base", fit_params=False)
+    said_notes = [n for n in res.notes if "'carrier_j', which also moves the ring" in n]
+    assert len(said_notes) == 1 and said_notes[0].startswith("approximation: ")
+
+
+@pytest.mark.parametrize("suffix", [".glb", ".ply"])
+def test_an_original_urdf_with_meshes_pybullet_cannot_read_is_simulated_on_the_same_shape(spec, tmp_path, monkeypatch, suffix):
+    """PyBullet rejects a URDF naming a .glb (or .ply, .off) mesh ("Cannot load URDF file": dex-urdf's
+    *_glb hands gave a traceback in `ohra eval --original`); the mesh reaches it as a cached OBJ of
+    the shape the parser measured."""
+    import pybullet as pb
+    import trimesh
+
+    from ohra.sim.bullet import load_urdf_text
+    from ohra.sim.hands import SimHand
+
+    monkeypatch.setenv("OHRA_CACHE_DIR", str(tmp_path / "cache"))
+    box = trimesh.creation.box((0.02, 0.06, 0.09))
+    box.apply_translation((0.0, 0.0, 0.045))
+    urdf_path = spec.parent / "toy_two_finger.urdf"
+    aabbs = []
+    for ext in (".obj", suffix):
+        box.export(spec.parent / f"palm{ext}")
+        text = URDF.replace('<origin xyz="0 0 0.045"/><geometry><box size="0.02 0.06 0.09"/></geometry>',
+                            f'<geometry><mesh filename="palm{ext}"/></geometry>')
+        assert text != URDF
+        urdf_path.write_text(text)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ParseWarning)
+            hand = SimHand.original_of(str(spec), "base")
+        client = pb.connect(pb.DIRECT)
+        try:
+            body = load_urdf_text(hand.urdf, client, useFixedBase=True)
+            aabbs.append(np.array(pb.getAABB(body, -1, physicsClientId=client)))
+        finally:
+            pb.disconnect(client)
+    assert np.allclose(aabbs[0], aabbs[1], atol=1e-6), aabbs
+    assert list((tmp_path / "cache" / "bullet_meshes").glob("palm-*.obj"))

@@ -30,7 +30,7 @@ SPEC_SUFFIXES = (".yaml", ".yml")
 # within 16.6 mm (LEAP's base form, whose 22.6 mm mean fingertip error is already a stated miss of its 8 mm target);
 # a hand the template cannot express (D'Claw's fingers at 120 deg in the base form) fits at ~47 mm
 POOR_FIT_MM = 25.0
-_warned_fits: set[tuple[Path, float, str]] = set()
+_warned_fits: set[tuple[Path, tuple[float, int], str]] = set()
 
 
 @dataclass
@@ -82,7 +82,7 @@ class HandRef:
 
 
 @lru_cache(maxsize=32)
-def _parse_cached(path: Path, mtime: float, form: str):
+def _parse_cached(path: Path, mtime: tuple[float, int], form: str):
     from ohra.original.parse import parse
 
     with warnings.catch_warnings():
@@ -108,7 +108,9 @@ def parse_spec_file(path: str | Path, form: str | None = None):
     if form is None:
         form = "base" if "base" in sp.forms else next(iter(sp.forms))
     sp.form(form)
-    mtime = p.stat().st_mtime
+    urdf = next((c for c in sp.urdf_candidates() if c.is_file()), None)
+    # the URDF's time too: a notebook that edits the hand's URDF and not its spec must not get the old parse
+    mtime = (p.stat().st_mtime, urdf.stat().st_mtime_ns if urdf is not None else 0)
     res = _parse_cached(p, mtime, form)
     if res.fit is not None and res.fit.final_rms_mm > POOR_FIT_MM and (p, mtime, form) not in _warned_fits:
         _warned_fits.add((p, mtime, form))

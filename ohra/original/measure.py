@@ -176,6 +176,37 @@ def _palm_link(hand: OriginalHand, fs: FormSpec) -> str:
     return palm_link
 
 
+def check_joints_below_palm(hand: OriginalHand, spec: HandSpec, fs: FormSpec, notes: list[str]) -> None:
+    """Refuse a finger slot mapped to a joint that moves every other finger too (a wrist or arm
+    joint above the palm: the fit would absorb its motion into a finger and the palm frame would
+    ride on the arm); note one that moves some other fingers (a palm piece the canonical finger
+    cannot share)."""
+    by_finger: dict[str, list[str]] = {}
+    for slot, sm in fs.slots.items():
+        by_finger.setdefault(slot.rsplit("_joint", 1)[0], []).append(slot)
+    if len(by_finger) < 2:
+        return
+    for f, slots in by_finger.items():
+        for slot in slots:
+            joint = fs.slots[slot].name
+            below = set(hand.descendants(hand.joints[joint].child))
+            moved = {g: [fs.slots[s].name for s in gs if hand.joints[fs.slots[s].name].parent in below]
+                     for g, gs in by_finger.items() if g != f}
+            moved = {g: js for g, js in moved.items() if js}
+            if not moved:
+                continue
+            what = ", ".join(f"{g} ({js[0]!r}{' ...' if len(js) > 1 else ''})" for g, js in moved.items())
+            if len(moved) == len(by_finger) - 1:
+                raise ParseError(
+                    f"{spec.source}: slot {slot!r} maps joint {joint!r}, which moves every other finger too: {what}; "
+                    f"a wrist or arm joint above the palm cannot drive a finger slot; map a joint inside the {f} finger "
+                    f"(joints above the palm stay at 0)"
+                )
+            msg = f"slot {slot!r} maps joint {joint!r}, which also moves the {what} finger(s); the canonical {f} finger moves alone"
+            notes.append("approximation: " + msg)
+            warnings.warn(msg, ParseWarning, stacklevel=user_stacklevel())
+
+
 def _stations(f: str, p: dict[str, np.ndarray], a: dict[str, np.ndarray]) -> list[np.ndarray | None]:
     """Base, middle-joint and distal-joint stations of finger ``f`` (None: no joint there)."""
     stations: list[np.ndarray | None] = []
@@ -397,6 +428,7 @@ def measure(hand: OriginalHand, spec: HandSpec, form: str) -> Measurement:
     lower, upper = am.limits_to_canonical(hand.lower, hand.upper)
     for slot, v in fs.fixed.items():
         lower[JOINT_INDEX[slot]] = upper[JOINT_INDEX[slot]] = v
+    check_joints_below_palm(hand, spec, fs, notes)
     palm_link = _palm_link(hand, fs)
     fingers: dict[str, FingerMeasure] = {}
     for f in FINGERS:

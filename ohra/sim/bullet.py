@@ -30,6 +30,43 @@ def load_urdf_text(text: str, client: int, **kwargs) -> int:
         Path(path).unlink(missing_ok=True)
 
 
+# Mesh files PyBullet's URDF importer reads itself; any other (.glb, .ply, .off, ...) is handed to it as OBJ.
+BULLET_MESH_SUFFIXES = (".obj", ".stl", ".dae")
+
+
+def bullet_mesh(path: str | Path) -> Path:
+    """``path``, or for a format PyBullet cannot read (its importer rejects e.g. ``.glb`` and the
+    whole URDF with it) the same mesh as OBJ in the cache, read as the parser reads it (trimesh,
+    scene transforms applied, no processing) so that the simulator and the measurement see one
+    shape. The copy is keyed by the file's content; units and the URDF's ``scale`` are untouched.
+
+    Raises :class:`~ohra.errors.ParseError` naming the file when trimesh cannot read it.
+    """
+    import hashlib
+
+    import trimesh
+
+    from ohra.errors import ParseError
+    from ohra.io import write_bytes
+    from ohra.paths import cache_dir
+
+    path = Path(path)
+    if path.suffix.lower() in BULLET_MESH_SUFFIXES or not path.is_file():
+        return path  # a missing file is the URDF loader's to report
+    digest = hashlib.sha256(path.read_bytes()).hexdigest()[:20]
+    out = cache_dir() / "bullet_meshes" / f"{path.stem}-{digest}.obj"
+    if out.is_file():
+        return out
+    try:
+        mesh = trimesh.load(path, force="mesh", process=False)
+    except Exception as exc:  # trimesh raises many kinds
+        raise ParseError(f"mesh {path} cannot be read for the simulator: {exc}") from None
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise ParseError(f"mesh {path} has zero faces")
+    write_bytes(out, trimesh.exchange.obj.export_obj(mesh, include_normals=False, include_texture=False).encode())
+    return out
+
+
 @dataclass(frozen=True)
 class LoadedHand:
     """A :class:`~ohra.sim.hands.SimHand` loaded into PyBullet, with its URDF names resolved.

@@ -396,6 +396,12 @@ def prepare_urdf(text: str, locked: dict[str, float], capsules: bool = True, bas
 
         for m in root.iter("mesh"):
             m.set("filename", str(resolve_mesh_path(m.get("filename", ""), base_dir)))
+    from ohra.sim.bullet import BULLET_MESH_SUFFIXES, bullet_mesh
+
+    for m in root.iter("mesh"):
+        name = m.get("filename", "")
+        if Path(name).is_absolute() and Path(name).suffix.lower() not in BULLET_MESH_SUFFIXES:
+            m.set("filename", str(bullet_mesh(name)))
     return ET.tostring(root, encoding="unicode")
 
 
