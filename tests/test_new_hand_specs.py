@@ -395,3 +395,51 @@ def test_an_original_urdf_with_meshes_pybullet_cannot_read_is_simulated_on_the_s
             pb.disconnect(client)
     assert np.allclose(aabbs[0], aabbs[1], atol=1e-6), aabbs
     assert list((tmp_path / "cache" / "bullet_meshes").glob("palm-*.obj"))
+
+
+# The carrier hand at the end of a two-joint arm: 'arm_base' -> shoulder_j -> 'upper' -> elbow_j -> 'lower' -> (fixed, 0.3 m) 'palm'.
+ARM_URDF = CARRIER_URDF.replace(
+    '<link name="palm">',
+    '<link name="arm_base"/><link name="upper"><collision><geometry><box size="0.05 0.05 0.5"/></geometry></collision></link>'
+    '<link name="lower"/>\n'
+    '  <joint name="shoulder_j" type="revolute"><parent link="arm_base"/><child link="upper"/><origin xyz="0 0 0.1"/>'
+    '<axis xyz="0 1 0"/><limit lower="-2" upper="2"/></joint>\n'
+    '  <joint name="elbow_j" type="revolute"><parent link="upper"/><child link="lower"/><origin xyz="0 0 0.5"/>'
+    '<axis xyz="0 1 0"/><limit lower="-2" upper="2"/></joint>\n'
+    '  <joint name="flange" type="fixed"><parent link="lower"/><child link="palm"/><origin xyz="0 0 0.3"/></joint>\n'
+    '  <transmission name="elbow_tr"><joint name="elbow_j"/></transmission>\n'
+    '  <link name="palm">',
+)
+
+
+def test_a_hand_on_an_arm_is_parsed_below_its_root_link(tmp_path, monkeypatch):
+    """dex-urdf's arm + hand assemblies: a spec names the hand's own root with root_link: and gets the
+    hand alone (arm links, joints and transmissions dropped); without it the palm 0.9 m up the arm
+    was refused as a units slip, and a palm frame at the arm's base blamed palm_origin alone."""
+    monkeypatch.setenv("OHRA_HANDS_ROOT", str(tmp_path / "no_assets_here"))
+    (tmp_path / "toy_carrier.urdf").write_text(CARRIER_URDF)
+    (tmp_path / "toy_carrier.yaml").write_text(CARRIER_SPEC)
+    (tmp_path / "toy_arm.urdf").write_text(ARM_URDF)
+    arm_spec = CARRIER_SPEC.replace("toy_carrier", "toy_arm")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ParseWarning)  # the unmapped 'carrier_j'
+        alone = parse(tmp_path / "toy_carrier.yaml", "base", fit_params=False)
+        (tmp_path / "toy_arm.yaml").write_text(arm_spec.replace("palm_origin:", "root_link: palm\npalm_origin:"))
+        on_arm = parse(tmp_path / "toy_arm.yaml", "base", fit_params=False)
+        assert on_arm.params == alone.params
+        assert "shoulder_j" not in on_arm.measurement.hand.joints and "upper" not in on_arm.measurement.hand.links
+        (tmp_path / "toy_arm.yaml").write_text(arm_spec.replace("palm_origin:", "root_link: plam\npalm_origin:"))
+        with pytest.raises(OhraError, match=r"root_link 'plam' is not a link of the URDF \(did you mean 'palm'"):
+            parse(tmp_path / "toy_arm.yaml", "base", fit_params=False)
+        (tmp_path / "toy_arm.yaml").write_text(arm_spec.replace("xyz: [0, 0, 0]", "xyz: [0, 0, 0.9]"))
+        with pytest.raises(OhraError, match=r"0\.9 m from the root link .* a hand on an arm\? name the hand's own root link "
+                                            r"with root_link:"):
+            parse(tmp_path / "toy_arm.yaml", "base", fit_params=False)
+        (tmp_path / "toy_arm.yaml").write_text(arm_spec)  # palm frame at the arm's base: fingers 0.9 m up +z
+        with pytest.raises(OhraError, match=r"finger joints lie up to 1\.0 m from the palm frame: 2 movable joint\(s\) lie "
+                                            r"between the URDF's root 'arm_base' and the palm link 'palm'"):
+            parse(tmp_path / "toy_arm.yaml", "base", fit_params=False)
+        (tmp_path / "toy_arm.yaml").write_text(arm_spec.replace("rpy: [0, 0, 0]", "rpy: [3.14159265, 0, 0]"))
+        with pytest.raises(OhraError, match=r"point toward -z of the palm frame.*2 movable joint\(s\) lie between the URDF's "
+                                            r"root 'arm_base' and the palm link 'palm': shoulder_j, elbow_j; if that is an arm"):
+            parse(tmp_path / "toy_arm.yaml", "base", fit_params=False)

@@ -73,7 +73,30 @@ def check_palm_frame(m: Measurement, spec: HandSpec, form: str) -> list[str]:
     """Raise :class:`SpecError` when the fingers contradict the palm frame convention; else notes.
 
     Returns notes (e.g. handedness differing from the name when everything else is consistent).
+    When movable joints lie between the URDF's root and the palm (an arm, a wrist), the error says
+    so: a palm_origin written for the hand alone is then off by the arm.
     """
+    try:
+        return _check_palm_frame(m, spec, form)
+    except SpecError as exc:
+        hint = arm_hint(m, spec)
+        if not hint:
+            raise
+        raise SpecError(f"{exc} ({hint})") from None
+
+
+def arm_hint(m: Measurement, spec: HandSpec) -> str:
+    """'' or a sentence naming the movable joints between the URDF's root and the palm link (an arm
+    or a wrist under a palm_origin written for the hand alone), and ``root_link:`` as the way out."""
+    above = [j.name for l in m.hand.ancestors(m.palm_link)[:-1] if (j := m.hand.parent_joint[l]).type != "fixed"][::-1]
+    if not above or spec.root_link is not None:
+        return ""
+    return (f"{len(above)} movable joint(s) lie between the URDF's root {m.hand.root!r} and the palm link "
+            f"{m.palm_link!r}: {', '.join(above[:4])}{' ...' if len(above) > 4 else ''}; if that is an arm, name the "
+            "hand's own root link with root_link: and give palm_origin in its frame")
+
+
+def _check_palm_frame(m: Measurement, spec: HandSpec, form: str) -> list[str]:
     fingers = [f for f in FINGERS[1:] if f in m.fingers]
     where = f"{spec.source}: forms.{form}"
     back = [f for f in fingers if float(m.fingers[f].z[2]) < 0]

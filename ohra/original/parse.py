@@ -26,7 +26,7 @@ from ohra.canonical.params import FINGER_GAP, BaseParams, Params
 from ohra.errors import ParamsError, ParseError, SpecError
 from ohra.canonical.couplings import Coupling, describe
 from ohra.original.action import ActionMap
-from ohra.original.checks import check_palm_frame
+from ohra.original.checks import arm_hint, check_palm_frame
 from ohra.original.estimate import initial_base, initial_extended
 from ohra.original.fit import FitResult, fit, rounded
 from ohra.original.measure import Measurement, ParseWarning, measure
@@ -140,7 +140,7 @@ def load_original_for(spec: HandSpec, hands_root: str | Path | None = None) -> O
 
         tried = ", ".join(str(c) for c in spec.urdf_candidates(hands_root))
         raise AssetsNotFoundError(f"{spec.source}: original URDF {spec.urdf!r} not found (tried {tried}; set OHRA_HANDS_ROOT)")
-    hand = load_urdf(path)
+    hand = load_urdf(path, root_link=spec.root_link)
     spec.check_joints(hand)
     return hand
 
@@ -186,7 +186,9 @@ def parse(
     except ParamsError as exc:
         pts = [np.asarray(v, dtype=float) for fm in m.fingers.values() for v in fm.p.values()]
         size = max((float(np.linalg.norm(v)) for v in pts), default=0.0)
-        hint = (f" (the finger joints lie up to {size:.1f} m from the palm frame: is {spec.urdf} written in millimetres? "
+        arm = arm_hint(m, spec)
+        hint = (f" (the finger joints lie up to {size:.1f} m from the palm frame: {arm})" if arm and size > 0.5 else
+                f" (the finger joints lie up to {size:.1f} m from the palm frame: is {spec.urdf} written in millimetres? "
                 "URDF lengths are metres)" if size > 1.0 else "")
         raise ParseError(f"{spec.source}: measured {form} parameters are invalid: {exc}{hint}") from None
     params: Params = init

@@ -5,6 +5,8 @@ A spec is a small YAML file (the registered hands' specs live in ``ohra/hands/sp
     name: shadow_hand_right                  # registry name (default: the file stem)
     urdf: shadow_hand/shadow_hand_right.urdf  # original URDF (.urdf / .xacro), relative to the
                                               # hand-assets root (ohra.paths.hands_root()) or absolute
+    root_link: forearm                        # optional: the hand's own root in a URDF that holds an arm
+                                              #   (only it and its subtree are loaded; default: the URDF's root)
     palm_origin:                              # canonical palm frame in the original root frame
       xyz: [0.01, 0.0, 0.247]                 #   metres
       rpy: [0.0, 0.0, 0.0]                    #   fixed-axis x-y-z radians (also: a flat list of 6)
@@ -96,6 +98,7 @@ class HandSpec:
     extra: dict[str, Any] = field(default_factory=dict)
     couplings: tuple[Coupling, ...] = ()  # declared in the spec (canonical slots)
     base_dir: Path | None = None  # folder of the spec file (relative urdf paths are tried here first)
+    root_link: str | None = None  # the hand's own root link in a URDF that holds more (an arm); None: the URDF's root
 
     # -- paths -----------------------------------------------------------------------------------
     def urdf_candidates(self, root: str | Path | None = None) -> list[Path]:

@@ -111,7 +111,8 @@ def _palm_origin(v: Any, where: str) -> np.ndarray:
     dist = float(np.linalg.norm(out[:3]))
     if dist > PALM_ORIGIN_MAX_M:  # a hand's palm is centimetres from its root link; this is a unit slip
         raise SpecError(f"{where}: xyz {out[:3].tolist()} is {dist:.3g} m from the root link (expected metres, at most "
-                        f"{PALM_ORIGIN_MAX_M} m; millimetres? xyz [0, 0, -95] is written [0, 0, -0.095])")
+                        f"{PALM_ORIGIN_MAX_M} m; millimetres? xyz [0, 0, -95] is written [0, 0, -0.095]; a hand on an arm? "
+                        "name the hand's own root link with root_link: and give palm_origin in its frame)")
     if np.any(np.abs(out[3:]) > 2 * np.pi + 1e-9):
         raise SpecError(f"{where}: rpy {out[3:].tolist()} beyond +-2 pi (expected radians; degrees?)")
     return out
@@ -203,7 +204,7 @@ def spec_from_dict(d: Any, source: str = "<spec>", default_name: str = "hand", b
     """Build and validate a :class:`HandSpec` from a parsed YAML mapping."""
     if not isinstance(d, Mapping):
         raise SpecError(f"{source}: expected a mapping at the top level")
-    known = {"name", "urdf", "palm_origin", "joints", "forms", "overrides", "fit", "notes", "couplings"}
+    known = {"name", "urdf", "root_link", "palm_origin", "joints", "forms", "overrides", "fit", "notes", "couplings"}
     unknown = sorted(set(d) - known)
     if unknown:
         raise SpecError(f"{source}: unknown key(s) {unknown}; expected some of {sorted(known)}")
@@ -215,6 +216,10 @@ def spec_from_dict(d: Any, source: str = "<spec>", default_name: str = "hand", b
     name = d.get("name", default_name)
     if not isinstance(name, str) or not re.match(r"^[A-Za-z0-9_.-]+$", name):
         raise SpecError(f"{source}: 'name' must be a simple identifier, got {name!r}")
+    root_link = d.get("root_link")
+    if root_link is not None and (not isinstance(root_link, str) or not root_link):
+        raise SpecError(f"{source}: 'root_link' must be a link name (the hand's own root in a URDF that holds an arm), "
+                        f"got {root_link!r}")
     palm = _palm_origin(d["palm_origin"], f"{source}: palm_origin")
     shared = _slots(d["joints"], f"{source}: joints", allow_null=False)
     forms_raw = d.get("forms", {"base": {}, "extended": {}})
@@ -228,7 +233,7 @@ def spec_from_dict(d: Any, source: str = "<spec>", default_name: str = "hand", b
     samples, seed = _fit_settings(d.get("fit"), source)
     couplings = _declared_couplings(d.get("couplings"), forms, source)
     return HandSpec(name, d["urdf"], palm, forms, overrides, samples, seed, source, str(d.get("notes", "") or ""),
-                    couplings=couplings, base_dir=base_dir)
+                    couplings=couplings, base_dir=base_dir, root_link=root_link)
 
 
 def _declared_couplings(raw: Any, forms: dict[str, FormSpec], source: str) -> tuple[Coupling, ...]:

@@ -17,6 +17,7 @@ The model itself (:class:`OriginalHand`: frames, kinematics, geometry) lives in
 
 from __future__ import annotations
 
+import difflib
 import warnings
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -226,11 +227,48 @@ def _root_link(links: list[str], joints: dict[str, Joint], where: str) -> str:
     return roots[0]
 
 
-def load_urdf(source: str | Path, base_dir: str | Path | None = None) -> OriginalHand:
+def _cut_below(root_elem: ET.Element, root_link: str, where: str) -> None:
+    """In place: keep only ``root_link`` and what hangs below it (a hand on an arm: the arm's links,
+    joints and transmissions go)."""
+    names = [e.get("name") for e in root_elem.findall("link")]
+    if root_link not in names:
+        near = difflib.get_close_matches(root_link, [n for n in names if n], n=3)
+        raise ParseError(f"{where}: root_link {root_link!r} is not a link of the URDF"
+                         + (f" (did you mean {', '.join(map(repr, near))}?)" if near else f" ({len(names)} links)"))
+    children: dict[str, list[str]] = {}
+    for je in root_elem.findall("joint"):
+        p, c = je.find("parent"), je.find("child")
+        if p is not None and c is not None:
+            children.setdefault(p.get("link"), []).append(c.get("link"))
+    keep, stack = set(), [root_link]
+    while stack:
+        x = stack.pop()
+        if x not in keep:
+            keep.add(x)
+            stack.extend(children.get(x, []))
+    dropped_joints = set()
+    for e in list(root_elem):
+        if e.tag == "link" and e.get("name") not in keep:
+            root_elem.remove(e)
+        elif e.tag == "joint":
+            c = e.find("child")
+            if c is None or c.get("link") not in keep or c.get("link") == root_link:
+                dropped_joints.add(e.get("name"))
+                root_elem.remove(e)
+    for e in list(root_elem.findall("transmission")):
+        if any(j.get("name") in dropped_joints for j in e.iter("joint")):
+            root_elem.remove(e)
+
+
+def load_urdf(source: str | Path, base_dir: str | Path | None = None, root_link: str | None = None) -> OriginalHand:
     """Load and validate an original hand URDF (path, or XML text with ``base_dir`` for meshes).
 
+    ``root_link``: the hand's own root in a URDF that holds more (a hand on an arm); only that link
+    and its subtree are loaded, so link poses are in its frame.
+
     Raises:
-        ParseError: the text is not a valid single-tree ``<robot>`` (message names file and element).
+        ParseError: the text is not a valid single-tree ``<robot>`` (message names file and element),
+            or ``root_link`` is not one of its links.
     """
     path, text, where, urdf_dir = _read_source(source, base_dir)
     try:
@@ -239,6 +277,8 @@ def load_urdf(source: str | Path, base_dir: str | Path | None = None) -> Origina
         raise ParseError(f"{where}: not valid XML ({exc})") from None
     if root_elem.tag != "robot":
         raise ParseError(f"{where}: root element is <{root_elem.tag}>, expected <robot>")
+    if root_link is not None:
+        _cut_below(root_elem, root_link, where)
     links = _link_names(root_elem, where)
     joints = _joints(root_elem, where, set(links))
     root = _root_link(links, joints, where)
