@@ -85,7 +85,7 @@ def test_original_finger_masses_of_registered_hands(hands_dir):
         b.with_finger_masses(m)
 
 
-def test_cli_eval_inertials_original_needs_a_registered_hand(tmp_path, capsys):
+def test_cli_eval_inertials_original_needs_a_hand_with_an_original(tmp_path, capsys):
     from ohra.cli.main import main
 
     hand = tmp_path / "pinch.json"
@@ -96,7 +96,19 @@ def test_cli_eval_inertials_original_needs_a_registered_hand(tmp_path, capsys):
     np.savez(g, grasps=np.zeros((1, 31)))
     rc = main(["eval", str(g), "--hand", str(hand), "--object", str(mesh), "--inertials", "original", "--quiet"])
     err = capsys.readouterr().err
-    assert rc == 2 and err.count("\n") == 1 and "Traceback" not in err and "not registered" in err
+    assert rc == 2 and err.count("\n") == 1 and "Traceback" not in err
+    assert "original finger masses (--inertials original) needs the original hand, which is unknown for 'pinch'" in err
+
+
+def test_original_finger_masses_of_a_hand_given_by_its_spec_file(hands_dir):
+    """`ohra eval --inertials original --hand my_hand.yaml` answered "needs a registered hand" although
+    --original takes a spec."""
+    from ohra.hands.registry import spec_path
+    from ohra.sim.hands import original_finger_masses
+
+    by_spec = original_finger_masses(str(spec_path("barrett_hand")), "base")
+    np.testing.assert_array_equal(by_spec, original_finger_masses("barrett_hand", "base"))
+    assert by_spec[1] > 0.8
 
 
 def test_grasp_eval_with_original_masses_needs_a_registered_hand():

@@ -555,3 +555,18 @@ def test_a_spec_form_that_fits_its_original_poorly_is_named_once_where_it_is_use
     with warnings.catch_warnings():
         warnings.simplefilter("error", HandWarning)
         rs.resolve_hand(spec)  # once per spec file and form
+
+
+def test_ohra_hand_parse_names_a_poor_fit_too(tmp_path, no_hands_root, monkeypatch, capsys):
+    """`ohra hand parse --fit` printed the RMS and no warning (a 33 mm base fit passed as any other)."""
+    from ohra.cli import main
+    from ohra.hands import resolve as rs
+
+    spec = _claw(tmp_path, middle_axis=1, lo=-1.0)
+    argv = ["hand", "parse", str(spec), "--fit", "--no-fidelity", "-o", str(tmp_path / "p.json")]
+    for threshold, said in ((rs.POOR_FIT_MM, False), (-1.0, True)):
+        monkeypatch.setattr(rs, "POOR_FIT_MM", threshold)
+        assert main(argv) == 0
+        err = capsys.readouterr().err
+        assert ("warning: this base form follows the original URDF poorly" in err) == said, err
+        assert ("try --extended" in err) == said

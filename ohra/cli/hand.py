@@ -274,8 +274,14 @@ def _cmd_parse(args: argparse.Namespace) -> int:
     else:
         sys.stdout.write(text)
     if res.fit is not None:
+        from ohra.hands.resolve import POOR_FIT_MM
+
         print(f"fit: keypoint rms {res.fit.initial_rms_mm:.2f} -> {res.fit.final_rms_mm:.2f} mm "
               f"({res.fit.samples} configurations, {res.fit.iterations} evaluations)", file=sys.stderr)
+        if res.fit.final_rms_mm > POOR_FIT_MM:
+            print(f"warning: this {_form(args)} form follows the original URDF poorly (keypoint RMS above {POOR_FIT_MM:.0f} mm; "
+                  "registered hands: at most 17 mm): grasps or policies made on it may not carry over to the original"
+                  + ("; try --extended" if not args.extended and "extended" in spec.forms else ""), file=sys.stderr)
     print("measured: palm radius, finger radii, lengths, joint positions/axes, limits from the URDF", file=sys.stderr)
     rep = None if args.no_fidelity else compare(res, _form(args), samples=100, surface=args.surface)
     in_table = set() if rep is None else {f"coupling: {c}" for c in rep.couplings} | {approx + a for a in rep.approximations}

@@ -244,9 +244,10 @@ class SimHand:
         return cls._original_of(oh, am, params, name)
 
     @classmethod
-    def original_of(cls, hand: str, form: str | None = None) -> "SimHand":
+    def original_of(cls, hand: str, form: str | None = None, purpose: str = "--original") -> "SimHand":
         """The original URDF of any hand with a known original: a registered name (:meth:`registered_original`), a
         spec YAML, or a params JSON with its spec; driven through the action map of the form it resolves to.
+        ``purpose`` starts the error messages (what needed the original).
 
         Raises:
             HandNotFoundError: a LEAP variant (a canonical hand only) or a params JSON without its spec.
@@ -259,8 +260,8 @@ class SimHand:
             return cls.registered_original(hand, form)
         ref = resolve_hand(hand, form)
         if ref.kind == "variant":
-            raise HandNotFoundError(f"--original: {hand} is a LEAP variant, a canonical hand with no original URDF")
-        ref.require_spec("--original")  # a params JSON without its spec: names what to pass
+            raise HandNotFoundError(f"{purpose}: {hand} is a LEAP variant, a canonical hand with no original URDF")
+        ref.require_spec(purpose)  # a params JSON without its spec: names what to pass
         return cls._original_of(ref.original(), ref.action_map(), ref.params, ref.name)
 
     @classmethod
@@ -291,13 +292,9 @@ def _limits(j: ET.Element) -> tuple[float, float]:
 
 
 def original_finger_masses(name: str, form: str | None = None) -> np.ndarray:
-    """(5,) finger masses [kg] of a registered hand's original URDF; one clear error for any other hand."""
-    from ohra.errors import HandNotFoundError
-    from ohra.hands.registry import registered_hands
-
-    if name not in registered_hands():
-        raise HandNotFoundError(f"original finger masses need a registered hand with an original URDF; {name!r} is not registered")
-    return SimHand.registered_original(name, form=form).finger_masses
+    """(5,) finger masses [kg] of the original URDF of ``name`` (a registered hand, a spec YAML or a
+    params JSON beside its spec: :meth:`SimHand.original_of`); one clear error for a hand without one."""
+    return SimHand.original_of(name, form=form, purpose="original finger masses (--inertials original)").finger_masses
 
 
 def _link_mass(link: ET.Element) -> float:
