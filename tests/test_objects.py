@@ -302,3 +302,25 @@ def test_an_object_urdf_is_simulated_as_all_its_collision_elements(tmp_path):
     assert o.body.kind.startswith("provided") and len(o.body.pieces) == 3
     assert o.volume == pytest.approx(2 * 0.04**3 + 0.06 * 0.01 * 0.01, rel=0.03)
     assert o.fidelity.within_tolerance
+
+
+def test_object_urdfs_side_by_side_are_named_by_their_files(tmp_path):
+    """pybullet_data keeps duck_vhacd.urdf and teddy_vhacd.urdf in one folder: both were named "data"
+    (their folder), so reports read "on data" and GraspDataset(objects=["data"]) merged their grasps.
+    The YCB layout's generic file names (model.urdf, textured*.obj, collision_vhacd.obj) still name
+    the object by its folder."""
+    flat = tmp_path / "data"
+    flat.mkdir()
+    for n, size in (("duck_vhacd", 0.05), ("teddy_vhacd", 0.08)):
+        trimesh.creation.box((size, size, size)).export(flat / f"{n}.obj")
+        (flat / f"{n}.urdf").write_text(f'<robot name="{n}"><link name="base"><visual><geometry><mesh filename="{n}.obj"/>'
+                                        '</geometry></visual></link></robot>')
+    assert [ObjectModel.load(flat / f"{n}.urdf").name for n in ("duck_vhacd", "teddy_vhacd")] == ["duck_vhacd", "teddy_vhacd"]
+    ycb = tmp_path / "Banana"
+    ycb.mkdir()
+    trimesh.creation.box((0.05, 0.06, 0.07)).export(ycb / "textured_simple_reoriented.obj")
+    trimesh.creation.box((0.05, 0.06, 0.07)).export(ycb / "collision_vhacd.obj")
+    (ycb / "model.urdf").write_text('<robot name="b"><link name="base"><visual><geometry><mesh filename="textured_simple_reoriented.obj"/>'
+                                    '</geometry></visual></link></robot>')
+    for p in (ycb, ycb / "model.urdf", ycb / "textured_simple_reoriented.obj", ycb / "collision_vhacd.obj"):
+        assert ObjectModel.load(p).name == "Banana", p

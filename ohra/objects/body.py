@@ -32,6 +32,9 @@ SDF = Callable[[np.ndarray], np.ndarray]
 # a body whose surface lies within this of the mesh (95th percentile, both ways) matches it [m];
 # YCB scans sit 1-6 mm from their best convex body (dents, recessed lids), so 5 mm flags real misfits
 BODY_TOLERANCE_M = 0.005
+# a body whose volume leaves this range of the mesh's (body / mesh) fills a cavity or thin walls, or
+# misses parts: its mass and inertia, taken from the body, are then that far off and said so
+BODY_VOLUME_RANGE = (0.8, 1.25)
 # PyBullet inflates convex meshes by this collision margin; the world sets it to 0 on the object
 BULLET_MESH_MARGIN_M = 0.001
 

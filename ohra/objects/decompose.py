@@ -89,6 +89,25 @@ def load_convex_pieces(path: Path, scale: np.ndarray | None = None) -> list[trim
     return pieces
 
 
+def convex_components(mesh: trimesh.Trimesh, rel: float = 0.02) -> list[trimesh.Trimesh] | None:
+    """The mesh's connected components as convex pieces when it is already a convex decomposition
+    (two or more closed components, each within ``rel`` of its hull's volume: V-HACD / CoACD output
+    saved as one mesh, or separate convex parts); else None."""
+    parts = mesh.split(only_watertight=False)
+    if len(parts) < 2 or not all(p.is_watertight for p in parts):
+        return None
+    hulls = []
+    for p in parts:
+        try:
+            h = p.convex_hull
+        except Exception:  # Qhull rejects flat parts
+            return None
+        if not (h.volume > 0 and abs(float(p.volume)) >= (1.0 - rel) * h.volume):
+            return None
+        hulls.append(h)
+    return hulls
+
+
 _VHACD_SCRIPT = (
     "import sys, pybullet as pb\n"
     "c = pb.connect(pb.DIRECT)\n"

@@ -24,8 +24,8 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from ohra.errors import ObjectError, ObjectWarning, user_stacklevel
-from ohra.objects.body import BODY_TOLERANCE_M, SDF, Body, Fidelity, MassProperties, fidelity
-from ohra.objects.decompose import DECOMPOSITION_NAMES, check_solid, load_convex_pieces, vhacd_pieces
+from ohra.objects.body import BODY_TOLERANCE_M, BODY_VOLUME_RANGE, SDF, Body, Fidelity, MassProperties, fidelity
+from ohra.objects.decompose import DECOMPOSITION_NAMES, check_solid, convex_components, load_convex_pieces, vhacd_pieces
 from ohra.objects.repair import RepairReport, repair_mesh
 from ohra.objects.sdf import SDFGrid
 
@@ -45,6 +45,15 @@ def _load_mesh_file(path: Path, scale: np.ndarray | None = None) -> trimesh.Trim
     if scale is not None:
         loaded.apply_scale(scale)
     return loaded
+
+
+def _label(path: Path) -> str:
+    """An object's default name: its file's stem, or its folder's name when the stem is the YCB
+    layout's generic one (``model.urdf``, ``textured_simple_reoriented.obj``, ``collision_vhacd.obj``);
+    a flat folder of object URDFs (``duck_vhacd.urdf``, ``teddy_vhacd.urdf``) names each by its file."""
+    stem = path.stem.lower()
+    generic = stem in ("model", "collision_vhacd", "textured_vhacd") or stem.startswith("textured")
+    return path.parent.name if generic else path.stem
 
 
 def _urdf_mesh(path: Path) -> tuple[Path, np.ndarray, np.ndarray, list[tuple[Path | None, np.ndarray, np.ndarray, trimesh.Trimesh | None]]]:
@@ -168,8 +177,8 @@ class ObjectModel:
                 mesh by name, ``.obj`` before ``.stl``, ``.ply``, ``.off``, ``.glb``, with a warning when there
                 are several).
             density: [kg/m^3] for :attr:`mass`.
-            name: label; None: the file stem (the folder name for a URDF, a folder or a
-                ``textured*`` mesh).
+            name: label; None: the file stem, or the folder's name for a folder and for a file whose stem
+                names no object (``model.urdf``, ``textured*``, ``collision_vhacd``: the YCB layout).
             scale: factor on the vertices (and a provided decomposition's), which are read as metres:
                 e.g. 0.001 for a millimetre mesh; None: 1.
 
@@ -223,14 +232,20 @@ class ObjectModel:
             pieces = pieces or None
             names = list(dict.fromkeys(names))
             label_pieces = f"provided:{'+'.join(names) if len(names) <= 2 else f'{len(cols)} URDF collisions'}"
-            label = name or path.parent.name
+            label = name or _label(path)
         elif path.suffix.lower() in MESH_SUFFIXES:
             mesh = _load_mesh_file(path)
             for sib in (path.parent / n for n in DECOMPOSITION_NAMES):
                 if sib.is_file() and sib != path:
                     pieces, label_pieces = load_convex_pieces(sib), f"provided:{sib.name}"
                     break
-            label = name or (path.parent.name if path.stem.startswith("textured") else path.stem)
+            if pieces is None:
+                # a decomposition loaded as the object itself (collision_vhacd.obj, *_VHACD_CHs.obj, separate convex
+                # parts): its own pieces are the exact body, where V-HACD would decompose it again (x1.5 volume)
+                own = (load_convex_pieces(path) if path.name in DECOMPOSITION_NAMES else convex_components(mesh))
+                if own and len(own) > 1:
+                    pieces, label_pieces = own, f"provided:{path.name} pieces"
+            label = name or _label(path)
         else:
             raise ObjectError(f"{path}: unsupported object file type {path.suffix!r} (use {', '.join(MESH_SUFFIXES)} or .urdf)")
         if scale is not None:
@@ -301,6 +316,19 @@ class ObjectModel:
                 warnings.warn(f"object {self.name!r}: {exc}; using the convex hull", ObjectWarning, stacklevel=user_stacklevel())
         fid, best = min(scored, key=lambda fb: fb[0].mean)
         self.__dict__["fidelity"] = fid
+        lo, hi = BODY_VOLUME_RANGE
+        if self.watertight and not lo <= fid.volume_ratio <= hi:
+            # the surface can follow the mesh within tolerance while a cavity or thin walls are filled (a bowl's
+            # V-HACD: x2.1 volume, p95 3.7 mm): the mass, centre of mass and inertia follow the body
+            mp = best.mass_properties
+            warnings.warn(f"object {self.name!r}: its body ({best.kind}, {len(best.pieces)} piece(s)) holds x{fid.volume_ratio:.2f} "
+                          f"the mesh's volume ({1e6 * mp.volume:.4g} vs {1e6 * self.mesh_volume:.4g} cm^3: a cavity or thin walls "
+                          f"filled?); mass and inertia follow the body ({1e3 * mp.volume * self.density:.4g} g at "
+                          f"{self.density:g} kg/m^3): "
+                          + ("a finer decomposition" if best.kind.startswith("provided") else
+                             "a decomposition that follows the walls (collision_vhacd.obj beside the mesh)")
+                          + " or a density of (intended mass / body volume) corrects them", ObjectWarning,
+                          stacklevel=user_stacklevel())
         if not self.watertight:
             warnings.warn(f"object {self.name!r}: the mesh is open (not watertight after repair); it is taken as the closed "
                           f"body {best.kind} ({len(best.pieces)} piece(s)): volume {1e6 * best.mass_properties.volume:.4g} cm^3, "
