@@ -324,3 +324,19 @@ def test_object_urdfs_side_by_side_are_named_by_their_files(tmp_path):
                                     '</geometry></visual></link></robot>')
     for p in (ycb, ycb / "model.urdf", ycb / "textured_simple_reoriented.obj", ycb / "collision_vhacd.obj"):
         assert ObjectModel.load(p).name == "Banana", p
+
+
+def test_every_visual_element_of_an_object_urdf_is_part_of_its_surface(tmp_path):
+    """pybullet_data's pan_tefal.urdf: a pan mesh and a <cylinder> handle as two <visual> elements; only the
+    first was read, so the grasp model's surface points and the body's distances knew no handle."""
+    trimesh.creation.cylinder(radius=0.12, height=0.05).export(tmp_path / "pan.obj")
+    (tmp_path / "pan.urdf").write_text(
+        '<robot name="pan"><link name="base">'
+        '<visual><geometry><mesh filename="pan.obj"/></geometry></visual>'
+        '<visual><origin xyz="0.2 0 0" rpy="0 1.5707963 0"/><geometry><cylinder radius="0.01" length="0.18"/></geometry></visual>'
+        '<collision><geometry><mesh filename="pan.obj"/></geometry></collision>'
+        '<collision><origin xyz="0.2 0 0" rpy="0 1.5707963 0"/><geometry><cylinder radius="0.01" length="0.18"/></geometry></collision>'
+        '</link></robot>')
+    o = ObjectModel.load(tmp_path / "pan.urdf")
+    assert o.mesh.bounds[:, 0] == pytest.approx([-0.12, 0.29], abs=1e-3)  # pan rim to handle end
+    assert o.fidelity.p95 < 0.002  # the body (both collisions) follows the whole surface

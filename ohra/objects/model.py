@@ -56,11 +56,12 @@ def _label(path: Path) -> str:
     return path.parent.name if generic else path.stem
 
 
-def _urdf_mesh(path: Path) -> tuple[Path, np.ndarray, np.ndarray, list[tuple[Path | None, np.ndarray, np.ndarray, trimesh.Trimesh | None]]]:
+def _urdf_mesh(path: Path):
     """Visual mesh, its (3,) scale and origin (4x4 in the link frame) named by a PyBullet-style object URDF
-    (its first ``<visual>`` mesh; without one, its first ``<collision>`` mesh), and **every** ``<collision>``
+    (its first ``<visual>`` mesh; without one, its first ``<collision>`` mesh), **every** ``<collision>``
     element as ``(mesh file, scale, origin, None)`` or, for a ``<box>``/``<sphere>``/``<cylinder>``,
-    ``(None, ones, origin, solid)`` (a plate's rim is six collision meshes and a cylinder)."""
+    ``(None, ones, origin, solid)`` (a plate's rim is six collision meshes and a cylinder), and the other
+    ``<visual>`` elements alike (a pan's handle)."""
     from ohra.transforms import xyzrpy_to_matrix
 
     try:
@@ -101,7 +102,18 @@ def _urdf_mesh(path: Path) -> tuple[Path, np.ndarray, np.ndarray, list[tuple[Pat
             raise ObjectError(f"{path}: a <collision> primitive with a missing or non-numeric size") from None
         return None
 
-    vis = next(((m, origin(el)) for el in root.iter("visual") if (m := mesh_of(el)) is not None), None)
+    visuals = list(root.iter("visual"))
+    vis_el = next((el for el in visuals if mesh_of(el) is not None), None)
+    vis = None if vis_el is None else (mesh_of(vis_el), origin(vis_el))
+    # the object's other visual parts (a pan's handle is a <cylinder> beside its mesh): part of its surface
+    extra: list[tuple[Path | None, np.ndarray, np.ndarray, trimesh.Trimesh | None]] = []
+    for el in visuals:
+        if el is vis_el:
+            continue
+        if (m := mesh_of(el)) is not None:
+            extra.append((m[0], m[1], origin(el), None))
+        elif (solid := solid_of(el)) is not None:
+            extra.append((None, np.ones(3), origin(el), solid))
     cols: list[tuple[Path | None, np.ndarray, np.ndarray, trimesh.Trimesh | None]] = []
     for el in root.iter("collision"):
         if (m := mesh_of(el)) is not None:
@@ -114,7 +126,7 @@ def _urdf_mesh(path: Path) -> tuple[Path, np.ndarray, np.ndarray, list[tuple[Pat
             raise ObjectError(f"{path}: no <mesh> geometry in the object URDF")
         vis = ((first[0], first[1]), first[2])
     (vis_path, scale), T_vis = vis
-    return vis_path, scale, T_vis, cols
+    return vis_path, scale, T_vis, cols, extra
 
 
 class ObjectModel:
@@ -213,9 +225,13 @@ class ObjectModel:
         pieces, label_pieces = None, "provided"
         if path.suffix.lower() == ".urdf":
             # the object frame is the URDF link frame: mesh scale, then the <visual>/<collision> origin
-            mesh_path, vis_scale, T_vis, cols = _urdf_mesh(path)
+            mesh_path, vis_scale, T_vis, cols, extra = _urdf_mesh(path)
             mesh = _load_mesh_file(mesh_path, vis_scale)
             mesh.apply_transform(T_vis)
+            if extra:
+                parts = [mesh] + [(solid.copy() if solid is not None else _load_mesh_file(f, sc)).apply_transform(T)
+                                  for f, sc, T, solid in extra]
+                mesh = trimesh.util.concatenate(parts)
             # every <collision> element is a candidate body piece (a plate's rim is six meshes and a cylinder);
             # the visual mesh itself counts only when it is a decomposition (several convex pieces), so that a
             # concave visual mesh still gets V-HACD rather than its hull
