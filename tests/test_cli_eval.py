@@ -179,8 +179,14 @@ def test_a_sampled_grasp_file_says_which_hand_and_form_it_was_made_for(tmp_path,
     monkeypatch.setattr(cli_eval, "eval_hand", lambda name, original, form, inertials: forms.append(form) or
                         real(name, original, form, inertials))
     capsys.readouterr()
-    rc, _, err = _run(capsys, out, "--hand", "allegro_hand_left", "--object", "builtin:box")
+    rc, said, err = _run(capsys, out, "--hand", "allegro_hand_left", "--object", "builtin:box")
     assert rc == 0 and forms[-1] == "base" and "note" not in err
+    assert said.startswith("allegro_hand_left on box: ")  # the canonical hand; a replay names the original URDF
+    from ohra.paths import hands_root
+
+    if hands_root().is_dir():  # the replay needs the original URDF
+        rc, said, _ = _run(capsys, out, "--hand", "allegro_hand_left", "--object", "builtin:box", "--original")
+        assert rc == 0 and said.startswith("allegro_hand_left (original URDF) on box: ")
     rc, _, err = _run(capsys, out, "--hand", "allegro_hand_left", "--object", "builtin:box", "--form", "extended",
                       "-o", tmp_path / "ext.json")
     assert rc == 0 and forms[-1] == "extended" and "sampled for the base form of allegro_hand_left" in err

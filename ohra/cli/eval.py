@@ -247,7 +247,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"{args.hand} on {obj.name}: {args.grasps} holds no grasps; nothing was simulated")
         return 0
     simulated = n - int(rep.meta.get("resumed", 0))  # the rate of this run's own simulations
-    print(f"{args.hand} on {obj.name}: {int(rep.success.sum())}/{n} succeeded ({100 * rep.success_rate:.1f} %), "
+    which = " (original URDF)" if args.original else (" (original finger masses)" if args.inertials == "original" else "")
+    print(f"{args.hand}{which} on {obj.name}: {int(rep.success.sum())}/{n} succeeded ({100 * rep.success_rate:.1f} %), "
           f"{rep.clamped_count} clamped, {wall:.1f} s ({simulated / wall if wall > 0 else 0:.1f} grasps/s"
           f"{f' over the {simulated} simulated now' if simulated < n else ''})")
     return 0
