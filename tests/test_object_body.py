@@ -166,8 +166,8 @@ def test_a_mesh_that_is_already_convex_pieces_is_its_own_body(tmp_path):
     from ohra.objects.decompose import convex_components
 
     cubes = trimesh.util.concatenate([trimesh.creation.box((0.04, 0.04, 0.04)),
-                                      trimesh.creation.box((0.04, 0.04, 0.04)).apply_translation((0.14, 0, 0))])
-    cubes.export(tmp_path / "two_cubes.obj")
+                                      trimesh.creation.box((0.04, 0.04, 0.04)).apply_translation((0.041, 0, 0))])
+    cubes.export(tmp_path / "two_cubes.obj")  # 1 mm apart: pieces of one object
     with warnings.catch_warnings():
         warnings.simplefilter("error", ObjectWarning)  # exact: nothing to say
         obj = ObjectModel.load(tmp_path / "two_cubes.obj")
@@ -179,3 +179,17 @@ def test_a_mesh_that_is_already_convex_pieces_is_its_own_body(tmp_path):
     tube = trimesh.creation.annulus(r_min=0.02, r_max=0.04, height=0.08)  # closed but not convex: not a decomposition
     assert convex_components(trimesh.util.concatenate([tube, trimesh.creation.box((0.04,) * 3).apply_translation((0.2, 0, 0))])) is None
     assert convex_components(trimesh.creation.box((0.04,) * 3)) is None  # one piece: the hull rule handles it
+
+
+@pytest.mark.parametrize("gap, warned", [(0.001, False), (0.003, True), (0.1, True)])
+def test_separate_parts_in_one_mesh_are_named_as_one_rigid_object(tmp_path, gap, warned):
+    """Two cubes saved 10 cm apart in one file were graded as one rigid object without a word."""
+    cube = trimesh.creation.box((0.04, 0.04, 0.04))
+    trimesh.util.concatenate([cube, cube.copy().apply_translation((0.04 + gap, 0, 0))]).export(tmp_path / "cubes.obj")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        ObjectModel.load(tmp_path / "cubes.obj").body
+    said = [str(w.message) for w in caught if "separate parts" in str(w.message)]
+    assert len(said) == int(warned), said
+    if warned:
+        assert f"holds 2 separate parts (up to {1e3 * gap:.0f} mm apart)" in said[0]

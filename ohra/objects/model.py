@@ -332,6 +332,11 @@ class ObjectModel:
                 warnings.warn(f"object {self.name!r}: {exc}; using the convex hull", ObjectWarning, stacklevel=user_stacklevel())
         fid, best = min(scored, key=lambda fb: fb[0].mean)
         self.__dict__["fidelity"] = fid
+        apart = self._separate_parts()
+        if apart:
+            warnings.warn(f"object {self.name!r}: the mesh holds {apart[0]} separate parts (up to {1e3 * apart[1]:.0f} mm apart); "
+                          "they are grasped and simulated as one rigid object (load each part's file to grasp it alone)",
+                          ObjectWarning, stacklevel=user_stacklevel())
         lo, hi = BODY_VOLUME_RANGE
         if self.watertight and not lo <= fid.volume_ratio <= hi:
             # the surface can follow the mesh within tolerance while a cavity or thin walls are filled (a bowl's
@@ -365,6 +370,18 @@ class ObjectModel:
                               f"(best: {best.kind}, 95th percentile {1e3 * fid.p95:.1f} mm, volume x{fid.volume_ratio:.2f}); "
                               "grasps are synthesised and simulated on that body", ObjectWarning, stacklevel=user_stacklevel())
         return best
+
+    def _separate_parts(self) -> tuple[int, float] | None:
+        """(count, largest gap [m]) when the mesh is several solid parts that do not touch (each over 5 % of
+        the volume, each more than 2 mm from every other): two cubes saved in one file are one rigid object."""
+        parts = [p for p in self.mesh.split(only_watertight=True)]
+        total = sum(abs(float(p.volume)) for p in parts)
+        parts = [p for p in parts if total > 0 and abs(float(p.volume)) > 0.05 * total]
+        if len(parts) < 2:
+            return None
+        trees = [cKDTree(p.vertices) for p in parts]
+        gaps = [min(trees[j].query(parts[i].vertices)[0].min() for j in range(len(parts)) if j != i) for i in range(len(parts))]
+        return (len(parts), float(max(gaps))) if min(gaps) > 0.002 else None
 
     def _fidelity_of(self, body: Body) -> Fidelity:
         pts, _ = self.sample_surface(3000, seed=2)
