@@ -439,7 +439,7 @@ def test_eval_original_takes_a_spec_file_and_names_why_a_variant_cannot(tmp_path
     np.save(g, pose_to_grasp(T, np.zeros(22))[None])
     spec = str(_toy(tmp_path))
     assert main(["eval", str(g), "--hand", spec, "--object", "builtin:box", "--original", "--quiet"]) == 0
-    assert f"{spec} on box: " in capsys.readouterr().out
+    assert f"{spec} (original URDF) on box: " in capsys.readouterr().out
     assert main(["eval", str(g), "--hand", "leap_3303", "--object", "builtin:box", "--original", "--quiet"]) == 2
     assert "leap_3303 is a LEAP variant, a canonical hand with no original URDF" in capsys.readouterr().err
 
