@@ -570,3 +570,27 @@ def test_ohra_hand_parse_names_a_poor_fit_too(tmp_path, no_hands_root, monkeypat
         err = capsys.readouterr().err
         assert ("warning: this base form follows the original URDF poorly" in err) == said, err
         assert ("try --extended" in err) == said
+
+
+def test_pictures_of_an_original_hand_pose_its_mimic_joints_as_the_simulation_does(tmp_path, no_hands_root):
+    """`ohra eval --original --render` drew Ability's fingers straight (mimic joints at 0) while the simulation
+    had closed them and counted the grasps held."""
+    import pybullet as pb
+
+    from ohra.sim.bullet import load_urdf_text
+    from ohra.sim.hands import SimHand
+    from ohra.sim.render import pose_joints
+
+    hand = SimHand.original_of(str(_toy(tmp_path)))
+    assert hand.mimic, "the test needs a hand with mimic joints"
+    c = pb.connect(pb.DIRECT)
+    try:
+        body = load_urdf_text(hand.urdf, c, useFixedBase=True)
+        by_name = {pb.getJointInfo(body, j, physicsClientId=c)[1].decode(): j for j in range(pb.getNumJoints(body, physicsClientId=c))}
+        qs = 0.5 * (hand.lower + hand.upper) + 0.1
+        pose_joints(hand, body, by_name, qs, c)
+        for name, (driver, mul, off) in hand.mimic.items():
+            got = pb.getJointState(body, by_name[name], physicsClientId=c)[0]
+            assert got == pytest.approx(mul * qs[hand.joints.index(driver)] + off, abs=1e-9), name
+    finally:
+        pb.disconnect(c)

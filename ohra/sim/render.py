@@ -19,6 +19,16 @@ from ohra.rotations import grasp_to_pose, matrix_to_quat
 from ohra.sim.hands import SimHand
 
 
+def pose_joints(hand: SimHand, body: int, by_name: dict[str, int], qs: np.ndarray, client: int) -> None:
+    """Set ``hand``'s driven joints to ``qs`` (sim order, rad) and its URDF mimic joints from their drivers, as
+    the simulation poses them (:meth:`ohra.sim.world.World.set_joints`); ``by_name``: joint name -> PyBullet index."""
+    for k, n in enumerate(hand.joints):
+        pb.resetJointState(body, by_name[n], float(qs[k]), physicsClientId=client)
+    for name, (driver, mul, off) in hand.mimic.items():
+        if name in by_name and driver in hand.joints:
+            pb.resetJointState(body, by_name[name], mul * float(qs[hand.joints.index(driver)]) + off, physicsClientId=client)
+
+
 def render_grasps(hand: SimHand, obj: ObjectModel, grasps: np.ndarray, size: int = 256,
                   distance: float | None = None, yaw: float = 45.0, pitch: float = -30.0) -> np.ndarray:
     """(N, size, size, 3) uint8 RGB images of canonical grasps (object at the origin)."""
@@ -33,7 +43,6 @@ def render_grasps(hand: SimHand, obj: ObjectModel, grasps: np.ndarray, size: int
         finally:
             Path(path).unlink(missing_ok=True)
         by_name = {pb.getJointInfo(body, j, physicsClientId=c)[1].decode(): j for j in range(pb.getNumJoints(body, physicsClientId=c))}
-        jidx = [by_name[n] for n in hand.joints]
         V = np.asarray(obj.mesh.vertices)
         F = np.asarray(obj.mesh.faces)
         vis = pb.createVisualShape(pb.GEOM_MESH, vertices=V.tolist(), indices=F.ravel().tolist(),
@@ -48,8 +57,7 @@ def render_grasps(hand: SimHand, obj: ObjectModel, grasps: np.ndarray, size: int
             Tr = T @ hand.T_palm_root
             pb.resetBasePositionAndOrientation(body, Tr[:3, 3].tolist(), matrix_to_quat(Tr[:3, :3]).tolist(), physicsClientId=c)
             qs = np.clip(hand.to_sim(np.clip(q, hand.canon_lower, hand.canon_upper)), hand.lower, hand.upper)
-            for k, j in enumerate(jidx):
-                pb.resetJointState(body, j, float(qs[k]), physicsClientId=c)
+            pose_joints(hand, body, by_name, qs, c)
             img = pb.getCameraImage(size, size, view, proj, renderer=pb.ER_TINY_RENDERER, physicsClientId=c)
             out[i] = np.reshape(img[2], (size, size, 4))[..., :3]
         return out
