@@ -671,3 +671,20 @@ def test_a_replay_page_opens_on_the_episodes_first_frame(raw_obs_run, tmp_path, 
     assert links and all(not np.allclose(T, np.eye(4)) for T in links.values())
     traj = dict(np.load(ep["trajectory"]))
     np.testing.assert_allclose(static["/meshcat/replay/object"][:3, 3], traj["obj_pos"][0])
+
+
+def test_a_run_records_the_form_of_the_hand_it_trains_on(tmp_path):
+    """config.json said form: null both for a registered hand (trained on its extended form) and for a spec
+    path (its base form): two runs with one config trained different hands."""
+    from ohra.learn.rl.train import _write_config
+
+    from ohra.hands import get_hand
+
+    base_file = tmp_path / "my_hand.json"
+    get_hand("shadow_hand_right", "base").to_json(base_file)
+    for k, (hand, form) in enumerate((("leap_hand_right", "extended"), (str(base_file), "base"))):
+        run = tmp_path / f"run{k}"
+        run.mkdir()
+        _write_config(run, RotationConfig(hand=hand), PPOSettings(total_steps=48))
+        saved = json.loads((run / "config.json").read_text())
+        assert saved["env"]["form"] is None and saved["hand_form"] == form

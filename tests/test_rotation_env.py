@@ -196,6 +196,22 @@ def test_canonical_and_original_action_spaces(hands_dir):
     assert np.allclose(leap_oc.space.from_sim(leap_oc.space.to_sim(x))[m], x[m])
 
 
+def test_the_original_urdf_of_a_hand_given_by_its_spec_file(hands_dir, tmp_path):
+    """urdf='original' refused a spec path even with its folder registered ("needs a registered hand"), so a run
+    trained from a spec could never be evaluated on its original URDF; a params JSON without its spec says why."""
+    from ohra.errors import HandNotFoundError
+    from ohra.hands import get_hand
+    from ohra.hands.registry import spec_path
+
+    by_spec = resolve(RotationConfig(hand=str(spec_path("shadow_hand_right")), urdf="original", form="extended"))
+    by_name = resolve(RotationConfig(hand="shadow_hand_right", urdf="original", form="extended"))
+    assert not by_spec.hand.canonical and by_spec.hand.joints == by_name.hand.joints and by_spec.hand.urdf == by_name.hand.urdf
+    lone = tmp_path / "lone.json"
+    get_hand("shadow_hand_right", "extended").to_json(lone)
+    with pytest.raises(HandNotFoundError, match=r"urdf='original' needs the original hand, which is unknown"):
+        resolve(RotationConfig(hand=str(lone), urdf="original"))
+
+
 def test_canonical_space_ignores_actions_of_absent_joints(env):
     env.reset(seed=0)
     dead = ~env.space.movable

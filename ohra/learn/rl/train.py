@@ -531,6 +531,11 @@ def _write_config(run_dir: Path, env_cfg: RotationConfig, ppo: PPOSettings, init
         d["init_from"] = init_from
     if hand_source is not None:
         d["hand_source"] = hand_source  # where the run's copy of its hand file came from
+    # env.form may be null (the hand's default); a spec path and a registered name default to different forms
+    from ohra.hands import get_hand
+    from ohra.sim.rotation.task import canonical_form
+
+    d["hand_form"] = get_hand(env_cfg.hand, canonical_form(env_cfg.hand, env_cfg.form)).form
     _replace_config(run_dir, d)
 
 

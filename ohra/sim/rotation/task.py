@@ -12,7 +12,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ohra.errors import HandNotFoundError
 from ohra.sim.hands import SimHand
 from ohra.sim.rotation.config import RotationConfig, RotationConfigError
 from ohra.sim.rotation.objects import SIZED, ObjectShape, make_object
@@ -102,7 +101,6 @@ def resolve(cfg: RotationConfig, sim_hand: SimHand | None = None) -> Task:
 
     form = canonical_form(cfg.hand, cfg.form)
     params = get_hand(cfg.hand, form)
-    from ohra.hands import registry
 
     hand = sim_hand
     if hand is not None:
@@ -116,10 +114,8 @@ def resolve(cfg: RotationConfig, sim_hand: SimHand | None = None) -> Task:
 
             hand = hand.with_finger_masses(original_finger_masses(cfg.hand, params.form))
     else:
-        if cfg.hand not in registry.registered_hands():
-            raise HandNotFoundError(f"urdf='original' needs a registered hand with an original URDF, not {cfg.hand!r} "
-                                    "(a spec YAML of your own registers with ohra --hands DIR or $OHRA_HANDS_PATH)")
-        hand = SimHand.registered_original(cfg.hand, params.form)
+        # a registered name, a spec YAML or a params JSON beside its spec (HandNotFoundError names what is missing)
+        hand = SimHand.original_of(cfg.hand, params.form, purpose="urdf='original'")
         if cfg.collisions == "canonical":
             from ohra.sim.hybrid import with_canonical_collisions
 
