@@ -263,3 +263,17 @@ def test_a_hand_that_keeps_no_starting_state_is_told_why(tmp_path, monkeypatch):
     with pytest.raises(G.GraspGenerationError, match=r"none of 3 perturbed grasps survived .*: object fell \(2\), too few hand "
                                                    r"contacts \(1\) \(a hand that cannot hold the object palm up"):
         G.generate(resolve(RotationConfig(grasp_count=1)))
+
+
+def test_a_hand_that_keeps_few_starting_states_is_told_why_too(tmp_path, monkeypatch):
+    """The original Schunk SVH kept 1 of 20 states after 400 attempts: the warning said only the counts (every
+    other settle had dropped the object)."""
+    from ohra.sim.rotation import grasps as G
+
+    monkeypatch.setenv("OHRA_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(G, "MAX_ATTEMPTS_PER_GRASP", 2)
+    reasons = iter([None, G.REJECTIONS[1], G.REJECTIONS[1], G.REJECTIONS[5]])
+    monkeypatch.setattr(G, "_rejection", lambda *a, **k: next(reasons))  # planted: one kept, then three rejected
+    with pytest.warns(UserWarning, match=r"only 1 of 2 starting states after 4 attempts; the others: object fell \(2\), "
+                                         r"too few hand contacts \(1\)"):
+        G.generate(resolve(RotationConfig(grasp_count=2)))

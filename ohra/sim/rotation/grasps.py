@@ -318,8 +318,9 @@ def generate(task: Task, progress: bool | None = False, partial: Path | None = N
                                    + (" (a hand that cannot hold the object palm up, or a holding pose that does not "
                                       "close on it)" if rejected.get(REJECTIONS[1], 0) > attempts / 2 else ""))
     if len(Q) < cfg.grasp_count:
-        warnings.warn(f"{hand.name}: only {len(Q)} of {cfg.grasp_count} starting states after {attempts} attempts",
-                      stacklevel=user_stacklevel())
+        why = ", ".join(f"{k} ({n})" for k, n in rejected.most_common())
+        warnings.warn(f"{hand.name}: only {len(Q)} of {cfg.grasp_count} starting states after {attempts} attempts"
+                      + (f"; the others: {why}" if why else ""), stacklevel=user_stacklevel())
     return GraspSet(np.array(Q), np.array(T), np.array(P), np.array(O), hold, attempts, key)
 
 
