@@ -41,6 +41,7 @@ THUMB_MARGIN = 0.05  # cosine kept between the raw thumb and the palm-centre dir
 PRESENCE_WEIGHT = 0.1  # weak: at 10 the path kept every jump where it was and stayed ~21 mm
 THUMB_WEIGHT = 100.0
 PRIOR_WEIGHT = 1.0
+THUMB_BOX_MARGIN_M = 0.005  # how far a thumb base on the path may leave the sampler's thumb box (or the ends')
 
 
 # -- measuring ------------------------------------------------------------------------------------
@@ -69,6 +70,33 @@ def tip_moves(v82: np.ndarray) -> np.ndarray:
     v = np.atleast_2d(v82)
     d = np.linalg.norm(np.diff(tips_q0(v), axis=0), axis=-1)  # NaN where a finger is absent at either end
     return np.where(structure_changes(v), 0.0, np.where(np.isnan(d), 0.0, d).max(axis=1))
+
+
+def _thumb_bases(v82: np.ndarray) -> np.ndarray:
+    """(N, 3) thumb bases [m] of base vectors, right-hand form (|y|)."""
+    t = np.array(np.atleast_2d(v82)[:, XYZ][:, :3], dtype=float)
+    t[:, 1] = np.abs(t[:, 1])
+    return t
+
+
+def thumb_box(v_ends: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) (3,) [m], right-hand form: the sampler's thumb base ranges (the training data's), widened
+    to hold the thumb bases of the two end hands (2, 82), which a user's hand may put outside them."""
+    from ohra.learn.sampler import DEFAULT_CONFIG as C
+
+    t = _thumb_bases(v_ends)
+    lo = np.array([C.thumb_x[0], C.thumb_y[0], C.thumb_z[0]])
+    hi = np.array([C.thumb_x[1], C.thumb_y[1], C.thumb_z[1]])
+    return np.minimum(lo, t.min(axis=0)), np.maximum(hi, t.max(axis=0))
+
+
+def thumb_excursion(v82: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:
+    """Largest distance [m] by which a hand's thumb base (right-hand form) lies outside the box ``lo``-``hi``.
+    A tip-only path measure lets a thumb fold back from a base flung out of the palm (Ability -> Shadow: 127 mm
+    out on a 55 mm palm; Barrett -> Shadow: 93 mm behind the wrist)."""
+    t = _thumb_bases(v82)
+    out = np.maximum(lo - t, 0.0) + np.maximum(t - hi, 0.0)
+    return float(np.linalg.norm(out, axis=1).max(initial=0.0))
 
 
 # -- equal arc length -----------------------------------------------------------------------------
@@ -142,6 +170,8 @@ def geodesic_latents(vae: "VAEBundle", mu_a: np.ndarray, mu_b: np.ndarray, n: in
     V0 = vae.decode_vectors(best_z)
     best = float(tip_moves(V0).max())
     jumps = int(structure_changes(V0).sum())
+    lo, hi = thumb_box(V0[[0, -1]])
+    excursion = max(thumb_excursion(V0, lo, hi), THUMB_BOX_MARGIN_M)
     if n < 3 or best == 0.0:
         return best_z, best_s
     z0 = best_z
@@ -150,6 +180,7 @@ def geodesic_latents(vae: "VAEBundle", mu_a: np.ndarray, mu_b: np.ndarray, n: in
     with torch.no_grad():
         logits0 = vae.model.decode(torch.as_tensor(z0, dtype=torch.float32))["presence"]
     radius = float(max(np.linalg.norm(mu_a), np.linalg.norm(mu_b)))
+    box = (torch.as_tensor(lo - THUMB_BOX_MARGIN_M, dtype=torch.float32), torch.as_tensor(hi + THUMB_BOX_MARGIN_M, dtype=torch.float32))
     inner = torch.as_tensor(z0[1:-1], dtype=torch.float32).clone().requires_grad_(True)
     opt = torch.optim.Adam([inner], lr=lr)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, max(int(iterations), 1))
@@ -157,7 +188,7 @@ def geodesic_latents(vae: "VAEBundle", mu_a: np.ndarray, mu_b: np.ndarray, n: in
     for it in range(1, int(iterations) + 1):
         z = torch.cat([ends[:1], inner, ends[1:]])
         # autograd.grad, not backward: the shared model's parameters get no .grad
-        (inner.grad,) = torch.autograd.grad(_energy(vae, geom, z, logits0, radius), inner)
+        (inner.grad,) = torch.autograd.grad(_energy(vae, geom, z, logits0, radius, box), inner)
         opt.step()
         sched.step()
         if it % every == 0 or it == iterations:
@@ -166,12 +197,13 @@ def geodesic_latents(vae: "VAEBundle", mu_a: np.ndarray, mu_b: np.ndarray, n: in
             for z_s, s in ((knots, np.linspace(0.0, 1.0, n)), arc_length_resample(vae, knots, n)):
                 V = vae.decode_vectors(z_s)
                 worst = float(tip_moves(V).max())
-                if worst < best and int(structure_changes(V).sum()) <= jumps:
+                if worst < best and int(structure_changes(V).sum()) <= jumps and thumb_excursion(V, lo, hi) <= excursion:
                     best, best_z, best_s = worst, z_s, s
     return best_z, best_s
 
 
-def _energy(vae: "VAEBundle", geom, z: torch.Tensor, logits0: torch.Tensor, radius: float) -> torch.Tensor:
+def _energy(vae: "VAEBundle", geom, z: torch.Tensor, logits0: torch.Tensor, radius: float,
+            box: tuple[torch.Tensor, torch.Tensor] | None = None) -> torch.Tensor:
     """Discrete path energy of latents ``z`` (n, d) and the terms that keep the path where the
     decoder's plain output is what ``decode`` returns.
 
@@ -181,7 +213,9 @@ def _energy(vae: "VAEBundle", geom, z: torch.Tensor, logits0: torch.Tensor, radi
       its starting size, at most 0.5), so no joint appears, vanishes or flips handedness elsewhere;
     * thumb: the raw thumb keeps ``THUMB_MARGIN`` of cosine away from the palm centre and its base at
       y >= 0 (``project_plausible`` would turn or clamp it there, which the energy cannot see);
-    * prior: latents stay within the larger endpoint norm (decoded hands stay like the training data).
+    * prior: latents stay within the larger endpoint norm (decoded hands stay like the training data);
+    * box: the raw thumb base stays in ``box`` (lo, hi) (:func:`thumb_box`, right-hand form), inside the
+      same thumb term's weight (the path term alone flung a thumb base 93 mm behind the wrist).
     """
     out = vae.model.decode(z)
     present = logits0[:, :22] > 0
@@ -197,6 +231,8 @@ def _energy(vae: "VAEBundle", geom, z: torch.Tensor, logits0: torch.Tensor, radi
     to_centre = torch.stack([-base[:, 0], -base[:, 1], raw[:, PALM] - base[:, 2]], dim=1)
     cos = (direction * to_centre).sum(-1) / to_centre.norm(dim=-1).clamp(min=1e-9)
     thumb = (torch.relu(cos + THUMB_MARGIN).pow(2) + torch.relu(-base[:, 1] / TIP_SCALE_M).pow(2)).sum()
+    if box is not None:
+        thumb = thumb + ((torch.relu(box[0] - base) + torch.relu(base - box[1])) / TIP_SCALE_M).pow(2).sum()
     prior = torch.relu(z.norm(dim=1) - radius).pow(2).sum()
     return path + PRESENCE_WEIGHT * presence + THUMB_WEIGHT * thumb + PRIOR_WEIGHT * prior
 
@@ -217,4 +253,4 @@ def _tips_q0(raw: torch.Tensor, thumb_dir: torch.Tensor, present: torch.Tensor) 
     return raw[:, XYZ].reshape(n, 5, 3) + d * reach[..., None]
 
 
-__all__ = ["ARC_DENSITY", "tip_moves", "structure_changes", "arc_length_resample", "arc_length_alphas", "geodesic_latents"]
+__all__ = ["ARC_DENSITY", "tip_moves", "thumb_box", "thumb_excursion", "structure_changes", "arc_length_resample", "arc_length_alphas", "geodesic_latents"]
