@@ -136,3 +136,18 @@ def test_a_user_hand_far_from_the_training_data_keeps_its_thumb_on_the_palm(vae)
     V = _vectors(path)
     lo, hi = thumb_box(V[[0, -1]])
     assert thumb_excursion(V, lo, hi) <= THUMB_BOX_MARGIN_M + 1e-9, 1e3 * thumb_excursion(V, lo, hi)
+
+
+def test_encoding_a_hand_outside_the_training_data_says_so_and_names_it(vae):
+    """`ohra vae encode` of the Ability hand only warned about snapped thumb axes, for no hand in particular;
+    its latent decodes with a 69 mm third thumb segment it does not have."""
+    from ohra.learn import AxisSnapWarning, OutOfSupportWarning
+
+    ability = str(Path(__file__).parent / "data" / "ability_hand_right_base.json")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        vae.encode([ability, "shadow_hand_right"])
+    out = [str(w.message) for w in caught if w.category is OutOfSupportWarning]
+    assert len(out) == 1 and out[0].startswith(f"{ability}: outside the hands the VAE was trained on (joint pattern")
+    snaps = [str(w.message) for w in caught if w.category is AxisSnapWarning]
+    assert {m.split(":")[0] for m in snaps} == {ability, "shadow_hand_right"}

@@ -21,6 +21,7 @@ from ohra.learn.encoding import (
     CONT_DIM,
     ENCODING_DIM,
     AxisSnapWarning,
+    OutOfSupportWarning,
     LatentError,
     Standardizer,
     decode_params,
@@ -89,7 +90,7 @@ __getattr__ = lazy_getattr(__name__, _LAZY, require_torch)
 
 __all__ = [
     "sample_vectors", "sample_params", "sample_hand", "SamplerConfig", "encode_vectors", "encode_params",
-    "decode_vectors", "decode_params", "Standardizer", "AxisSnapWarning", "LatentError", "ENCODING_DIM",
+    "decode_vectors", "decode_params", "Standardizer", "AxisSnapWarning", "OutOfSupportWarning", "LatentError", "ENCODING_DIM",
     "CONT_DIM", "AXIS_CATEGORIES", "TrainConfig", "ENCODINGS", "get_encoding", "MissingDependencyError", "require_torch",
     *_LAZY,
 ]

@@ -86,6 +86,10 @@ class AxisSnapWarning(UserWarning):
     """A thumb axis was not a signed basis axis and was snapped to the nearest one."""
 
 
+class OutOfSupportWarning(UserWarning):
+    """A hand encoded by the VAE lies outside the hands it was trained on (the sampler's support)."""
+
+
 class LatentError(OhraError, ValueError):
     """A latent vector or encoding array has the wrong shape or non-finite values."""
 

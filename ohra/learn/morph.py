@@ -29,7 +29,7 @@ import torch
 from ohra.errors import CheckpointError, ParamsError, user_stacklevel
 from ohra.canonical.params import BaseParams, ExtendedParams
 from ohra.canonical.urdfgen import render
-from ohra.learn.encoding import LatentError, Standardizer, as_base
+from ohra.learn.encoding import LatentError, OutOfSupportWarning, Standardizer, as_base
 from ohra.learn.encodings import Encoding, get_encoding
 from ohra.learn.latent_path import ARC_DENSITY, arc_length_alphas, geodesic_latents, tip_moves  # noqa: F401 (re-exported)
 from ohra.learn.train_vae import CHECKPOINT_FORMAT, MODEL_FORMAT, load_torch_file
@@ -133,9 +133,29 @@ class VAEBundle:
         items = [hands] if single else list(hands)
         if not items:
             raise ParamsError("encode: no hands given (expected a hand or a non-empty sequence of hands)")
-        x = np.stack([self.encoding.encode_vectors(resolve_hand(h).to_vector()) for h in items])
+        x = np.stack([self._encode_one(h) for h in items])
         mu, logvar = self.encode_encodings(x)
         return (mu[0], logvar[0]) if single else (mu, logvar)
+
+    def _encode_one(self, hand: HandLike) -> np.ndarray:
+        """The encoding of one hand; its warnings (snapped thumb axes, a hand outside the training data) name it."""
+        from ohra.learn.sampler import support_violations
+
+        label = hand if isinstance(hand, (str, Path)) else f"{type(hand).__name__}({hand.num_fingers} fingers)"
+        params = resolve_hand(hand)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            x = self.encoding.encode_vectors(params.to_vector())
+        for w in caught:
+            warnings.warn(f"{label}: {w.message}", w.category, stacklevel=user_stacklevel())
+        why = support_violations(params)
+        if why:
+            # the decoder was trained on the sampler's hands: a latent of a hand outside them may decode to another
+            # hand (Ability's decodes with a 69 mm third thumb segment)
+            warnings.warn(f"{label}: outside the hands the VAE was trained on ({'; '.join(why[:3])}"
+                          f"{f'; and {len(why) - 3} more' if len(why) > 3 else ''}); its latent may not decode back to it",
+                          OutOfSupportWarning, stacklevel=user_stacklevel())
+        return x
 
     # -- decoding -----------------------------------------------------------------------------
     def check_latent(self, z: Any) -> tuple[np.ndarray, bool]:
