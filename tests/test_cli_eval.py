@@ -254,3 +254,15 @@ def test_a_bare_object_word_lists_the_built_in_shapes_and_a_speck_names_its_unit
     trimesh.Trimesh([[0, 0, 0], [0.1, 0, 0], [0, 0.1, 0], [0.1, 0.1, 0]], [[0, 1, 2], [1, 3, 2]]).export(str(sheet))
     with pytest.raises(ObjectError, match=r"is flat: .*needs volume$"):
         resolve_object(str(sheet))
+
+
+def test_the_form_note_suggests_the_hand_as_the_user_gave_it(tmp_path, capsys, hands_dir):
+    """Grasps made for a spec hand's extended form, evaluated with --hand SPEC.yaml (its base form): the note
+    suggested --hand NAME --form extended, a name that fails unless the spec's folder is registered."""
+    from ohra.hands.registry import spec_path
+
+    spec = str(spec_path("allegro_hand_left"))
+    g = tmp_path / "g.npz"
+    np.savez(g, grasps=pinch_grasp()[None], hand=np.array("allegro_hand_left"), form=np.array("extended"))
+    rc, _, err = _run(capsys, g, "--hand", spec, "--object", "builtin:box", "--limit", "1")
+    assert rc == 0 and f"(--hand {spec} --form extended evaluates the hand the grasps were made for)" in err

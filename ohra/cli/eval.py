@@ -173,7 +173,7 @@ def run(args: argparse.Namespace) -> int:
                   file=sys.stderr)
         elif made.get("form") and told.form != made["form"]:
             print(f"ohra: note: {args.grasps} was {made.get('made', 'sampled')} for the {made['form']} form of {made['hand']}; --hand "
-                  f"{args.hand} gives its {told.form} form, evaluated as given (--hand {made['hand']} --form "
+                  f"{args.hand} gives its {told.form} form, evaluated as given (--hand {args.hand} --form "
                   f"{made['form']} evaluates the hand the grasps were made for)", file=sys.stderr)
     if made.get("hand") == str(args.hand) and made.get("form"):
         if args.form is None:
