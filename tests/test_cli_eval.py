@@ -261,8 +261,12 @@ def test_the_form_note_suggests_the_hand_as_the_user_gave_it(tmp_path, capsys, h
     suggested --hand NAME --form extended, a name that fails unless the spec's folder is registered."""
     from ohra.hands.registry import spec_path
 
-    spec = str(spec_path("allegro_hand_left"))
+    import re
+
+    spec = tmp_path / "my_allegro.yaml"  # a user's spec, its folder not registered
+    spec.write_text(re.sub(r"(?m)^name: .*$", "name: my_allegro", spec_path("allegro_hand_left").read_text()))
+    spec = str(spec)
     g = tmp_path / "g.npz"
-    np.savez(g, grasps=pinch_grasp()[None], hand=np.array("allegro_hand_left"), form=np.array("extended"))
+    np.savez(g, grasps=pinch_grasp()[None], hand=np.array("my_allegro"), form=np.array("extended"))
     rc, _, err = _run(capsys, g, "--hand", spec, "--object", "builtin:box", "--limit", "1")
     assert rc == 0 and f"(--hand {spec} --form extended evaluates the hand the grasps were made for)" in err

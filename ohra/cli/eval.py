@@ -172,8 +172,13 @@ def run(args: argparse.Namespace) -> int:
             print(f"ohra: note: {args.grasps} was {made.get('made', 'sampled')} for {made['hand']}; evaluating it on --hand {args.hand}",
                   file=sys.stderr)
         elif made.get("form") and told.form != made["form"]:
+            from ohra.hands import list_hands
+
+            # the registered name when there is one (a params file may hold only the other form), else the hand as given
+            # (a spec path: its name is unknown unless its folder is registered)
+            again = made["hand"] if made["hand"] in list_hands() else args.hand
             print(f"ohra: note: {args.grasps} was {made.get('made', 'sampled')} for the {made['form']} form of {made['hand']}; --hand "
-                  f"{args.hand} gives its {told.form} form, evaluated as given (--hand {args.hand} --form "
+                  f"{args.hand} gives its {told.form} form, evaluated as given (--hand {again} --form "
                   f"{made['form']} evaluates the hand the grasps were made for)", file=sys.stderr)
     if made.get("hand") == str(args.hand) and made.get("form"):
         if args.form is None:
