@@ -151,3 +151,20 @@ def test_encoding_a_hand_outside_the_training_data_says_so_and_names_it(vae):
     assert len(out) == 1 and out[0].startswith(f"{ability}: outside the hands the VAE was trained on (joint pattern")
     snaps = [str(w.message) for w in caught if w.category is AxisSnapWarning]
     assert {m.split(":")[0] for m in snaps} == {ability, "shadow_hand_right"}
+
+
+def test_a_thumb_alone_encodes_and_is_named_outside_the_training_data(vae):
+    """support_violations() took np.ptp of an empty knuckle row: encoding a thumb-only hand raised a bare ValueError."""
+    from ohra.learn import OutOfSupportWarning
+
+    shadow = ohra.get_hand("shadow_hand_right", "base")
+    lo, up = shadow.joint_lowers.copy(), shadow.joint_uppers.copy()
+    lo[5:] = up[5:] = 0.0  # every finger but the thumb gone
+    thumb = BaseParams.from_vector(shadow.to_vector())
+    thumb = BaseParams(**{**{k: getattr(thumb, k) for k in ("palm_radius", "finger_radius", "finger_lengths", "finger_xyz",
+                                                          "little_extra_origin", "thumb_rpy", "thumb_axes")},
+                          "joint_lowers": lo, "joint_uppers": up})
+    assert thumb.num_fingers == 1
+    with pytest.warns(OutOfSupportWarning, match="no finger besides the thumb"):
+        mu, _ = vae.encode(thumb)
+    assert np.all(np.isfinite(mu))

@@ -193,3 +193,34 @@ def test_separate_parts_in_one_mesh_are_named_as_one_rigid_object(tmp_path, gap,
     assert len(said) == int(warned), said
     if warned:
         assert f"holds 2 separate parts (up to {1e3 * gap:.0f} mm apart)" in said[0]
+
+
+def test_parts_that_touch_or_pass_through_each_other_are_one_group(tmp_path):
+    """Gaps were vertex to vertex: a hammer's handle through its head read "2 separate parts (up to 38 mm apart)",
+    a small cube on a big box 28 mm; and a third part far away went unsaid when two others touched."""
+    head = trimesh.creation.box((0.12, 0.03, 0.03))
+    handle = trimesh.creation.box((0.02, 0.02, 0.2)).apply_translation((0, 0, -0.08))  # through the head
+    small = trimesh.creation.box((0.06, 0.06, 0.06)).apply_translation((0, 0, 0.08))  # on the big box below
+    big = trimesh.creation.box((0.1, 0.1, 0.1))
+    far = trimesh.creation.box((0.1, 0.1, 0.1)).apply_translation((0.3, 0, 0))
+    for name, parts, said in (("hammer", [head, handle], None), ("stack", [big, small], None),
+                              ("stack_and_far", [big, small, far], "holds 2 separate parts (up to 220 mm apart)")):
+        trimesh.util.concatenate(parts).export(tmp_path / f"{name}.obj")
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            ObjectModel.load(tmp_path / f"{name}.obj").body
+        got = [str(w.message) for w in caught if "separate parts" in str(w.message)]
+        assert (got == []) if said is None else (len(got) == 1 and said in got[0]), (name, got)
+
+
+def test_a_mesh_of_overlapping_convex_pieces_matches_its_own_body(tmp_path):
+    """teddy2_VHACD_CHs.obj as the object: its own 15 pieces are the exact body, yet the faces where pieces
+    overlap (inside the body) counted as mesh surface: "no convex body within 5 mm, 95th percentile 24.9 mm"."""
+    a = trimesh.creation.box((0.04, 0.04, 0.04))
+    b = trimesh.creation.box((0.04, 0.04, 0.04)).apply_translation((0.02, 0, 0.02))  # a quarter inside the first: an L
+    trimesh.util.concatenate([a, b]).export(tmp_path / "vhacd_like.obj")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ObjectWarning)  # exact: nothing to say (tolerance, volume, separate parts)
+        obj = ObjectModel.load(tmp_path / "vhacd_like.obj")
+        assert obj.body.kind == "provided:vhacd_like.obj pieces"
+    assert obj.fidelity.p95 < 1e-3 and obj.volume == pytest.approx(2 * 0.04 ** 3 - 0.02 * 0.04 * 0.02, rel=0.03)

@@ -340,3 +340,18 @@ def test_every_visual_element_of_an_object_urdf_is_part_of_its_surface(tmp_path)
     o = ObjectModel.load(tmp_path / "pan.urdf")
     assert o.mesh.bounds[:, 0] == pytest.approx([-0.12, 0.29], abs=1e-3)  # pan rim to handle end
     assert o.fidelity.p95 < 0.002  # the body (both collisions) follows the whole surface
+
+
+def test_a_missing_further_visual_is_left_out_with_a_warning(tmp_path):
+    """Reading every <visual> made a missing second visual mesh fatal ("object mesh not found") where it had been
+    ignored; a bad visual primitive's size was reported as a <collision> one's."""
+    trimesh.creation.cylinder(radius=0.05, height=0.05).export(tmp_path / "body.obj")
+    urdf = ('<robot name="o"><link name="base"><visual><geometry><mesh filename="body.obj"/></geometry></visual>'
+            '<visual><geometry>{}</geometry></visual></link></robot>')
+    (tmp_path / "o.urdf").write_text(urdf.format('<mesh filename="gone.obj"/>'))
+    with pytest.warns(ObjectWarning, match=r"a further <visual> is left out of the object's surface: .*gone\.obj"):
+        o = ObjectModel.load(tmp_path / "o.urdf")
+    assert o.mesh.extents == pytest.approx([0.1, 0.1, 0.05], abs=1e-3)
+    (tmp_path / "o.urdf").write_text(urdf.format('<box size="0.1 x 0.1"/>'))
+    with pytest.raises(ObjectError, match=r"a <visual> primitive with a missing or non-numeric size"):
+        ObjectModel.load(tmp_path / "o.urdf")

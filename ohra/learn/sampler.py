@@ -413,15 +413,18 @@ def support_violations(params: BaseParams, config: SamplerConfig = DEFAULT_CONFI
         _range(out, name, xyz[0, k], *lim)
     used = params.present_fingers[1:]
     k = xyz[1:][used]
-    jx, jz = c.knuckle_x_jitter, c.knuckle_z_jitter
-    _range(out, "knuckle x", k[:, 0], c.knuckle_x[0] - jx, c.knuckle_x[1] + jx)
-    _range(out, "knuckle x spread", np.ptp(k[:, 0]), 0.0, 2 * jx)
-    zlo, zhi = c.knuckle_z_bounds(R)
-    _range(out, "knuckle z", k[:, 2], float(zlo), float(zhi))
-    _range(out, "knuckle z spread", np.ptp(k[:, 2]), 0.0, 2 * jz)
-    wmax = c.knuckle_span[1] * (R - r)
-    _range(out, "knuckle |y|", np.abs(k[:, 1]), 0.0, max(wmax, (len(k) - 1) * (2 * r + c.finger_gap)))  # a full row overflows
-    _range(out, "knuckle gaps - finger diameter", -np.diff(k[:, 1]) - 2 * r, c.finger_gap, np.inf)
+    if len(k) == 0:  # a thumb alone: no knuckle row (its joint pattern is out of the support already)
+        out.append("no finger besides the thumb (the sampler draws at least 2)")
+    else:
+        jx, jz = c.knuckle_x_jitter, c.knuckle_z_jitter
+        _range(out, "knuckle x", k[:, 0], c.knuckle_x[0] - jx, c.knuckle_x[1] + jx)
+        _range(out, "knuckle x spread", np.ptp(k[:, 0]), 0.0, 2 * jx)
+        zlo, zhi = c.knuckle_z_bounds(R)
+        _range(out, "knuckle z", k[:, 2], float(zlo), float(zhi))
+        _range(out, "knuckle z spread", np.ptp(k[:, 2]), 0.0, 2 * jz)
+        wmax = c.knuckle_span[1] * (R - r)
+        _range(out, "knuckle |y|", np.abs(k[:, 1]), 0.0, max(wmax, (len(k) - 1) * (2 * r + c.finger_gap)))  # a full row overflows
+        _range(out, "knuckle gaps - finger diameter", -np.diff(k[:, 1]) - 2 * r, c.finger_gap, np.inf)
     if thumb_inwardness(v)[0] > 0:
         out.append("the thumb points into the palm at q = 0")
     clear = thumb_clearance(v)[0]
