@@ -70,6 +70,7 @@ def test_stored_pairs_are_reused_only_under_the_same_settings_and_when_readable(
     assert len(calls) == 4
 
 
+@pytest.mark.e2e  # an interrupted `ohra grasp eval` and its resume (~13 s): in .ci/run's e2e set, keeping the default suite under 5 min
 def test_the_cli_keeps_finished_pairs_beside_the_report_until_it_is_written(tmp_path, monkeypatch, capsys):
     from ohra.cli.main import main
 

@@ -327,6 +327,7 @@ def test_mirror_takes_the_recorded_numpy_bool_and_keeps_the_hint_for_hands_witho
             m.sample("leap_3303", "builtin:capsule", 2, mirror=mirror)
 
 
+@pytest.mark.e2e  # five `ohra eval` runs on Shadow (~11 s): in .ci/run's e2e set, keeping the default suite under 5 min
 def test_ohra_eval_notes_grasps_sampled_for_another_hand(tmp_path, capsys):
     from ohra.cli.main import main
 
