@@ -170,10 +170,10 @@ def geodesic_latents(vae: "VAEBundle", mu_a: np.ndarray, mu_b: np.ndarray, n: in
     V0 = vae.decode_vectors(best_z)
     best = float(tip_moves(V0).max())
     jumps = int(structure_changes(V0).sum())
-    lo, hi = thumb_box(V0[[0, -1]])
-    excursion = max(thumb_excursion(V0, lo, hi), THUMB_BOX_MARGIN_M)
     if n < 3 or best == 0.0:
         return best_z, best_s
+    lo, hi = thumb_box(V0[[0, -1]])
+    excursion = max(thumb_excursion(V0, lo, hi), THUMB_BOX_MARGIN_M)
     z0 = best_z
     geom = GeometryLoss(vae.model.config, vae.standardizer.mean, vae.standardizer.std)
     ends = torch.as_tensor(z0[[0, -1]], dtype=torch.float32)

@@ -234,16 +234,8 @@ class OriginalHand:
         return m
 
     def _load_mesh(self, filename: str):
-        import trimesh
-
         if filename not in self._mesh_cache:
-            try:
-                m = trimesh.load(filename, force="mesh", process=False)
-            except Exception as exc:  # trimesh raises many kinds
-                raise ParseError(f"mesh {filename} cannot be read: {exc}") from None
-            if not isinstance(m, trimesh.Trimesh) or len(m.faces) == 0:
-                raise ParseError(f"mesh {filename} has zero faces")
-            self._mesh_cache[filename] = m
+            self._mesh_cache[filename] = read_mesh(filename)
         return self._mesh_cache[filename]
 
     def pinocchio_model(self):
@@ -254,6 +246,23 @@ class OriginalHand:
             return pin.buildModelFromXML(self.urdf_text)
         except Exception as exc:
             raise ParseError(f"Pinocchio cannot load {self.path}: {exc}") from None
+
+
+def read_mesh(filename: str | Path):
+    """A hand link's mesh file as one trimesh (scene transforms applied, no processing): how the parser
+    measures it and the simulator gets it (:func:`ohra.sim.bullet.bullet_mesh`).
+
+    Raises :class:`ParseError` naming the file when it cannot be read or has no faces.
+    """
+    import trimesh
+
+    try:
+        m = trimesh.load(filename, force="mesh", process=False)
+    except Exception as exc:  # trimesh raises many kinds
+        raise ParseError(f"mesh {filename} cannot be read: {exc}") from None
+    if not isinstance(m, trimesh.Trimesh) or len(m.faces) == 0:
+        raise ParseError(f"mesh {filename} has zero faces")
+    return m
 
 
 def _joint_value(qb: np.ndarray, index: dict[str, int], joints: dict[str, Joint], name: str, over: dict) -> np.ndarray:
@@ -267,4 +276,4 @@ def _joint_value(qb: np.ndarray, index: dict[str, int], joints: dict[str, Joint]
     return qb[:, index[name]]
 
 
-__all__ = ["OriginalHand", "Joint", "Geometry", "MissingMeshWarning", "MOVABLE_TYPES", "KNOWN_TYPES"]
+__all__ = ["OriginalHand", "Joint", "Geometry", "MissingMeshWarning", "MOVABLE_TYPES", "KNOWN_TYPES", "read_mesh"]

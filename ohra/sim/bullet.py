@@ -46,8 +46,8 @@ def bullet_mesh(path: str | Path) -> Path:
 
     import trimesh
 
-    from ohra.errors import ParseError
     from ohra.io import write_bytes
+    from ohra.original.hand import read_mesh
     from ohra.paths import cache_dir
 
     path = Path(path)
@@ -57,12 +57,7 @@ def bullet_mesh(path: str | Path) -> Path:
     out = cache_dir() / "bullet_meshes" / f"{path.stem}-{digest}.obj"
     if out.is_file():
         return out
-    try:
-        mesh = trimesh.load(path, force="mesh", process=False)
-    except Exception as exc:  # trimesh raises many kinds
-        raise ParseError(f"mesh {path} cannot be read for the simulator: {exc}") from None
-    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-        raise ParseError(f"mesh {path} has zero faces")
+    mesh = read_mesh(path)
     write_bytes(out, trimesh.exchange.obj.export_obj(mesh, include_normals=False, include_texture=False).encode())
     return out
 
