@@ -272,7 +272,7 @@ def _cmd_sample(args: argparse.Namespace) -> int:
     timing: dict = {}
     mirrored = model.mirrors(args.condition_hand or params, _mirror(args.mirror))
     g = model.sample(params, obj, args.n, seed=args.seed, timing=timing, refine=_refine(args.refine), centre=args.centre,
-                     condition_hand=args.condition_hand, candidates=args.candidates, mirror=mirrored)
+                     condition_hand=args.condition_hand, candidates=args.candidates, mirror=mirrored, name=args.hand)
     from ohra.hands import get_couplings
 
     couplings = get_couplings(args.hand)

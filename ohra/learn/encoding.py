@@ -87,7 +87,8 @@ class AxisSnapWarning(UserWarning):
 
 
 class OutOfSupportWarning(UserWarning):
-    """A hand encoded by the VAE lies outside the hands it was trained on (the sampler's support)."""
+    """A hand lies outside the hands a learned model was trained on: encoded by the VAE, outside the sampler's
+    support; sampled by a grasp model, outside its training hands' conditions (``GraspModel.support``)."""
 
 
 class LatentError(OhraError, ValueError):

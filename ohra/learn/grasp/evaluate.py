@@ -410,7 +410,7 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
                     continue
             timing: dict = {}
             grasps = model.sample(params, obj, int(n), seed=s, timing=timing, condition_hand=condition_hand, refine=refine,
-                                  centre=centre, candidates=candidates, mirror=flip)
+                                  centre=centre, candidates=candidates, mirror=flip, name=str(name))
             if couplings:  # what the simulation runs (it drives coupled joints by their drivers), stored as such
                 from ohra.canonical.couplings import project
 

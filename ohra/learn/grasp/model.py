@@ -145,6 +145,15 @@ from their mesh frame's origin (the YCB meshes in ``../shared/objects``, some of
 trained on, lie 0.8-9.7 cm off; procedural objects 0)."""
 
 
+SUPPORT_MARGIN = 0.5
+"""How far (condition units) a hand's condition may lie outside the training hands' range in any entry before
+:meth:`GraspModel.sample` warns that the hand is unseen (:class:`~ohra.learn.encoding.OutOfSupportWarning`).
+Units: the VAE latent (prior standard deviation 1) for ``vae`` models, the training hands' spread for ``params``
+ones. Measured on the shipped models: mirror twins of training hands and held-out LEAP variants lie 0-0.25 out;
+the registered hands neither model trained on 0.56-2.5 (``default``: LEAP 0.56-0.90, Dex3, Gaia, Inspire, Sharpa,
+Ability 1.3-2.5) and 4.4-13.6 (``leap``: every non-LEAP-template hand, the parsed LEAP hand included)."""
+
+
 def object_offset(obj: ObjectModel) -> np.ndarray:
     """(3,) [m] the centre of ``obj``'s mesh bounding box in its mesh frame."""
     b = np.asarray(obj.mesh.bounds, dtype=float)
@@ -251,7 +260,7 @@ class GraspModel:
     def sample(self, hand: HandLike, obj: ObjectLike, n: int, rotations: Any = None, seed: int = 0,
                timing: dict | None = None, condition_hand: HandLike | None = None,
                refine: bool | RefineSettings = False, centre: bool = False, candidates: int = 1,
-               mirror: bool | str = "auto") -> np.ndarray:
+               mirror: bool | str = "auto", name: str | None = None) -> np.ndarray:
         """``n`` grasps of ``hand`` on ``obj`` (see the module docstring).
 
         Args:
@@ -288,6 +297,8 @@ class GraspModel:
                 (:meth:`mirrors`), so a model trained on right hands grasps with their left twins. Hands
                 the model trained on, and hands more like them than their mirror images, are sampled as
                 they are. With ``condition_hand`` the decision is made on that hand, and both are mirrored.
+            name: how a warning names ``hand`` (default: ``hand`` when it is a name or path); a hand outside the
+                model's training hands gets one (:meth:`support_warning`).
 
         Returns:
             (n, 31) float64 grasps ``[t (3), rot6d (6), q (22)]``: ``t`` the palm-frame origin in the
@@ -327,6 +338,7 @@ class GraspModel:
             net_params, signs, cond_params = self._mirrored(params, cond_params)
             rots = rots * _Y_FLIP[:, None] * _Y_FLIP  # S R M
             shift = shift * _Y_FLIP
+        self.support_warning(cond_params, (hand if name is None else name) if condition_hand is None else condition_hand, flip)
         hand_vec = torch.from_numpy(self.condition.vector(cond_params).astype(np.float32))
         lower = torch.from_numpy(np.asarray(net_params.joint_lowers, dtype=np.float32))
         upper = torch.from_numpy(np.asarray(net_params.joint_uppers, dtype=np.float32))
@@ -378,6 +390,49 @@ class GraspModel:
                           f"mesh frame's origin, over {100 * CENTRE_WARN:g} cm (the shipped models' training objects lie "
                           "within that): grasps sampled in that frame can miss the object; pass centre=True (--centre)", ObjectWarning,
                           stacklevel=user_stacklevel())
+
+    def support(self, hand: HandLike, mirror: bool | str = "auto") -> tuple[float, int] | None:
+        """How far ``hand`` (as :meth:`sample` conditions on it: mirrored when ``mirror`` says so) lies outside the
+        hands this model trained on: (largest excess over the training conditions' range, in condition units;
+        number of entries more than :data:`SUPPORT_MARGIN` out), or None when no training hand resolves here."""
+        params = resolve_hand(hand)
+        flip = self.mirrors(params, mirror)
+        return self._support(self._mirrored(params, params)[2] if flip else params)
+
+    def _support(self, cond_params: Any) -> tuple[float, int] | None:
+        train = self._training_conditions()
+        if train is None:
+            return None
+        c = self.condition.vector(cond_params)
+        excess = np.maximum(train.min(axis=0) - c, 0.0) + np.maximum(c - train.max(axis=0), 0.0)
+        return float(excess.max()), int(np.count_nonzero(excess > SUPPORT_MARGIN))
+
+    def support_warning(self, cond_params: Any, label: Any, flipped: bool = False) -> None:
+        """Warn (:class:`~ohra.learn.encoding.OutOfSupportWarning`, once per hand and model) when the condition
+        :meth:`sample` gives the networks lies more than :data:`SUPPORT_MARGIN` outside the training hands' range:
+        the grasps of such a hand are a zero-shot guess the model's training says little about (README, *Grasp
+        model*: the shipped default model on the Ability and SVH hands)."""
+        from ohra.learn.encoding import OutOfSupportWarning
+
+        key = "support:" + hand_key(cond_params)
+        if key in self._cache:
+            return
+        self._cache[key] = True
+        try:
+            found = self._support(cond_params)
+        except ParamsError:  # sample() raises it, naming the hand, just after
+            return
+        if found is None or found[1] == 0:
+            return
+        worst, count = found
+        hands = list(self.meta.get("hands") or [])
+        named = ", ".join(hands) if len(hands) <= 4 else f"{len(hands)} hands, {hands[0]} ... {hands[-1]}"
+        units = "latent units" if self.condition.kind == "vae" else "training spreads"
+        label = label if isinstance(label, (str, Path)) else f"{type(label).__name__}({label.num_fingers} fingers)"
+        warnings.warn(f"hand {str(label)!r}{' (as its mirror image)' if flipped else ''} lies outside the hands this grasp "
+                      f"model trained on ({named}): {count} of {len(self.condition.vector(cond_params))} condition "
+                      f"entries beyond their range, by up to {worst:.2f} {units}; its grasps are a zero-shot guess "
+                      "(evaluate them before use)", OutOfSupportWarning, stacklevel=user_stacklevel())
 
     def _run(self, obj: ObjectModel, hand_vec: torch.Tensor, r6: np.ndarray, lower: torch.Tensor, upper: torch.Tensor,
              gen: torch.Generator, shift: np.ndarray | None = None, mirror: bool = False,

@@ -1,0 +1,96 @@
+"""A grasp model says when it is asked for a hand unlike the ones it trained on (``OutOfSupportWarning``)."""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("torch")
+
+from ohra.canonical.params import ExtendedParams  # noqa: E402
+from ohra.learn.encoding import OutOfSupportWarning  # noqa: E402
+from ohra.learn.grasp.condition import params_vector  # noqa: E402
+from ohra.learn.grasp.model import SUPPORT_MARGIN, load_grasp_model  # noqa: E402
+from ohra.objects.model import ObjectModel  # noqa: E402
+
+ABILITY = Path(__file__).parent / "data" / "ability_hand_right_base.json"
+
+
+@pytest.fixture(scope="module")
+def default_model():
+    return load_grasp_model("default")
+
+
+@pytest.fixture(scope="module")
+def leap_model():
+    return load_grasp_model("leap")
+
+
+@pytest.fixture(scope="module")
+def capsule():
+    return ObjectModel.builtin("capsule")
+
+
+def _support_warnings(model, hand, obj, calls=1):
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for seed in range(calls):
+            model.sample(hand, obj, 2, seed=seed)
+    return [str(w.message) for w in caught if issubclass(w.category, OutOfSupportWarning)]
+
+
+@pytest.mark.parametrize("hand", ["barrett_hand", "shadow_hand_right", "shadow_hand_left", "allegro_hand_right"])
+def test_training_hands_and_their_mirror_twins_sample_without_a_warning(default_model, capsule, hand):
+    assert _support_warnings(default_model, hand, capsule) == []
+
+
+def test_an_unseen_hand_is_named_once_with_the_training_hands_and_how_far_out_it_lies(default_model, capsule):
+    found = _support_warnings(default_model, str(ABILITY), capsule, calls=2)
+    assert len(found) == 1, found
+    msg = found[0]
+    assert str(ABILITY) in msg and "allegro_hand_left, barrett_hand, shadow_hand_right" in msg
+    worst, count = default_model.support(str(ABILITY))
+    assert worst > 1.0 and count >= 3
+    assert f"{count} of 32 condition entries" in msg and f"{worst:.2f} latent units" in msg
+
+
+def test_held_out_leap_variants_lie_inside_the_leap_models_support_and_the_real_leap_hand_outside(leap_model, capsule):
+    assert "leap_0000" not in leap_model.meta["hands"]
+    assert _support_warnings(leap_model, "leap_0000", capsule) == []
+    assert leap_model.support("leap_0000")[1] == 0
+    found = _support_warnings(leap_model, "leap_hand_right", capsule)
+    assert len(found) == 1 and "66 hands, leap_0233 ... leap_3333" in found[0] and "training spreads" in found[0]
+
+
+@pytest.mark.parametrize("beyond, warns", [(SUPPORT_MARGIN - 0.1, False), (SUPPORT_MARGIN + 0.1, True)])
+def test_the_margin_is_measured_in_training_spreads_beyond_the_largest_training_value(leap_model, capsule, beyond, warns):
+    # a LEAP variant whose palm radius (condition entry 0) lies `beyond` spreads past the largest training value
+    cond = leap_model.condition
+    largest = max(params_vector(leap_model_hand)[0] for leap_model_hand in _training_params(leap_model))
+    hand = ExtendedParams.from_vector(_training_params(leap_model)[0].to_vector(), template="leap")
+    v = hand.to_vector()
+    v[0] = largest + beyond * cond.scale[0]
+    hand = ExtendedParams.from_vector(v, template="leap")
+    worst, count = leap_model.support(hand)
+    assert worst == pytest.approx(beyond, abs=1e-9) and count == int(warns)
+    assert bool(_support_warnings(leap_model, hand, capsule)) == warns
+
+
+def _training_params(model):
+    from ohra.learn.grasp.condition import resolve_hand
+
+    return [resolve_hand(h) for h in model.meta["hands"]]
+
+
+def test_the_cli_names_the_hand_as_the_user_gave_it_on_one_line(tmp_path, capsys):
+    from ohra.cli.main import main
+
+    out = tmp_path / "g.npz"
+    assert main(["grasp", "sample", "--hand", str(ABILITY), "--object", "builtin:box", "-n", "2", "-o", str(out)]) == 0
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if "outside the hands this grasp model trained on" in ln]
+    assert len(lines) == 1 and lines[0].startswith(f"ohra: warning: hand '{ABILITY}'")
+    assert main(["grasp", "sample", "--hand", "barrett_hand", "--object", "builtin:box", "-n", "2", "-o", str(out)]) == 0
+    assert "outside the hands" not in capsys.readouterr().err
