@@ -688,3 +688,23 @@ def test_a_run_records_the_form_of_the_hand_it_trains_on(tmp_path):
         _write_config(run, RotationConfig(hand=hand), PPOSettings(total_steps=48))
         saved = json.loads((run / "config.json").read_text())
         assert saved["env"]["form"] is None and saved["hand_form"] == form
+
+
+def test_a_run_is_loaded_and_resumed_in_the_form_it_recorded_not_the_hands_default_now(tmp_path):
+    """A run recorded with form null trained the hand's default form then (``hand_form``): evaluating it builds that
+    form, and resuming it onto a hand whose default form has since changed is refused, naming both forms."""
+    from ohra.learn.rl.train import _check_resume, load_run
+
+    env_cfg, ppo = RotationConfig(hand="shadow_hand_right"), PPOSettings()  # the default now: its extended form
+    saved = {"env": json.loads(json.dumps(env_cfg.to_dict())), "ppo": json.loads(json.dumps(ppo.to_dict()))}
+    for recorded, loaded in (("base", "base"), ("extended", "extended"), (None, None)):
+        d = dict(saved, **({"hand_form": recorded} if recorded else {}))
+        (tmp_path / "config.json").write_text(json.dumps(d))
+        assert load_run(tmp_path)[0].form == loaded
+        if recorded == "base":  # planted: the run trained the base form; null now resolves to extended
+            with pytest.raises(RLConfigError, match=r"form: run 'base', now 'extended'"):
+                _check_resume(tmp_path, env_cfg, ppo)
+            _check_resume(tmp_path, env_cfg.with_overrides(form="base"), ppo)
+        else:  # null and the form it stands for are one setting, either way round
+            _check_resume(tmp_path, env_cfg, ppo)
+            _check_resume(tmp_path, env_cfg.with_overrides(form="extended"), ppo)

@@ -251,6 +251,26 @@ def test_an_interrupted_starting_state_generation_continues_to_the_same_states(t
     assert again.attempts == whole.attempts and not partial.exists()
 
 
+def test_a_continued_generation_counts_the_rejections_of_the_interrupted_one_too(tmp_path, monkeypatch):
+    """The "only N of M starting states" warning gives the reasons of every rejected attempt, those made before an
+    interruption included (they were saved with the unfinished set)."""
+    from ohra.sim.rotation import grasps as G
+
+    monkeypatch.setenv("OHRA_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(G, "PARTIAL_EVERY", 1)
+    monkeypatch.setattr(G, "MAX_ATTEMPTS_PER_GRASP", 3)
+    # planted: attempt 1 falls, 2 is kept (and saved), 3 is interrupted; after the restart every attempt has too few contacts
+    first = iter([G.REJECTIONS[1], None])
+    monkeypatch.setattr(G, "_rejection", lambda *a, **k: next(first))
+    task = resolve(RotationConfig(grasp_count=2))
+    with pytest.raises(StopIteration):
+        G.load_or_generate(task)
+    monkeypatch.setattr(G, "_rejection", lambda *a, **k: G.REJECTIONS[5])
+    with pytest.warns(UserWarning, match=r"only 1 of 2 starting states after 6 attempts; the others: too few hand contacts "
+                                         r"\(4\), object fell \(1\)"):
+        G.load_or_generate(task)
+
+
 def test_a_hand_that_keeps_no_starting_state_is_told_why(tmp_path, monkeypatch):
     """D'Claw (a claw, not a palm-up hand) ended with "none of N perturbed grasps survived 1.5 s" and nothing on why:
     the error now counts each rejection reason, and says what most falls mean."""

@@ -221,8 +221,13 @@ def _check_resume(run_dir: Path, env_cfg: RotationConfig, ppo: PPOSettings) -> N
     config is read through the dataclasses, so a setting added to ohra after the run was made counts
     at the value the run had (``SAVED_BEFORE``) or its default instead of failing the comparison."""
     saved = read_config(run_dir)
-    theirs = _plain(RotationConfig.from_saved(_saved_env(run_dir, saved), f"{run_dir}/config.json").to_dict())
+    theirs_cfg = RotationConfig.from_saved(_saved_env(run_dir, saved), f"{run_dir}/config.json")
+    theirs = _plain(theirs_cfg.to_dict())
     mine = _plain(_portable_env(run_dir, env_cfg, copy=False)[0])
+    # forms compare as resolved: null and the form it stands for are one setting, and a hand whose default form
+    # changed since the run (a spec YAML's `form:` edited) is another hand
+    theirs["form"] = theirs.get("form") or _hand_form(theirs_cfg)
+    mine["form"] = mine.get("form") or _hand_form(env_cfg)
     diff = sorted(k for k in set(theirs) | set(mine) if theirs.get(k) != mine.get(k))
     if diff:
         raise RLConfigError(f"{run_dir}: the environment config differs from the run being resumed: "
@@ -531,12 +536,18 @@ def _write_config(run_dir: Path, env_cfg: RotationConfig, ppo: PPOSettings, init
         d["init_from"] = init_from
     if hand_source is not None:
         d["hand_source"] = hand_source  # where the run's copy of its hand file came from
-    # env.form may be null (the hand's default); a spec path and a registered name default to different forms
+    # env.form may be null (the hand's default; a spec path and a registered name default to different forms):
+    # the form it resolved to is what loading the run uses (_saved_env)
+    d["hand_form"] = _hand_form(env_cfg)
+    _replace_config(run_dir, d)
+
+
+def _hand_form(env_cfg: RotationConfig) -> str:
+    """The canonical form ``env_cfg``'s hand resolves to (its ``form``, else the hand's default)."""
     from ohra.hands import get_hand
     from ohra.sim.rotation.task import canonical_form
 
-    d["hand_form"] = get_hand(env_cfg.hand, canonical_form(env_cfg.hand, env_cfg.form)).form
-    _replace_config(run_dir, d)
+    return get_hand(env_cfg.hand, canonical_form(env_cfg.hand, env_cfg.form)).form
 
 
 HAND_FILE_SUFFIXES = (".json",)  # a params file; a spec YAML names its URDF relative to itself: not copied
@@ -578,8 +589,11 @@ def _object_file(obj: str) -> bool:
 
 
 def _saved_env(run_dir: str | Path, d: dict) -> dict:
-    """``d["env"]`` with a hand file stored in the run folder (:func:`_portable_env`) named by its path."""
+    """``d["env"]`` with a hand file stored in the run folder (:func:`_portable_env`) named by its path, and a
+    null ``form`` pinned to the form the run recorded (``hand_form``) when it did."""
     env = dict(d["env"])
+    if env.get("form") is None and isinstance(d.get("hand_form"), str):
+        env["form"] = d["hand_form"]  # the form the run trained in, whatever the hand's default is now
     hand = env.get("hand")
     if isinstance(hand, str) and Path(hand).suffix.lower() in HAND_FILE_SUFFIXES and not Path(hand).is_absolute():
         own = Path(run_dir) / hand

@@ -283,9 +283,9 @@ def generate(task: Task, progress: bool | None = False, partial: Path | None = N
         Q, T, P, O = [], [], [], []
         attempts = 0
         key = cache_key(task)
+        rejected: Counter = Counter()  # the rejections' reasons, for the messages below (an interrupted run's included)
         if partial is not None:
-            attempts = _resume_partial(partial, key, hold, rng, (Q, T, P, O))
-        rejected: Counter = Counter()  # this call's rejections, for the error below
+            attempts = _resume_partial(partial, key, hold, rng, (Q, T, P, O), rejected)
         bar = _bar(cfg.grasp_count, f"grasps {hand.name}", progress)
         bar.update(len(Q))
         while len(Q) < cfg.grasp_count and attempts < MAX_ATTEMPTS_PER_GRASP * cfg.grasp_count:
@@ -307,7 +307,7 @@ def generate(task: Task, progress: bool | None = False, partial: Path | None = N
                 O.append(s.obj_quat)
                 bar.update(1)
                 if partial is not None and len(Q) % PARTIAL_EVERY == 0 and len(Q) < cfg.grasp_count:
-                    _save_partial(partial, key, hold, rng, attempts, (Q, T, P, O))
+                    _save_partial(partial, key, hold, rng, attempts, (Q, T, P, O), rejected)
         bar.close()
     finally:
         scene.close()
@@ -324,14 +324,16 @@ def generate(task: Task, progress: bool | None = False, partial: Path | None = N
     return GraspSet(np.array(Q), np.array(T), np.array(P), np.array(O), hold, attempts, key)
 
 
-def _save_partial(path: Path, key: str, hold: np.ndarray, rng: np.random.Generator, attempts: int, lists) -> None:
+def _save_partial(path: Path, key: str, hold: np.ndarray, rng: np.random.Generator, attempts: int, lists,
+                  rejected: Counter) -> None:
     Q, T, P, O = (np.array(x) for x in lists)
     write_npz(path, {"q": Q, "target": T, "obj_pos": P, "obj_quat": O, "hold": hold, "attempts": attempts,
-                            "key": key, "rng": json.dumps(rng.bit_generator.state)})
+                     "key": key, "rng": json.dumps(rng.bit_generator.state), "rejected": json.dumps(dict(rejected))})
 
 
-def _resume_partial(path: Path, key: str, hold: np.ndarray, rng: np.random.Generator, lists) -> int:
-    """Fill ``lists`` and ``rng`` from an unfinished generation of the same key; returns its attempts (0: none)."""
+def _resume_partial(path: Path, key: str, hold: np.ndarray, rng: np.random.Generator, lists, rejected: Counter) -> int:
+    """Fill ``lists``, ``rng`` and ``rejected`` from an unfinished generation of the same key; returns its attempts
+    (0: none). A file from before the counts were saved continues with none counted."""
     if not path.is_file():
         return 0
     try:
@@ -340,9 +342,11 @@ def _resume_partial(path: Path, key: str, hold: np.ndarray, rng: np.random.Gener
                 return 0
             arrays = [np.asarray(d[k]) for k in ("q", "target", "obj_pos", "obj_quat")]
             attempts, state = int(d["attempts"]), json.loads(str(d["rng"]))
+            counts = json.loads(str(d["rejected"])) if "rejected" in d.files else {}
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
         return 0  # unreadable: start again
     rng.bit_generator.state = state
+    rejected.update({str(k): int(n) for k, n in counts.items()})
     for lst, a in zip(lists, arrays):
         lst.extend(list(a))
     return attempts
