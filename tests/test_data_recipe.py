@@ -79,6 +79,7 @@ def test_a_hand_file_is_found_beside_the_recipe_like_an_object_file(tmp_path, mo
     ({"hands": ["leap_3333"], "objects": [{"procedural": "box", "cuont": 3}]}, r"objects\[0\]: unknown key\(s\) cuont"),
     ({"hands": ["leap_3333"], "objects": [{"path": "mug.obj", "scael": 0.5}]}, r"unknown key\(s\) scael"),
     ({"hands": ["leap_3333"], "objects": [{"path": "mug.obj", "scale": 0}]}, "'scale' must be a number > 0"),
+    ({"hands": ["leap_3333"], "objects": [{"path": "mug.obj", "body": "convex"}]}, "'body' must be one of auto, hull, provided, vhacd"),
     ({"hands": ["leap_3333"], "objects": ["builtin"], "filter": "no"}, "'filter' must be true or false"),
     ({"hands": ["leap_3333"], "objects": ["builtin"], "cap": True}, "'cap' must be an integer >= 1"),
     ({"hands": ["leap_3333"], "objects": ["builtin"], "split": {"test_fraction": "half"}}, "split.test_fraction must be a number"),

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ohra.cli.main import BODY_CHOICES, BODY_HELP
 from ohra.errors import GraspError, ObjectError
 
 EPILOG = "Exit codes: 0 ok, 2 bad input. The report is JSON (success, displacements per phase, contacts, penetration)."
@@ -34,6 +35,8 @@ def register(subparsers) -> None:
     p.add_argument("--object", required=True, help="mesh (.obj/.stl/.ply/.off/.glb), object URDF or folder, builtin:NAME "
                    "or procedural:FAMILY:SEED")
     p.add_argument("--scale", type=float, default=None, help="multiply the coordinates of object files (0.001 for millimetre meshes)")
+    p.add_argument("--body", choices=BODY_CHOICES, default=None, help=BODY_HELP.replace(
+        "auto (default: ", "auto (default, unless the grasp file records another: ", 1))
     p.add_argument("--key", default=None, help="array name inside the .npz (default: 'grasps' or the only array)")
     p.add_argument("--workers", type=int, default=1, help="processes (default 1)")
     p.add_argument("--backend", choices=("process", "ray"), default="process", help="process pool (default) or Ray")
@@ -118,7 +121,7 @@ def load_grasp_file(path: str | Path, key: str | None = None) -> tuple[np.ndarra
             key = "grasps" if "grasps" in names else (names[0] if len(names) == 1 else None)
         if key is None or key not in names:
             raise GraspError(f"{path}: no array {key or 'grasps'!r} (arrays: {', '.join(names) or 'none'}); use --key")
-        info = {k: str(data[k]) for k in ("hand", "form", "model", "object", "object_name", "object_hash", "scale")
+        info = {k: str(data[k]) for k in ("hand", "form", "model", "object", "object_name", "object_hash", "scale", "body")
                 if k in names and data[k].ndim == 0}
         return np.asarray(data[key]), info or _shard_info(path)
 
@@ -140,6 +143,7 @@ def _shard_info(path: Path) -> dict[str, str]:
         return {}  # not a shard this manifest lists: nothing to compare
     form = "extended" if "finger_radii" in entry.get("params", {}) else "base"
     return {"hand": path.parent.name, "form": form, "object_name": str(obj["name"]), "object_hash": str(obj["mesh_hash"]),
+            "body_hash": str(obj.get("body_hash", "")), "body_kind": str(obj.get("body", {}).get("kind", "")),
             "made": "synthesised"}
 
 
@@ -192,13 +196,22 @@ def run(args: argparse.Namespace) -> int:
         # the grasps were sampled on this file read at another scale (a millimetre mesh): read it the same way
         args.scale = float(made["scale"])
         print(f"ohra: note: --scale {args.scale:g} from {args.grasps} (the scale its grasps were sampled at)", file=sys.stderr)
-    objs = resolve_objects(args.object, scale=args.scale)
+    if args.body is None:
+        args.body = "auto"
+        if made.get("body", "auto") != "auto" and made.get("object") == str(args.object):
+            args.body = made["body"]  # the body refined grasps were made against; the test runs on it too
+            print(f"ohra: note: --body {args.body} from {args.grasps} (the body its grasps were sampled on)", file=sys.stderr)
+    objs = resolve_objects(args.object, scale=args.scale, body=args.body)
     if len(objs) != 1:
         raise ObjectError(f"--object must name one object, {args.object!r} names {len(objs)}")
     obj = objs[0]
     if made.get("object_hash") and made["object_hash"] != obj.mesh_hash:
         print(f"ohra: note: {args.grasps} holds grasps of {made.get('object_name', 'another object')} (mesh {made['object_hash']}); "
               f"evaluating them on --object {args.object} (mesh {obj.mesh_hash})", file=sys.stderr)
+    elif made.get("body_hash") and made["body_hash"] != obj.body_hash:
+        kind = made.get("body_kind") or "another body"
+        print(f"ohra: note: {args.grasps} was synthesised on the body {kind} of this mesh; --body {args.body} gives "
+              f"{obj.body.kind} (--body {kind.split(':', 1)[0]} evaluates on the body they were made on)", file=sys.stderr)
     from ohra.objects.resolve import warn_if_ungraspable
 
     warn_if_ungraspable(obj)

@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
-from ohra.cli.main import subcommand_group
+from ohra.cli.main import BODY_CHOICES, BODY_HELP, subcommand_group
 from ohra.errors import OhraError
 
 if TYPE_CHECKING:
@@ -66,6 +66,7 @@ def register(sub: Any) -> None:
                    "or procedural:FAMILY:SEED")
     p.add_argument("--scale", type=float, default=None, help="multiply the coordinates of object files (0.001 for "
                    "millimetre meshes; built-in and procedural shapes keep their size)")
+    p.add_argument("--body", choices=BODY_CHOICES, default="auto", help=BODY_HELP)
     p.add_argument("-n", type=int, default=100, help="number of grasps (default 100)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--model", help=model_help)
@@ -85,6 +86,7 @@ def register(sub: Any) -> None:
                    "(.obj/.stl/.ply/.off/.glb), object URDFs or folders")
     p.add_argument("--scale", type=float, default=None, help="multiply the coordinates of object files (0.001 for "
                    "millimetre meshes; built-in and procedural shapes keep their size)")
+    p.add_argument("--body", choices=BODY_CHOICES, default="auto", help=BODY_HELP)
     p.add_argument("-n", type=int, default=100, help="grasps per (hand, object) (default 100)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--model", help=model_help)
@@ -268,7 +270,7 @@ def _cmd_sample(args: argparse.Namespace) -> int:
 
     # the model must read the hand it is conditioned on
     model, note = _load(args.model, [args.condition_hand or args.hand], resolved={args.hand: params})
-    obj = resolve_object(args.object, scale=args.scale)  # sampling warns about its size (GraspModel.object_warnings)
+    obj = resolve_object(args.object, scale=args.scale, body=args.body)  # sampling warns about its size (GraspModel.object_warnings)
     timing: dict = {}
     mirrored = model.mirrors(args.condition_hand or params, _mirror(args.mirror))
     g = model.sample(params, obj, args.n, seed=args.seed, timing=timing, refine=_refine(args.refine), centre=args.centre,
@@ -294,6 +296,7 @@ def _cmd_sample(args: argparse.Namespace) -> int:
                            # seed and the sampling options
                            "object": np.array(str(args.object)), "object_name": np.array(obj.name),
                            "scale": np.array(float(obj.file_scale)),  # ohra eval reads the object at it again
+                           "body": np.array(str(obj.body_choice)),  # and simulates it as this body (refinement used it)
                            "object_hash": np.array(obj.mesh_hash), "seed": np.array(int(args.seed)),
                            "refine": np.array(str(args.refine or "none")), "candidates": np.array(int(args.candidates)),
                            "centre": np.array(bool(args.centre)),
@@ -322,7 +325,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
 
     from ohra.objects.model import resolve_objects
 
-    objs = resolve_objects(args.objects, scale=args.scale)
+    objs = resolve_objects(args.objects, scale=args.scale, body=args.body)
     # with a report file, finished pairs are kept beside it until the report is written: a rerun of an
     # interrupted evaluation continues where it stopped
     pairs_dir = Path(args.output).with_suffix(".pairs") if args.output else None

@@ -47,6 +47,11 @@ _Parser = Parser  # the name this class had before the CLI became a package
 
 
 # a group several command modules add to keeps one help text, whichever module registers it first
+BODY_HELP = ("the body object files are grasped and simulated as: auto (default: the hull of a convex mesh, else the "
+             "nearest to the mesh of the hull, a provided decomposition and V-HACD), hull, provided (collision_vhacd.obj "
+             "beside the mesh or the URDF's collisions), vhacd; built-in and procedural shapes keep their exact solids")
+BODY_CHOICES = ("auto", "hull", "provided", "vhacd")  # ohra.objects.model.BODY_CHOICES (a test holds them equal)
+
 SHARED_GROUP_HELP = {"train": "train learned models: vae, grasp, rotate"}
 
 

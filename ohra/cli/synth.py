@@ -14,7 +14,7 @@ import argparse
 from pathlib import Path
 from typing import Sequence
 
-from ohra.cli.main import Parser, execute
+from ohra.cli.main import BODY_CHOICES, BODY_HELP, Parser, execute
 from ohra.errors import OhraError
 
 DESCRIPTION = "Synthesise force-closure grasps (CasADi/IPOPT) and filter them in PyBullet."
@@ -31,6 +31,7 @@ def configure(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--objects", nargs="+", default=["builtin"],
                    help="builtin | builtin:NAME | procedural:FAMILY:SEED | mesh/URDF file | folder (default: builtin)")
     p.add_argument("--scale", type=float, default=None, help="multiply the coordinates of object files (0.001 for millimetre meshes)")
+    p.add_argument("--body", choices=BODY_CHOICES, default="auto", help=BODY_HELP)
     p.add_argument("--cap", type=int, default=None, help="stop a (hand, object) pair once this many grasps are kept")
     p.add_argument("--robust-trials", type=int, default=None,
                    help="perturbed re-tests a kept grasp must also pass (default 2; 0 = off); sizes: ohra.synth.robust")
@@ -98,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
     from ohra.synth.pipeline import SynthSettings, synthesize
 
     hands = _hands(args.hand)
-    objects = resolve_objects(args.objects, scale=args.scale)
+    objects = resolve_objects(args.objects, scale=args.scale, body=args.body)
     settings = SynthSettings(grasps_per_object=args.grasps_per_object, seed=args.seed, filter=not args.no_filter, cap=args.cap)
     if args.robust_trials is not None:
         settings = replace(settings, robustness=replace(settings.robustness, trials=args.robust_trials))

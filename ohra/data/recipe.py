@@ -14,6 +14,8 @@ A recipe is a YAML mapping (plain values only; unknown keys are errors naming th
       - builtin                      # all built-ins, or builtin:NAME
       - {path: meshes/mug.obj}       # a folder, a mesh or an object URDF
       - {glob: "@objects/ycb/*Can", scale: 1.0}     # @objects/ = the shared object root (OHRA_OBJECTS_ROOT)
+      - {path: meshes/cup.obj, body: vhacd}        # the body to grasp and simulate it as: auto (default), hull,
+                                                   # provided, vhacd (ohra.objects.model.BODY_CHOICES)
       - {procedural: superquadric, count: 20, seed: 0}
     grasps_per_pair: 16              # solver starts per (hand, object) pair
     cap: 8                           # stop a pair once this many grasps are kept
@@ -40,6 +42,7 @@ import numpy as np
 import yaml
 
 from ohra.errors import OhraError
+from ohra.objects.model import BODY_CHOICES
 
 RECIPE_KEYS = ("name", "seed", "hands", "objects", "grasps_per_pair", "cap", "split", "protocol", "robustness", "filter")
 
@@ -241,7 +244,7 @@ class Recipe:
                 paths = [self._path(o["path"])] if "path" in o else sorted(Path(p) for p in glob.glob(str(self._path(o["glob"]))))
                 if not paths:
                     raise RecipeError(f"{where}: glob {o['glob']!r} matches nothing")
-                out += resolve_objects([str(p) for p in paths], scale=o.get("scale"))
+                out += resolve_objects([str(p) for p in paths], scale=o.get("scale"), body=o.get("body", "auto"))
             else:
                 raise RecipeError(f"{where}: an object is a spec string or a mapping with 'path', 'glob' or 'procedural'")
         return out
@@ -301,7 +304,7 @@ class Recipe:
 
 
 HAND_KEYS = {"pattern": ("pattern", "digit_sum"), "params": ("params",), "spec": ("spec", "form")}
-OBJECT_KEYS = {"procedural": ("procedural", "count", "seed"), "path": ("path", "scale"), "glob": ("glob", "scale")}
+OBJECT_KEYS = {"procedural": ("procedural", "count", "seed"), "path": ("path", "scale", "body"), "glob": ("glob", "scale", "body")}
 
 
 def _check_entry(e: Any, kinds: dict[str, tuple[str, ...]], where: str) -> None:
@@ -324,6 +327,8 @@ def _check_entry(e: Any, kinds: dict[str, tuple[str, ...]], where: str) -> None:
     if "scale" in e and e["scale"] is not None and (isinstance(e["scale"], bool) or not isinstance(e["scale"], (int, float))
                                                     or not np.isfinite(e["scale"]) or e["scale"] <= 0):
         raise RecipeError(f"{where}: 'scale' must be a number > 0, got {e['scale']!r}")
+    if "body" in e and e["body"] not in BODY_CHOICES:
+        raise RecipeError(f"{where}: 'body' must be one of {', '.join(BODY_CHOICES)}, got {e['body']!r}")
     if "digit_sum" in e:
         _range(e["digit_sum"], where + ".digit_sum")
 

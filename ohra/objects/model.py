@@ -49,6 +49,15 @@ def _load_mesh_file(path: Path, scale: np.ndarray | None = None) -> trimesh.Trim
 
 
 OWN_PIECES = " pieces"  # the end of a body kind whose pieces are the mesh's own components ("provided:X.obj pieces")
+BODY_CHOICES = ("auto", "hull", "provided", "vhacd")
+"""What a mesh object can be grasped and simulated as (``body=``, ``--body``): ``auto`` the convex hull when the mesh is
+convex, else whichever of the hull, a provided decomposition and (when neither is within tolerance) V-HACD lies nearest
+the mesh on average; or the one named."""
+
+
+def _choice_of(kind: str) -> str:
+    """The ``body_choice`` that gives a body of ``kind`` (``"provided:collision_vhacd.obj"`` -> ``"provided"``)."""
+    return kind.split(":", 1)[0]
 
 
 def _label(path: Path) -> str:
@@ -146,16 +155,21 @@ class ObjectModel:
         repair: merge vertices, drop degenerate faces, fill holes, orient faces (see :func:`repair_mesh`).
         primitives: exact solids the body is made of (built-ins, procedural shapes).
         exact_sdf: closed-form signed distance of the shape the (convex) mesh approximates.
+        body_choice: which body a mesh object is grasped and simulated as (:data:`BODY_CHOICES`): ``"auto"``
+            (default: see :attr:`body`), ``"hull"``, ``"provided"`` (the given decomposition) or ``"vhacd"``.
+            Objects made of primitives or with an exact shape keep theirs.
 
     Raises:
         ObjectError: ``density`` is not a finite number > 0; the mesh has no faces or spans no volume
-            (a point, a line, a flat sheet).
+            (a point, a line, a flat sheet); ``body_choice`` is unknown.
     """
 
     def __init__(self, mesh: trimesh.Trimesh, name: str, density: float = DEFAULT_DENSITY,
                  source: Path | None = None, convex_pieces: list[trimesh.Trimesh] | None = None,
                  repair: bool = True, primitives: list[dict] | None = None, exact_sdf: SDF | None = None,
-                 pieces_label: str = "provided"):
+                 pieces_label: str = "provided", body_choice: str = "auto"):
+        if body_choice not in BODY_CHOICES:
+            raise ObjectError(f"object {name!r}: body must be one of {', '.join(BODY_CHOICES)}, got {body_choice!r}")
         if not (np.isfinite(float(density)) and float(density) > 0):
             raise ObjectError(f"object {name!r}: density must be a finite number > 0 kg/m^3, got {density}")
         if len(mesh.faces) == 0:
@@ -177,12 +191,13 @@ class ObjectModel:
         self._pieces_label = pieces_label
         self.primitives = primitives  # exact solids for the simulator (built-ins, procedural), else None
         self._exact_sdf = exact_sdf
+        self.body_choice = body_choice
         self.procedural_params: dict | None = None  # family, seed and sampled sizes of a procedural object
 
     # -- construction ------------------------------------------------------------------------------
     @classmethod
     def load(cls, path: str | Path, density: float = DEFAULT_DENSITY, name: str | None = None,
-             scale: float | None = None) -> "ObjectModel":
+             scale: float | None = None, body: str = "auto") -> "ObjectModel":
         """Load a mesh file, a PyBullet-style object URDF (mesh scale, then ``<visual>`` origin applied),
         or a folder holding one. A convex decomposition beside the mesh (or the URDF's
         ``<collision>`` mesh) is taken as provided pieces.
@@ -197,6 +212,8 @@ class ObjectModel:
                 names no object (``model.urdf``, ``textured*``, ``collision_vhacd``: the YCB layout).
             scale: factor on the vertices (and a provided decomposition's), which are read as metres:
                 e.g. 0.001 for a millimetre mesh; None: 1.
+            body: the body to grasp and simulate it as (``body_choice`` of :class:`ObjectModel`): ``"auto"``,
+                ``"hull"``, ``"provided"`` (the decomposition beside the mesh or in the URDF) or ``"vhacd"``.
 
         Returns:
             The object, in its mesh frame [m] (not recentred).
@@ -225,7 +242,7 @@ class ObjectModel:
                 warnings.warn(f"{path}: folder holds {len(meshes)} meshes ({', '.join(f.name for f in meshes)}); loading "
                               f"{meshes[0].name} as the object (pass the files themselves to load each)",
                               ObjectWarning, stacklevel=user_stacklevel())
-            return cls.load(cands[0], density, name or path.name, scale)
+            return cls.load(cands[0], density, name or path.name, scale, body)
         pieces, label_pieces = None, "provided"
         if path.suffix.lower() == ".urdf":
             # the object frame is the URDF link frame: mesh scale, then the <visual>/<collision> origin
@@ -279,7 +296,7 @@ class ObjectModel:
             mesh.apply_scale(float(scale))
             for pc in pieces or []:
                 pc.apply_scale(float(scale))
-        out = cls(mesh, label, density, path, pieces, pieces_label=label_pieces)
+        out = cls(mesh, label, density, path, pieces, pieces_label=label_pieces, body_choice=body)
         out.file_scale = float(scale) if scale is not None else 1.0  # what the file's coordinates were multiplied by
         return out
 
@@ -330,13 +347,18 @@ class ObjectModel:
         # the mesh is its own convex pieces (overlapping: its volume counts the overlaps twice, so the hull test
         # below would take a non-convex union for convex)
         own = bool(self._pieces) and self._pieces_label.endswith(OWN_PIECES)
-        if self.watertight and not own and hull.mass_properties.volume <= 1.01 * abs(float(self.mesh.volume)):
+        choice = self.body_choice
+        if choice != "auto":
+            scored = [(None, self._chosen_body(hull))]
+            scored = [(self._fidelity_of(b), b) for _, b in scored]
+        elif self.watertight and not own and hull.mass_properties.volume <= 1.01 * abs(float(self.mesh.volume)):
             return hull  # convex: the hull is the mesh
-        cands = [hull] + ([Body(self._pieces, self._pieces_label)] if self._pieces else [])
-        scored = [(self._fidelity_of(b), b) for b in cands]
+        else:
+            cands = [hull] + ([Body(self._pieces, self._pieces_label)] if self._pieces else [])
+            scored = [(self._fidelity_of(b), b) for b in cands]
         # V-HACD only for closed meshes: on an open surface it voxelises a thin shell (an open tube
         # became 30 of its 283 cm^3), while the hull takes the holes as closed
-        if not min(f.p95 for f, _ in scored) <= BODY_TOLERANCE_M and not self._pieces and self.watertight:
+        if choice == "auto" and not min(f.p95 for f, _ in scored) <= BODY_TOLERANCE_M and not self._pieces and self.watertight:
             try:
                 b = Body(vhacd_pieces(self.mesh, self.mesh_hash), "vhacd")
                 scored.append((self._fidelity_of(b), b))
@@ -359,7 +381,8 @@ class ObjectModel:
                           f"filled?); mass and inertia follow the body ({1e3 * mp.volume * self.density:.4g} g at "
                           f"{self.density:g} kg/m^3): "
                           + ("a finer decomposition" if best.kind.startswith("provided") else
-                             "a decomposition that follows the walls (collision_vhacd.obj beside the mesh)")
+                             "a decomposition that follows the walls (collision_vhacd.obj beside the mesh"
+                             + (", or body='vhacd', --body vhacd" if best.kind == "hull" else "") + ")")
                           + " or a density of (intended mass / body volume) corrects them", ObjectWarning,
                           stacklevel=user_stacklevel())
         if not self.watertight:
@@ -376,12 +399,32 @@ class ObjectModel:
                 warnings.warn(f"object {self.name!r}: the body closest to the mesh on average ({best.kind}, mean "
                               f"{1e3 * fid.mean:.1f} mm) lies beyond {tol} at the 95th percentile ({1e3 * fid.p95:.1f} mm); "
                               f"{b2.kind} is within it ({1e3 * f2.p95:.1f} mm) but farther on average ({1e3 * f2.mean:.1f} mm); "
-                              f"grasps are synthesised and simulated on {best.kind}", ObjectWarning, stacklevel=user_stacklevel())
+                              f"grasps are synthesised and simulated on {best.kind} (body={_choice_of(b2.kind)!r}, "
+                              f"--body {_choice_of(b2.kind)}, picks the other)", ObjectWarning, stacklevel=user_stacklevel())
+            elif choice != "auto":
+                warnings.warn(f"object {self.name!r}: the body chosen ({best.kind}, {len(best.pieces)} piece(s)) lies beyond "
+                              f"{tol} of the mesh at the 95th percentile ({1e3 * fid.p95:.1f} mm; mean {1e3 * fid.mean:.1f} mm, "
+                              f"volume x{fid.volume_ratio:.2f})", ObjectWarning, stacklevel=user_stacklevel())
             else:
                 warnings.warn(f"object {self.name!r}: no convex body within {tol} of the mesh "
                               f"(best: {best.kind}, 95th percentile {1e3 * fid.p95:.1f} mm, volume x{fid.volume_ratio:.2f}); "
                               "grasps are synthesised and simulated on that body", ObjectWarning, stacklevel=user_stacklevel())
         return best
+
+    def _chosen_body(self, hull: Body) -> Body:
+        """The body ``body_choice`` names (not ``"auto"``); :class:`ObjectError` when the object has none such."""
+        choice = self.body_choice
+        if choice == "hull":
+            return hull
+        if choice == "provided":
+            if not self._pieces:
+                where = f" beside {self.source} ({', '.join(DECOMPOSITION_NAMES)}) or in its URDF" if self.source else ""
+                raise ObjectError(f"object {self.name!r}: body 'provided' asked for, but it has no convex decomposition{where}")
+            return Body(self._pieces, self._pieces_label)
+        if not self.watertight:  # "vhacd": on an open surface V-HACD voxelises a thin shell
+            raise ObjectError(f"object {self.name!r}: body 'vhacd' needs a closed mesh; this one is open after repair "
+                              "(use 'hull' or 'auto')")
+        return Body(vhacd_pieces(self.mesh, self.mesh_hash), "vhacd")
 
     def _separate_parts(self) -> tuple[int, float] | None:
         """(groups, largest gap [m]) when the mesh is solid parts (each over 5 % of the volume) that fall into
@@ -589,7 +632,9 @@ class ObjectModel:
         """Summary for reports and manifests (body, its fidelity to the mesh, how mass was obtained)."""
         mp = self.mass_properties
         return {
-            "name": self.name, "source": self._source_spec(), "mesh_hash": self.mesh_hash,
+            "name": self.name, "source": self._source_spec(),
+            # how the source is read again into this object (a millimetre mesh's 0.001; the body asked for)
+            "scale": float(self.file_scale), "body_choice": self.body_choice, "mesh_hash": self.mesh_hash,
             "body_hash": self.body_hash, "faces": int(len(self.mesh.faces)), "watertight": self.watertight,
             "extents_m": [float(x) for x in self.extents], "volume_m3": self.volume, "mass_kg": self.mass,
             "density": self.density, "radius_m": self.radius, "center_mass_m": [float(x) for x in mp.center_mass],
@@ -621,8 +666,8 @@ def builtin_object_names() -> list[str]:
     return list(BUILTINS)
 
 
-def resolve_objects(spec, scale: float | None = None) -> list["ObjectModel"]:
+def resolve_objects(spec, scale: float | None = None, body: str = "auto") -> list["ObjectModel"]:
     """Objects from command-line specs (see :func:`ohra.objects.resolve.resolve_objects`)."""
     from ohra.objects.resolve import resolve_objects as _resolve
 
-    return _resolve(spec, scale)
+    return _resolve(spec, scale, body)

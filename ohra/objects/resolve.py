@@ -9,29 +9,32 @@ from pathlib import Path
 import numpy as np
 
 from ohra.errors import ObjectError, ObjectWarning, user_stacklevel
-from ohra.objects.model import MESH_SUFFIXES, ObjectModel, builtin_object_names
+from ohra.objects.model import BODY_CHOICES, MESH_SUFFIXES, ObjectModel, builtin_object_names
 
 # largest extent [m] of an object a hand can grasp; outside it the units are almost surely wrong
 # (a millimetre mesh read as metres is a 75 m apple) or the object is a speck or a wall
 GRASPABLE_EXTENT_M = (0.01, 0.5)
 
 
-def resolve_objects(spec: list[str] | str | None, scale: float | None = None) -> list[ObjectModel]:
+def resolve_objects(spec: list[str] | str | None, scale: float | None = None, body: str = "auto") -> list[ObjectModel]:
     """Objects from specs: ``builtin`` (all built-ins), ``builtin:NAME``, ``procedural:FAMILY:SEED``,
     a mesh/URDF file, or a folder (each sub-folder or mesh file in it). ``scale`` multiplies the
-    coordinates of objects read from files (e.g. 0.001 for millimetre meshes)."""
+    coordinates of objects read from files (e.g. 0.001 for millimetre meshes); ``body`` picks the body they are
+    grasped and simulated as (:data:`~ohra.objects.model.BODY_CHOICES`; built-in and procedural shapes keep their
+    exact solids)."""
     if scale is not None and not (isinstance(scale, (int, float)) and math.isfinite(scale) and scale > 0):
         raise ObjectError(f"scale must be a number > 0, got {scale!r}")
+    if body not in BODY_CHOICES:
+        raise ObjectError(f"body must be one of {', '.join(BODY_CHOICES)}, got {body!r}")
     specs = [spec] if isinstance(spec, str) else list(spec or ["builtin"])
     sized = [s for s in specs if s == "builtin" or s.startswith(("builtin:", "procedural:"))]
+    them = f"{', '.join(sized)} keep{'s' if len(sized) == 1 else ''}"
     if scale is not None and scale != 1.0 and sized:
-        import warnings
-
-        from ohra.errors import ObjectWarning, user_stacklevel
-
-        warnings.warn(f"scale {scale:g} applies to objects read from files; {', '.join(sized)} keep{'s' if len(sized) == 1 else ''} "
-                      "its own size (built-in and procedural shapes are made in metres)", ObjectWarning,
-                      stacklevel=user_stacklevel())
+        warnings.warn(f"scale {scale:g} applies to objects read from files; {them} its own size (built-in and procedural "
+                      "shapes are made in metres)", ObjectWarning, stacklevel=user_stacklevel())
+    if body != "auto" and sized:
+        warnings.warn(f"body {body!r} applies to objects read from files; {them} its exact solid (built-in and procedural "
+                      "shapes are simulated as what they are)", ObjectWarning, stacklevel=user_stacklevel())
     out: list[ObjectModel] = []
     for s in specs:
         if s == "builtin":
@@ -41,17 +44,18 @@ def resolve_objects(spec: list[str] | str | None, scale: float | None = None) ->
         elif s.startswith("procedural:"):
             out.append(parse_procedural(s))
         else:
-            out += _from_path(Path(s), scale)
+            out += _from_path(Path(s), scale, body)
     return out
 
 
-def resolve_object(obj: "ObjectModel | str | Path", scale: float | None = None) -> ObjectModel:
+def resolve_object(obj: "ObjectModel | str | Path", scale: float | None = None, body: str = "auto") -> ObjectModel:
     """One object from an ObjectModel or a spec.
 
     Args:
         obj: an :class:`ObjectModel` (returned as is), ``builtin:NAME``, ``procedural:FAMILY:SEED``, or
             a mesh / URDF file or folder that holds exactly one object.
         scale: multiplies the coordinates of an object read from a file (e.g. 0.001 for a millimetre mesh).
+        body: the body an object read from a file is grasped and simulated as (:data:`~ohra.objects.model.BODY_CHOICES`).
 
     Returns:
         The object; its mesh in its mesh frame [m].
@@ -63,7 +67,7 @@ def resolve_object(obj: "ObjectModel | str | Path", scale: float | None = None) 
         return obj
     if not isinstance(obj, (str, Path)):
         raise ObjectError(f"object: expected an ObjectModel, builtin:NAME or a mesh path, got {type(obj).__name__}")
-    objs = resolve_objects(str(obj), scale=scale)
+    objs = resolve_objects(str(obj), scale=scale, body=body)
     if len(objs) != 1:
         raise ObjectError(f"object {str(obj)!r} names {len(objs)} objects, expected one")
     return objs[0]
@@ -77,7 +81,7 @@ def parse_procedural(spec: str) -> ObjectModel:
     return ObjectModel.procedural(parts[1], int(parts[2]))
 
 
-def _from_path(p: Path, scale: float | None) -> list[ObjectModel]:
+def _from_path(p: Path, scale: float | None, body: str = "auto") -> list[ObjectModel]:
     if not p.exists():
         hint = f" (the built-in object: builtin:{p.name})" if str(p) in builtin_object_names() else ""
         if not hint and not p.suffix and len(p.parts) == 1:  # a bare word: perhaps a built-in shape by another name
@@ -92,8 +96,9 @@ def _from_path(p: Path, scale: float | None) -> list[ObjectModel]:
         files = sorted(f for f in p.iterdir() if f.suffix.lower() in MESH_SUFFIXES)
         if not subs and not files:
             raise ObjectError(f"{p}: folder holds no objects")
-        return [ObjectModel.load(d, scale=scale) for d in subs] + [ObjectModel.load(f, scale=scale) for f in files]
-    return [ObjectModel.load(p, scale=scale)]
+        return ([ObjectModel.load(d, scale=scale, body=body) for d in subs]
+                + [ObjectModel.load(f, scale=scale, body=body) for f in files])
+    return [ObjectModel.load(p, scale=scale, body=body)]
 
 
 def size_problem(obj: ObjectModel, extent_range: tuple[float, float] = GRASPABLE_EXTENT_M) -> str | None:

@@ -124,7 +124,8 @@ def load_dataset_object(root: Path, name: str, info: dict, given: Mapping[str, O
             elif src == "builtin":
                 obj = ObjectModel.builtin(name)
             elif src:
-                obj = ObjectModel.load(_locate(root, src), name=name)
+                obj = ObjectModel.load(_locate(root, src), name=name, scale=info.get("scale"),
+                                       body=str(info.get("body_choice", "auto")))
             else:
                 raise ObjectError("the manifest gives no source")
         except OhraError as exc:
