@@ -78,7 +78,7 @@ def eval_hand(name: str, original: bool = False, form: str | None = None, inerti
 
     if original:
         return SimHand.original_of(name, form)  # a registered name, a spec YAML or a params JSON with its spec
-    hand = SimHand.from_params(get_hand(name, form), name=name, couplings=get_couplings(name))
+    hand = SimHand.from_params(get_hand(name, form), name=name, couplings=get_couplings(name, form))
     if inertials == "original":
         hand = hand.with_finger_masses(original_finger_masses(name, form))
     return hand
@@ -145,6 +145,10 @@ def _shard_info(path: Path) -> dict[str, str]:
     return {"hand": path.parent.name, "form": form, "object_name": str(obj["name"]), "object_hash": str(obj["mesh_hash"]),
             "body_hash": str(obj.get("body_hash", "")), "body_kind": str(obj.get("body", {}).get("kind", "")),
             "made": "synthesised"}
+
+
+COUPLING_NOTE_RAD = 1e-3
+"""[rad] ``ohra eval`` notes grasps whose coupled joints lie farther than this from their drivers' values."""
 
 
 def run(args: argparse.Namespace) -> int:
@@ -228,6 +232,14 @@ def run(args: argparse.Namespace) -> int:
     g, out_of_limits = ev.check(grasps)  # validates before any simulation or output
     if out_of_limits.any():
         print(f"ohra: warning: {int(out_of_limits.sum())} grasp(s) have joints outside the limits; clamped", file=sys.stderr)
+    if hand.coupled and len(g):
+        from ohra.canonical.couplings import residual
+
+        off = np.abs(residual(hand.couplings, g[:, 9:])).max(axis=1)
+        if np.any(off > COUPLING_NOTE_RAD):
+            print(f"ohra: note: {int(np.sum(off > COUPLING_NOTE_RAD))} of {len(g)} grasp(s) hold coupled joints of {args.hand} "
+                  f"off their drivers' values (up to {off.max():.3f} rad); the simulation sets them from their drivers "
+                  "(ohra.canonical.couplings.project), as the hand moves", file=sys.stderr)
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # already reported above
@@ -258,8 +270,15 @@ def run(args: argparse.Namespace) -> int:
 
         k = min(16, len(g))
         write_png(contact_sheet(render_grasps(hand, obj, g[:k]), rep.success[:k]), args.render)
+        print(f"wrote a contact sheet of {k} grasp(s) to {args.render}", file=sys.stderr)
     if args.meshcat and len(g):
-        _meshcat(args, hand, obj, g[0])
+        first = g[0].copy()
+        if hand.coupled:  # drawn as simulated
+            from ohra.canonical.couplings import project
+
+            first[9:] = project(hand.couplings, first[9:])
+        _meshcat(args, hand, obj, first)
+        print(f"wrote the first grasp's meshcat page to {args.meshcat}", file=sys.stderr)
     n = len(rep.results)
     if n == 0:
         print(f"{args.hand} on {obj.name}: {args.grasps} holds no grasps; nothing was simulated")

@@ -7,6 +7,7 @@ JSON file; ``get_couplings(name)`` gives its coupled joints.
 
 from __future__ import annotations
 
+from functools import lru_cache
 from pathlib import Path
 
 from ohra.canonical.couplings import Coupling
@@ -88,4 +89,37 @@ def get_couplings(name: str | Path, form: str | None = None) -> tuple[Coupling, 
     return resolve_hand(name, form).couplings
 
 
-__all__ = ["get_hand", "get_couplings", "hands_in_form", "resolve_hand", "HandRef", "list_hands", "variant_names", "leap_variant", "FORMS"]
+def couplings_of(params: Params) -> tuple[Coupling, ...]:
+    """The couplings of the registered hand (user folders included) whose params, in one of its forms, equal
+    ``params`` (what ``get_hand(name)`` returned, say); ``()`` when no coupled registered hand has them (LEAP
+    variants, a hand edited since). Lets APIs that take bare params (``GraspEvaluator(params, obj)``,
+    ``synthesize([(name, params)], ...)``) drive a coupled hand as simulation and synthesis by name do."""
+    import numpy as np
+
+    reg = _registry()
+    files = reg._spec_files()
+    key = tuple((n, str(p), p.stat().st_mtime_ns) for n, p in sorted(files.items()))
+    v = np.asarray(params.to_vector(), dtype=float)
+    for kind, vec, cs in _coupled_params(key):
+        if kind == type(params).__name__ and vec.shape == v.shape and np.array_equal(vec, v):
+            return cs
+    return ()
+
+
+@lru_cache(maxsize=4)
+def _coupled_params(key: tuple) -> tuple:
+    """(params type name, parameter vector, couplings) of every registered hand and form with couplings."""
+    import numpy as np
+
+    reg = _registry()
+    out = []
+    for name in reg.registered_hands():
+        for form in reg.registered_forms(name):
+            cs = reg.couplings(name, form)
+            if cs:
+                p = reg.registered_params(name, form)
+                out.append((type(p).__name__, np.asarray(p.to_vector(), dtype=float), tuple(cs)))
+    return tuple(out)
+
+
+__all__ = ["get_hand", "get_couplings", "couplings_of", "hands_in_form", "resolve_hand", "HandRef", "list_hands", "variant_names", "leap_variant", "FORMS"]

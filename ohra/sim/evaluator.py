@@ -267,7 +267,9 @@ class GraspEvaluator:
 
             hand = SimHand.from_params(get_hand(hand), name=hand, couplings=get_couplings(hand))
         elif isinstance(hand, (BaseParams, ExtendedParams)):
-            hand = SimHand.from_params(hand)
+            from ohra.hands import couplings_of
+
+            hand = SimHand.from_params(hand, couplings=couplings_of(hand))  # a registered coupled hand's params: its couplings
         elif not isinstance(hand, SimHand):
             raise OhraError(f"hand must be params, a hand name or a SimHand, got {type(hand).__name__}")
         obj = resolve_object(obj)  # an ObjectModel, or a spec as the CLI takes it ("builtin:box", a mesh path)

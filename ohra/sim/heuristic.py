@@ -13,6 +13,8 @@ synthesiser (``ohra.synth``) makes real grasps.
 
 from __future__ import annotations
 
+from typing import Sequence
+
 import numpy as np
 
 from ohra.canonical.kinematics import HandModel
@@ -53,9 +55,21 @@ def closing_direction(hm: HandModel, T: np.ndarray, q: np.ndarray, target: np.nd
 
 
 def heuristic_grasps(hm: HandModel, obj: ObjectModel, n: int, seed: int = 0, standoff: tuple[float, float] = (0.0, 0.01),
-                     samples: int = 256) -> np.ndarray:
-    """``n`` seeded grasps ``(n, 31)`` of ``hm`` around ``obj`` from random directions (see module doc)."""
+                     samples: int = 256, couplings: Sequence | None = None) -> np.ndarray:
+    """``n`` seeded grasps ``(n, 31)`` of ``hm`` around ``obj`` from random directions (see module doc).
+
+    ``couplings``: the hand's joint couplings; every candidate configuration keeps them (coupled joints set from
+    their drivers, as simulation drives them), so a finger chosen for touching still touches once simulated.
+    None: those of the registered hand whose params ``hm`` was built from (:func:`ohra.hands.couplings_of`), if any.
+    """
+    from ohra.canonical.couplings import project
     from ohra.canonical.params import FINGER_SLICES, FINGERS
+
+    if couplings is None:
+        from ohra.hands import couplings_of
+
+        couplings = couplings_of(hm.params) if hm.params is not None else ()
+    couplings = tuple(couplings)
 
     rng = np.random.default_rng(seed)
     caps = hm.capsule_specs
@@ -82,6 +96,8 @@ def heuristic_grasps(hm: HandModel, obj: ObjectModel, n: int, seed: int = 0, sta
         # candidate configurations: each finger's joints uniform within their limits
         Q = np.repeat(q0[None], samples + 1, axis=0)
         Q[1:] = rng.uniform(hm.lower, hm.upper, size=(samples, 22))
+        if couplings:  # each candidate as simulation would hold it
+            Q = np.clip(project(couplings, Q), hm.lower, hm.upper)
         P = T @ hm.frame_poses(Q, links)  # (S+1, K, 4, 4)
         a = P[..., :3, 2]
         pts = P[..., None, :3, 3] + (radius[None, :, None, None] + _AXIS_SAMPLES[None, None, :, None]
@@ -99,6 +115,8 @@ def heuristic_grasps(hm: HandModel, obj: ObjectModel, n: int, seed: int = 0, sta
             if ok.any():
                 k = int(np.flatnonzero(ok)[np.argmin(np.abs(tip_d[ok]))])
                 q[FINGER_SLICES[fname]] = Q[k, FINGER_SLICES[fname]]
+        if couplings:  # a slot coupled to another finger's joint follows the row that finger chose
+            q = np.clip(project(couplings, q), hm.lower, hm.upper)
         out[i] = pose_to_grasp(T, q)
     return out
 

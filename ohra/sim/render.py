@@ -56,7 +56,8 @@ def render_grasps(hand: SimHand, obj: ObjectModel, grasps: np.ndarray, size: int
             T, q = grasp_to_pose(g)
             Tr = T @ hand.T_palm_root
             pb.resetBasePositionAndOrientation(body, Tr[:3, 3].tolist(), matrix_to_quat(Tr[:3, :3]).tolist(), physicsClientId=c)
-            qs = np.clip(hand.to_sim(np.clip(q, hand.canon_lower, hand.canon_upper)), hand.lower, hand.upper)
+            # the pose the evaluator starts from: a coupled hand's coupled joints set from their drivers
+            qs = hand.project_sim(np.clip(hand.to_sim(np.clip(q, hand.canon_lower, hand.canon_upper)), hand.lower, hand.upper))
             pose_joints(hand, body, by_name, qs, c)
             img = pb.getCameraImage(size, size, view, proj, renderer=pb.ER_TINY_RENDERER, physicsClientId=c)
             out[i] = np.reshape(img[2], (size, size, 4))[..., :3]

@@ -31,7 +31,7 @@ import numpy as np
 
 from ohra import __version__
 from ohra.canonical.kinematics import HandModel
-from ohra.canonical.params import Params
+from ohra.canonical.params import BaseParams, ExtendedParams, Params
 from ohra.data.backends import check_backend, run_tasks
 from ohra.data.dataset import atomic_write_bytes, npz_bytes, shard_name
 from ohra.data.manifest import ManifestWriter, hand_entry, object_keys, open_manifest, rekey_shards, shard_complete
@@ -270,6 +270,12 @@ def _check_objects(objects: list[ObjectModel], settings: SynthSettings) -> None:
             raise ObjectError(problem)
 
 
+def _couplings_of(params) -> tuple:
+    from ohra.hands import couplings_of
+
+    return couplings_of(params) if isinstance(params, (BaseParams, ExtendedParams)) else ()
+
+
 def synthesize(hands: list[tuple], objects: list[ObjectModel], out: str | Path, settings: SynthSettings,
                workers: int = 1, resume: bool = False, progress: bool = True, overwrite: bool = False,
                backend: str = "process", address: str | None = None, header: dict | None = None) -> dict:
@@ -278,7 +284,9 @@ def synthesize(hands: list[tuple], objects: list[ObjectModel], out: str | Path, 
     Args:
         hands: ``(name, params)`` or ``(name, params, couplings)``; a hand's couplings replace
             ``settings.nlp.couplings`` for its shards (the NLP's equality rows, projected starts, the
-            filter's coupled controller) and are recorded in its manifest entry.
+            filter's coupled controller) and are recorded in its manifest entry. Without them (and without
+            ``settings.nlp.couplings``), params equal to a registered coupled hand's take its couplings
+            (:func:`ohra.hands.couplings_of`).
         resume: keep pairs whose shards are complete (see :mod:`ohra.data.manifest`).
         overwrite: replace a dataset made with other settings (its shards are deleted).
         backend: ``"process"`` (a local pool of ``workers`` processes) or ``"ray"`` (``address``:
@@ -296,7 +304,7 @@ def synthesize(hands: list[tuple], objects: list[ObjectModel], out: str | Path, 
     if int(workers) < 1:
         raise OhraError(f"--workers must be >= 1, got {workers}")
     check_backend(backend, address)
-    hands = [(h[0], h[1], tuple(h[2]) if len(h) > 2 else settings.nlp.couplings) for h in hands]
+    hands = [(h[0], h[1], tuple(h[2]) if len(h) > 2 else (settings.nlp.couplings or _couplings_of(h[1]))) for h in hands]
     for name, params, _ in hands:
         check_hand_for_synthesis(name, params)
     _check_objects(objects, settings)
