@@ -671,6 +671,12 @@ def test_a_replay_page_opens_on_the_episodes_first_frame(raw_obs_run, tmp_path, 
     assert links and all(not np.allclose(T, np.eye(4)) for T in links.values())
     traj = dict(np.load(ep["trajectory"]))
     np.testing.assert_allclose(static["/meshcat/replay/object"][:3, 3], traj["obj_pos"][0])
+    # the camera frames what the page opens on: every link and the object where frame 0 has them
+    from ohra.viz import scene_bounds
+
+    lo, hi = scene_bounds(vis)
+    for T in list(links.values()) + [static["/meshcat/replay/object"]]:
+        assert np.all(T[:3, 3] >= lo - 1e-9) and np.all(T[:3, 3] <= hi + 1e-9)
 
 
 def test_a_run_records_the_form_of_the_hand_it_trains_on(tmp_path):

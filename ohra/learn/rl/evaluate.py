@@ -491,10 +491,6 @@ def replay_html(env_cfg: RotationConfig, trajectory: dict | str | Path, path: st
     vis = vis if vis is not None else new_visualizer()
     T0 = T_WORLD_PALM @ task.hand.T_palm_root
     links = [n for n in model.links if model.link_geometry(n, prefer="collision") is not None]
-    for n in links:
-        m = model.link_geometry(n, prefer="collision")
-        add_mesh(vis, m.vertices, m.faces, path=f"replay/hand/{n}", color=0x66BFFF, opacity=0.9)
-    add_mesh(vis, task.obj.mesh.vertices, task.obj.mesh.faces, path="replay/object")
     poses = model.link_poses(np.asarray(traj["q"])[:, order], links)  # (T, L, 4, 4) in the root frame
 
     def object_pose(t: int) -> np.ndarray:
@@ -503,10 +499,12 @@ def replay_html(env_cfg: RotationConfig, trajectory: dict | str | Path, path: st
         To[:3, 3] = traj["obj_pos"][t]
         return To
 
-    # the page opens on the episode's first frame (without this every link sat at the origin until played)
+    # drawn at the episode's first frame: the page opens on it, and the camera frames the hand and object there
+    # (drawn at the origin and moved after, every link counted at the origin and the camera sat inside the hand)
     for k, n in enumerate(links):
-        vis[f"replay/hand/{n}"].set_transform(T0 @ poses[0, k])
-    vis["replay/object"].set_transform(object_pose(0))
+        m = model.link_geometry(n, prefer="collision")
+        add_mesh(vis, m.vertices, m.faces, T=T0 @ poses[0, k], path=f"replay/hand/{n}", color=0x66BFFF, opacity=0.9)
+    add_mesh(vis, task.obj.mesh.vertices, task.obj.mesh.faces, T=object_pose(0), path="replay/object")
     anim = meshcat.animation.Animation(default_framerate=int(env_cfg.control_hz))
     for t in range(len(poses)):
         with anim.at_frame(vis, t) as frame:
