@@ -241,6 +241,16 @@ def framing_script(view: CameraView) -> str:
     )
 
 
+def embed(vis: Any, height: int = 420):
+    """The view as a Jupyter cell output: :func:`static_html` in an iframe (self-contained, framed on the content;
+    meshcat's own ``vis.render_static()`` opens on its default camera, where a hand is a speck on the grid)."""
+    from html import escape
+
+    from IPython.display import HTML
+
+    return HTML(f'<div><iframe srcdoc="{escape(static_html(vis), quote=True)}" width="100%" height="{int(height)}"></iframe></div>')
+
+
 def save_html(vis: Any, path: str | Path) -> Path:
     """Write :func:`static_html` to ``path`` (atomically, mode from the umask; see :mod:`ohra.io`)."""
     from ohra.io import write_text

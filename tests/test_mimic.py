@@ -232,6 +232,19 @@ def test_show_without_a_terminal_stops_the_viewer_instead_of_a_traceback(monkeyp
     assert cli.main(["hand", "show", "leap_3303"]) == 0
     assert "stdin is not a terminal: the viewer stops now" in capsys.readouterr().err
 
+def test_show_no_wait_saves_a_page_that_outlives_the_command_and_says_when_there_is_none(tmp_path, capsys):
+    """`--no-wait` printed the meshcat URL and exited, taking the server (and the page at that URL) with it."""
+    page = tmp_path / "hand.html"
+    assert cli.main(["hand", "show", "leap_3303", "--no-wait", "-o", str(page)]) == 0
+    out = capsys.readouterr()
+    assert f"wrote {page}" in out.out and "127.0.0.1" not in out.out
+    html = page.read_text()
+    assert "ohra: open framed on the content" in html  # a static export, framed on the hand
+    assert cli.main(["hand", "show", "leap_3303", "--no-wait"]) == 0
+    out = capsys.readouterr()
+    assert "127.0.0.1" not in out.out and "-o PAGE.html saves a page that stays" in out.err
+
+
 # -- the Inspire hand (../shared) ------------------------------------------------------------------
 @pytest.mark.assets
 @pytest.mark.parametrize("form, target", [("extended", 2.0), ("base", 8.0)])

@@ -389,3 +389,21 @@ def test_object_point_com_changes_nothing_for_a_centred_object_and_unknown_point
     np.testing.assert_allclose([r.displacement for r in a.results], [r.displacement for r in b.results], atol=1e-9)
     with pytest.raises(ValueError, match="object_point"):
         Protocol(object_point="centre")
+
+
+def test_the_evaluator_names_a_millimetre_mesh_once_per_object():
+    """`ObjectModel.load("can_mm.stl")` from Python is an 80 m can; the evaluator simulated it without a word (the CLI,
+    the grasp model and synthesis all warned with the --scale hint)."""
+    import warnings
+
+    import trimesh
+
+    from ohra.objects.model import ObjectModel
+
+    obj = ObjectModel(trimesh.creation.box(extents=(50.0, 70.0, 90.0)), "box_mm")  # 5 x 7 x 9 cm written in mm
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        GraspEvaluator("barrett_hand", obj).close()
+        GraspEvaluator("barrett_hand", obj).close()
+    said = [str(w.message) for w in caught if issubclass(w.category, ObjectWarning) and "graspable range" in str(w.message)]
+    assert len(said) == 1 and "box_mm" in said[0] and "--scale 0.001" in said[0]

@@ -216,9 +216,6 @@ def run(args: argparse.Namespace) -> int:
         kind = made.get("body_kind") or "another body"
         print(f"ohra: note: {args.grasps} was synthesised on the body {kind} of this mesh; --body {args.body} gives "
               f"{obj.body.kind} (--body {kind.split(':', 1)[0]} evaluates on the body they were made on)", file=sys.stderr)
-    from ohra.objects.resolve import warn_if_ungraspable
-
-    warn_if_ungraspable(obj)
     protocol = Protocol.strict() if args.strict else Protocol()
     if args.isaac_step:
         protocol = replace(protocol, **ISAAC_STEP)

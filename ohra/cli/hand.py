@@ -85,7 +85,9 @@ def register(sub) -> None:
     p.add_argument("--original", action="store_true",
                    help="overlay the original meshes (a registered hand, spec YAML, or params JSON with its spec beside it)")
     p.add_argument("--q", help="22 canonical joint values (comma or space separated)")
-    p.add_argument("--no-wait", action="store_true", help="print the URL and exit")
+    p.add_argument("--no-wait", action="store_true", help="draw and exit: the viewer stops with the command (with -o, the "
+                   "page stays)")
+    p.add_argument("-o", "--output", help="also save the view as a static, framed HTML page (opens without a server)")
     p.set_defaults(func=_cmd_show)
 
     p = hsub.add_parser("mirror", help="the hand's mirror image (left <-> right) as params JSON")
@@ -333,16 +335,27 @@ def _cmd_show(args: argparse.Namespace) -> int:  # pragma: no cover - starts a s
     from ohra.hands.resolve import resolve_hand
 
     ref = resolve_hand(args.hand, _natural_form(args))  # a bad name fails here, before a meshcat server starts
+    if args.output:
+        from ohra.io import check_output, check_suffix
+
+        check_suffix(check_output(args.output), ".html", "-o")
     vis = viz.new_visualizer()
     viz.show_hand(vis, ref, ref.form, q=q, original=args.original)
+    if args.output:
+        viz.save_html(vis, args.output)
+        print(f"wrote {args.output}")
+    if args.no_wait:
+        if not args.output:  # the server lives as long as this process: its URL would be dead once printed
+            print("ohra: note: --no-wait stops the viewer with the command; -o PAGE.html saves a page that stays",
+                  file=sys.stderr)
+        return 0
     print(vis.url())
-    if not args.no_wait:
-        if not sys.stdin.isatty():  # piped, CI, nohup: input() had no line to read (an EOFError traceback)
-            print("ohra: note: stdin is not a terminal: the viewer stops now (keep it open from a terminal; "
-                  "--no-wait says so)", file=sys.stderr)
-            return 0
-        try:
-            input("press Enter to stop the viewer ")
-        except EOFError:
-            pass
+    if not sys.stdin.isatty():  # piped, CI, nohup: input() had no line to read (an EOFError traceback)
+        print("ohra: note: stdin is not a terminal: the viewer stops now (keep it open from a terminal, or save a page "
+              "with -o PAGE.html)", file=sys.stderr)
+        return 0
+    try:
+        input("press Enter to stop the viewer ")
+    except EOFError:
+        pass
     return 0

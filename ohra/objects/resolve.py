@@ -128,8 +128,9 @@ def size_problem(obj: ObjectModel, extent_range: tuple[float, float] = GRASPABLE
 def warn_if_ungraspable(obj: ObjectModel, extent_range: tuple[float, float] = GRASPABLE_EXTENT_M) -> bool:
     """Warn (:class:`~ohra.errors.ObjectWarning`) when ``obj`` is outside the graspable size range, e.g. a
     mesh in millimetres: evaluation and sampling still run on it (the synthesiser refuses it instead).
-    Returns whether it warned."""
+    Each object warns once, whoever asks (the evaluator, the grasp model, the CLI). Returns whether it is outside."""
     problem = size_problem(obj, extent_range)
-    if problem:
+    if problem and not obj.__dict__.get("_size_warned"):
+        obj.__dict__["_size_warned"] = True
         warnings.warn(f"{problem}; grasps on it say little about a hand", ObjectWarning, stacklevel=user_stacklevel())
     return problem is not None

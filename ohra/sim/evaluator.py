@@ -273,6 +273,9 @@ class GraspEvaluator:
         elif not isinstance(hand, SimHand):
             raise OhraError(f"hand must be params, a hand name or a SimHand, got {type(hand).__name__}")
         obj = resolve_object(obj)  # an ObjectModel, or a spec as the CLI takes it ("builtin:box", a mesh path)
+        from ohra.objects.resolve import warn_if_ungraspable
+
+        warn_if_ungraspable(obj)  # a millimetre mesh read as metres: an 80 m can, simulated without a word before
         self.hand = hand
         self.obj = obj
         self.protocol = protocol or Protocol()

@@ -376,16 +376,14 @@ class GraspModel:
         size range (:func:`~ohra.objects.resolve.size_problem`: a mesh in millimetres, say; the warning names the
         scale that fixes it) or, when not ``centre``, lies farther than :data:`CENTRE_WARN` from its mesh frame's origin.
         A mis-scaled mesh gets only the size warning: its offset is in the wrong units too. :meth:`sample` calls it."""
-        from ohra.objects.resolve import size_problem
+        from ohra.objects.resolve import warn_if_ungraspable
 
         key = f"warned:{obj.mesh_hash}:{bool(centre)}"
         if key in self._cache:
             return
         self._cache[key] = True
         offset = float(np.linalg.norm(object_offset(obj)))
-        if (problem := size_problem(obj)) is not None:
-            warnings.warn(f"{problem}; grasps on it say little about a hand", ObjectWarning, stacklevel=user_stacklevel())
-        elif not centre and offset > CENTRE_WARN:
+        if not warn_if_ungraspable(obj) and not centre and offset > CENTRE_WARN:  # a mis-scaled mesh: the size only
             warnings.warn(f"object {obj.name!r}: its bounding-box centre lies {100 * offset:.1f} cm from its "
                           f"mesh frame's origin, over {100 * CENTRE_WARN:g} cm (the shipped models' training objects lie "
                           "within that): grasps sampled in that frame can miss the object; pass centre=True (--centre)", ObjectWarning,
