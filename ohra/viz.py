@@ -125,14 +125,25 @@ def add_frame(vis: Any, T: np.ndarray, path: str = "frame", length: float = 0.05
     _grow_bounds(vis, np.vstack([T[:3, 3], T[:3, 3] + length * T[:3, :3].T]))
 
 
-def static_html(vis: Any) -> str:
-    """A self-contained HTML snapshot of the scene (opens without a server), framed on its content."""
+def static_html(vis: Any, caption: str | None = None) -> str:
+    """A self-contained HTML snapshot of the scene (opens without a server), framed on its content; ``caption``
+    (plain text) is shown in its top-left corner (what the colours and places mean)."""
     html = vis.static_html()
     bounds = scene_bounds(vis)
-    if bounds is None:
+    extra = (framing_script(frame_bounds(*bounds)) if bounds is not None else "") + (caption_div(caption) if caption else "")
+    if not extra:
         return html
     cut = html.rfind("</body>")
-    return html[:cut] + framing_script(frame_bounds(*bounds)) + html[cut:]
+    return html[:cut] + extra + html[cut:]
+
+
+def caption_div(text: str) -> str:
+    """A fixed caption over a static page (HTML-escaped)."""
+    from html import escape
+
+    return ('<div class="ohra-caption" style="position:fixed;top:8px;left:8px;max-width:60%;z-index:10;'
+            'font:13px/1.35 sans-serif;color:#111;background:rgba(255,255,255,0.82);padding:5px 9px;border-radius:4px">'
+            f"{escape(text)}</div>\n")
 
 
 # -- framing: a static export opens on its content ------------------------------------------------------
@@ -251,11 +262,11 @@ def embed(vis: Any, height: int = 420):
     return HTML(f'<div><iframe srcdoc="{escape(static_html(vis), quote=True)}" width="100%" height="{int(height)}"></iframe></div>')
 
 
-def save_html(vis: Any, path: str | Path) -> Path:
-    """Write :func:`static_html` to ``path`` (atomically, mode from the umask; see :mod:`ohra.io`)."""
+def save_html(vis: Any, path: str | Path, caption: str | None = None) -> Path:
+    """Write :func:`static_html` (with ``caption``) to ``path`` (atomically, mode from the umask; see :mod:`ohra.io`)."""
     from ohra.io import write_text
 
-    return write_text(path, static_html(vis))
+    return write_text(path, static_html(vis, caption))
 
 
 # -- original vs canonical overlays (parser / fidelity) ----------------------------------------------
@@ -332,7 +343,8 @@ def compare_html(name: Any, form: str, out: str | Path, seed: int = 0, vis: Any 
         T = np.eye(4)
         T[1, 3] = -0.3
         add_overlay(vis, name, form, hm.random_configurations(1, seed)[0], T, path="random")
-        return save_html(vis, out)
+        return save_html(vis, out, caption=f"{name.name} ({form} form): grey = original collision meshes, blue = canonical "
+                                           f"capsules; right: q = 0, left: a random configuration (seed {seed})")
     finally:
         proc = getattr(getattr(vis, "window", None), "server_proc", None)
         if own and proc is not None:  # the meshcat server we started for the export

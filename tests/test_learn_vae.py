@@ -329,7 +329,10 @@ def test_cli_interpolate_writes_urdfs_png_and_html(vae, tmp_path, capsys):
     assert rc == 0
     assert sorted(p.name for p in tmp_path.glob("*.urdf")) == [f"interp_{i:02d}.urdf" for i in range(4)]
     assert (tmp_path / "strip.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert "<html" in (tmp_path / "scene.html").read_text()[:2000].lower()
+    scene = (tmp_path / "scene.html").read_text()
+    assert "<html" in scene[:2000].lower()
+    assert "dex3_right -&gt; shadow_hand_right: decoded hands left to right at path fraction a = 0.00, " in scene
+    assert "1.00; grey, above the ends: the two hands as given</div>" in scene
     assert "wrote 4 URDFs" in capsys.readouterr().out
 
 

@@ -95,6 +95,10 @@ def test_static_html_frames_what_was_drawn():
     c = view.target
     assert f"viewer.controls.target.set({c[0]:.6g}, {c[2]:.6g}, {-c[1]:.6g})" in html  # three.js is y-up
     assert html.index("ohra: open framed") < html.rindex("</body>")
+    # a caption says what the page shows, as text (escaped), over the view
+    captioned = viz.static_html(vis, caption="left: q = 0 <rest>, right: q & random")
+    assert "left: q = 0 &lt;rest&gt;, right: q &amp; random</div>" in captioned and "<rest>" not in captioned
+    assert captioned.index("ohra-caption") < captioned.rindex("</body>")
     viz.clear_bounds(vis)
     assert viz.scene_bounds(vis) is None
 
@@ -151,6 +155,7 @@ def test_compare_overlay_opens_framed_on_the_hands(hands_dir, chromium, tmp_path
     assert _children() <= before  # the export's meshcat server is gone
     page = html.read_text()
     assert "ohra: open framed" in page and "viewer.connect(" not in page  # static: no server to reach
+    assert "grey = original collision meshes, blue = canonical capsules; right: q = 0, left: a random" in page
     cut = page.rindex("</body>")
     (tmp_path / "background.html").write_text(page[:cut] + _HIDE_CONTENT + page[cut:])
 

@@ -226,6 +226,9 @@ def _cmd_interpolate(args: argparse.Namespace) -> int:
     if not args.no_html:
         from ohra.learn.strip import sequence_html
 
-        html = sequence_html(interp.params, out / "scene.html", originals=interp.originals)
+        where = ", ".join(f"{a:.2f}" for a in interp.alphas)
+        html = sequence_html(interp.params, out / "scene.html", originals=interp.originals,
+                             caption=f"{args.hand_a} -> {args.hand_b}: decoded hands left to right at path fraction a = {where}"
+                                     + ("; grey, above the ends: the two hands as given" if interp.originals is not None else ""))
         print(f"wrote {html}")
     return 0

@@ -154,7 +154,7 @@ def strip_png(params: Sequence[BaseParams | ExtendedParams], path: str | Path, l
 
 
 def sequence_html(params: Sequence[BaseParams | ExtendedParams], path: str | Path, spacing: float = 0.2,
-                  originals: Sequence[BaseParams | ExtendedParams] | None = None) -> Path:
+                  originals: Sequence[BaseParams | ExtendedParams] | None = None, caption: str | None = None) -> Path:
     """A static meshcat HTML scene: the hands in a row (first on the left, seen from the palm side),
     ``spacing`` metres apart; ``originals`` (two hands) stand in grey one row higher, above the first
     and the last. The camera is set to frame the row (meshcat's orbit target is the scene origin,
@@ -183,7 +183,7 @@ def sequence_html(params: Sequence[BaseParams | ExtendedParams], path: str | Pat
             viz.add_hand(vis, HandModel.from_params(p), np.zeros(22), T_world_palm=place(i, 1), path=f"hands/{name}",
                          color=viz.ORIGINAL_COLOR)
     _frame_camera(vis, width=spacing * n, height=1.5 * spacing * rows)
-    return viz.save_html(vis, path)
+    return viz.save_html(vis, path, caption)
 
 
 def _frame_camera(vis, width: float, height: float) -> None:
