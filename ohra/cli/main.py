@@ -22,7 +22,9 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import signal
 import sys
+import threading
 import warnings
 from pathlib import Path
 from typing import Sequence
@@ -122,6 +124,7 @@ def execute(args: argparse.Namespace) -> int:
 
     shown = warnings.showwarning
     warnings.showwarning = _one_line_warnings(shown)
+    handlers = _stop_on_termination()
     try:
         import_pybullet()  # done once, after parsing: `ohra --help` does not pay the import; Ctrl-C here is one line too
         for folder in getattr(args, "hands_dirs", ()):
@@ -145,6 +148,25 @@ def execute(args: argparse.Namespace) -> int:
         return 130
     finally:
         warnings.showwarning = shown
+        for sig, handler in handlers.items():
+            signal.signal(sig, handler)
+
+
+def _terminate(signum, frame) -> None:
+    raise KeyboardInterrupt  # handled like Ctrl-C: one line, exit 130, cleanup runs
+
+
+def _stop_on_termination() -> dict:
+    """SIGTERM (a scheduler, `timeout`, `kill`) and SIGHUP (a closed terminal) stop a command as Ctrl-C does, so its
+    cleanup runs: Python's default for them ends the process at once, which left meshcat's server (started in its own
+    session) running and holding its ports. Returns the handlers to put back (none outside the main thread)."""
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    old = {}
+    for sig in (signal.SIGTERM, getattr(signal, "SIGHUP", None)):
+        if sig is not None and signal.getsignal(sig) in (signal.SIG_DFL, None):
+            old[sig] = signal.signal(sig, _terminate)
+    return old
 
 
 def main(argv: Sequence[str] | None = None) -> int:

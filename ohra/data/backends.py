@@ -60,8 +60,13 @@ def _pool(fn: Callable, tasks: list, workers: int) -> Iterable:
 
 def _ignore_sigint() -> None:
     """Pool workers leave Ctrl-C to the driver, which stops them: each printed its own KeyboardInterrupt
-    traceback ("Process ForkPoolWorker-7: ...") before the driver's one-line ``ohra: interrupted``."""
+    traceback ("Process ForkPoolWorker-7: ...") before the driver's one-line ``ohra: interrupted``. SIGTERM and
+    SIGHUP get their defaults back (the CLI turns them into Ctrl-C in the driver; a pool stops its workers with
+    SIGTERM, which must end them, not raise in them)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for sig in (signal.SIGTERM, getattr(signal, "SIGHUP", None)):
+        if sig is not None:
+            signal.signal(sig, signal.SIG_DFL)
 
 
 PROBE_TIMEOUT_S = 5.0
