@@ -138,3 +138,28 @@ def test_one_configuration_methods_given_a_batch_raise_naming_both_shapes(shadow
     getattr(hm, method)(np.zeros(22), *args)  # one configuration works
     with pytest.raises(OhraError, match=rf"{method} takes one configuration of shape \(22,\), got \(3, 22\)"):
         getattr(hm, method)(np.zeros((3, 22)), *args)
+
+
+def test_collision_queries_refuse_a_pose_or_margin_that_is_not_a_number():
+    """A NaN object pose gave a made-up 3 cm penetration, a NaN margin "no collision", a (3,) pose an IndexError."""
+    h = HandModel.from_params(get_hand("leap_3303"))
+    q = h.neutral()
+    sphere = coal.Sphere(0.03)
+    far = np.eye(4)
+    far[:3, 3] = (0.5, 0.0, 0.0)
+    assert h.min_distance(q, sphere, far) > 0.3
+    with pytest.raises(OhraError, match="T_palm_object contains NaN"):
+        h.min_distance(q, sphere, np.full((4, 4), np.nan))
+    with pytest.raises(OhraError, match=r"T_palm_object: expected a \(4, 4\) homogeneous transform, got shape \(3,\)"):
+        h.object_distances(q, sphere, np.zeros(3))
+    with pytest.raises(OhraError, match="margin must be a finite distance"):
+        h.self_collision(q, margin=float("nan"))
+    with pytest.raises(OhraError, match=r"T_world_palm: expected a \(4, 4\)"):
+        h.collision_objects(q, np.eye(3))
+
+
+def test_frame_poses_names_a_single_string_instead_of_reading_its_letters():
+    h = HandModel.from_params(get_hand("leap_3303"))
+    with pytest.raises(OhraError, match=r"got the string 'index_tip'; frame_poses\(q, \['index_tip'\]\)"):
+        h.frame_poses(h.neutral(), "index_tip")
+    assert h.frame_poses(h.neutral(), ["index_tip"]).shape == (1, 4, 4)

@@ -355,3 +355,14 @@ def test_a_missing_further_visual_is_left_out_with_a_warning(tmp_path):
     (tmp_path / "o.urdf").write_text(urdf.format('<box size="0.1 x 0.1"/>'))
     with pytest.raises(ObjectError, match=r"a <visual> primitive with a missing or non-numeric size"):
         ObjectModel.load(tmp_path / "o.urdf")
+
+
+@pytest.mark.parametrize("kw, message", [({"max_cells": 0}, "max_cells must be a whole number >= 1"),
+                                         ({"spacing": -0.01}, "spacing must be a distance > 0"),
+                                         ({"padding": float("nan")}, "padding must be a distance >= 0")])
+def test_an_sdf_grid_that_cannot_be_made_is_an_object_error(kw, message):
+    """max_cells=0 gave a (1, 1, 1) grid of spacing inf whose queries were NaN; a negative spacing a bare ValueError."""
+    from ohra.errors import ObjectError
+
+    with pytest.raises(ObjectError, match=message):
+        ObjectModel.builtin("box").sdf(**kw)

@@ -187,3 +187,24 @@ def test_substeps_keep_the_motor_torque_limit():
     assert one > 0.1  # the limit binds: the fingers sag
     assert _sag(Protocol(dt=1 / 200, motor_force=0.002)) > 1.04 * one  # and the sag depends on it
     assert two == pytest.approx(one, rel=0.01)
+
+
+@pytest.mark.parametrize("kw, message", [
+    ({"friction": -1.0}, "friction and force_per_mass must be >= 0, got -1.0"),
+    ({"friction": float("nan")}, "Protocol.friction must be a finite number, got nan"),
+    ({"dt": "x"}, "Protocol.dt must be a finite number, got 'x'"),
+    ({"substeps": True}, "Protocol.substeps must be a finite number, got True"),
+    ({"object_point": "centre"}, "object_point must be one of"),
+])
+def test_a_bad_protocol_setting_is_an_ohra_error_naming_it(kw, message):
+    from ohra.errors import OhraError
+
+    with pytest.raises(OhraError, match=message):
+        Protocol(**kw)
+
+
+def test_an_unknown_preset_is_an_ohra_error_listing_the_known_ones():
+    from ohra.sim import ProtocolError
+
+    with pytest.raises(ProtocolError, match="unknown protocol preset 'fast'; expected 'reference', 'strict'"):
+        Protocol.preset("fast")

@@ -426,3 +426,24 @@ def test_an_original_urdf_without_a_palm_collision_shape_names_the_hybrid_way_ou
     env = InHandRotateEnv(hand="gaia_hand_right", urdf="original", collisions="canonical", grasp_count=2)
     env.reset(seed=0)
     env.close()
+
+
+def test_a_nan_action_is_refused_and_leaves_the_env_as_it_was(env):
+    """np.clip keeps NaN: one NaN action reached the motors, PyBullet's joint state stayed NaN, and every later
+    episode ended at once as "broken" while its observations (NaN read as 0) looked valid."""
+    from ohra.sim.rotation import RotationActionError
+
+    n = env.action_space.shape[0]
+    env.reset(seed=0)
+    bad = np.zeros(n)
+    bad[3] = np.nan
+    with pytest.raises(RotationActionError, match=r"NaN or infinity at \[3\]"):
+        env.step(bad)
+    with pytest.raises(RotationActionError, match=f"expected {n} numbers"):
+        env.step(np.zeros(5))
+    with pytest.raises(RotationActionError, match="starting state index"):
+        env.reset(options={"grasp": len(env.grasps.q)})
+    env.reset(seed=1)
+    for _ in range(5):
+        _, _, terminated, _, info = env.step(np.zeros(n))
+    assert info["termination"] != "broken" and np.all(np.isfinite(env.scene.read().q))

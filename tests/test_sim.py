@@ -407,3 +407,22 @@ def test_the_evaluator_names_a_millimetre_mesh_once_per_object():
         GraspEvaluator("barrett_hand", obj).close()
     said = [str(w.message) for w in caught if issubclass(w.category, ObjectWarning) and "graspable range" in str(w.message)]
     assert len(said) == 1 and "box_mm" in said[0] and "--scale 0.001" in said[0]
+
+
+def test_an_objects_own_density_is_named_when_the_protocols_replaces_it():
+    import warnings
+
+    from ohra.objects.model import ObjectModel
+
+    heavy = ObjectModel.builtin("box", density=2000.0)
+    with pytest.warns(ObjectWarning, match=r"density 2000 kg/m\^3; the six-direction test simulates it at the protocol's "
+                                           r"500 kg/m\^3 .*Protocol\(density=2000\)"):
+        ev = GraspEvaluator("barrett_hand", heavy)
+    assert ev.world.mass == pytest.approx(heavy.volume * 500.0)
+    ev.close()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ObjectWarning)
+        ev = GraspEvaluator("barrett_hand", heavy, Protocol(density=2000.0))
+        assert ev.world.mass == pytest.approx(heavy.mass)
+        ev.close()
+        GraspEvaluator("barrett_hand", ObjectModel.builtin("box")).close()

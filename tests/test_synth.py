@@ -15,7 +15,8 @@ from ohra.canonical.kinematics import HandModel
 from ohra.objects.model import ObjectModel
 from ohra.rotations import grasp_to_pose
 from ohra.synth.init import initial_poses
-from ohra.synth.nlp import GraspNLP
+from ohra.errors import OhraError
+from ohra.synth.nlp import GraspNLP, NLPSettings
 from ohra.synth.pipeline import SynthSettings, synthesize
 from ohra.synth.quality import ferrari_canny
 
@@ -184,3 +185,20 @@ def test_ctrl_c_during_a_solve_stops_the_run_instead_of_storing_a_failed_solve()
     finally:
         signal.signal(signal.SIGINT, inherited)
     assert nlp.solve(st["R0"], st["t0"], st["q0"], st["q_pref"])["success"]  # the NLP still solves afterwards
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda: SynthSettings(grasps_per_object=1.5), "grasps per object must be a whole number >= 1, got 1.5"),
+    (lambda: SynthSettings(max_penetration_m=-0.001), "max_penetration_m must be a distance >= 0"),
+    (lambda: SynthSettings(object_extent_m=(0.5, 0.01)), "0 < smallest < largest"),
+    (lambda: NLPSettings(hessian="full"), "NLPSettings.hessian must be one of limited-memory, exact, got 'full'"),
+    (lambda: NLPSettings(mu=-0.5), "NLPSettings.mu must be a finite number >= 0"),
+    (lambda: synthesize(["leap_3303"], ["builtin:box"], "unused", SynthSettings()),
+     r"hands\[0\]: expected \(name, params\) .* e.g. \('leap_3303', ohra.get_hand\('leap_3303'\)\)"),
+    (lambda: synthesize([], [], "unused", None), "settings: expected SynthSettings, got NoneType"),
+])
+def test_synthesis_settings_and_arguments_are_checked_before_anything_runs(make, message):
+    """1.5 grasps per object ran as 1, an unknown Hessian silently as limited-memory, a negative friction was accepted,
+    and a bare hand name ended in an AttributeError."""
+    with pytest.raises(OhraError, match=message):
+        make()

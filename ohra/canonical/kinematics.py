@@ -267,6 +267,9 @@ class HandModel:
         """
         q = self.check_q(q)
         single = q.ndim == 1
+        if isinstance(frames, str):  # one name, not its letters ("unknown frame 'i'")
+            raise OhraError(f"frames: expected a list of frame names, got the string {frames!r}; "
+                            f"frame_poses(q, [{frames!r}]) or frame_pose(q, {frames!r})")
         frames = self.frame_names if frames is None else tuple(frames)
         if single:  # one configuration: Pinocchio's C++ FK beats numpy's per-call overhead
             pin.framesForwardKinematics(self.model, self.data, self._to_pin(q))
@@ -370,6 +373,28 @@ class HandModel:
         J = pin.computeFrameJacobian(self.model, self.data, qp, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
         return np.asarray(J)[:, self._pin_q]
 
+    @staticmethod
+    def _check_pose(T: np.ndarray | None, what: str) -> np.ndarray:
+        """A (4, 4) finite pose (None: identity); an :class:`OhraError` naming ``what`` otherwise (a NaN pose gave a
+        made-up 3 cm penetration)."""
+        if T is None:
+            return np.eye(4)
+        try:
+            T = np.asarray(T, dtype=float)
+        except (TypeError, ValueError):
+            raise OhraError(f"{what}: expected a (4, 4) homogeneous transform, got {type(T).__name__}") from None
+        if T.shape != (4, 4):
+            raise OhraError(f"{what}: expected a (4, 4) homogeneous transform, got shape {T.shape}")
+        if not np.all(np.isfinite(T)):
+            raise OhraError(f"{what} contains NaN or inf")
+        return T
+
+    @staticmethod
+    def _check_margin(margin: float) -> float:
+        if isinstance(margin, bool) or not isinstance(margin, (int, float, np.integer, np.floating)) or not np.isfinite(margin):
+            raise OhraError(f"margin must be a finite distance [m], got {margin!r}")
+        return float(margin)
+
     def _check_frame(self, frame: str) -> str:
         if frame not in self._frame_id:
             raise OhraError(f"unknown frame {frame!r}; known: {', '.join(self.frame_names)}")
@@ -434,7 +459,7 @@ class HandModel:
     def collision_objects(self, q: np.ndarray, T_world_palm: np.ndarray | None = None) -> list[tuple[str, int, coal.CollisionObject]]:
         """Coal objects (name, finger index or -1 for the palm, object) of the hand at one (22,) configuration."""
         q = self._check_one_q(q, "collision_objects")
-        T0 = np.eye(4) if T_world_palm is None else np.asarray(T_world_palm, dtype=float)
+        T0 = self._check_pose(T_world_palm, "T_world_palm")
         out: list[tuple[str, int, coal.CollisionObject]] = []
         R, depth = palm_geometry(self.params) if self.params is not None else (0.0, 0.0)
         Tp = np.eye(4)
@@ -466,6 +491,7 @@ class HandModel:
             OhraError: the model has no params; ``q`` is not (22,) or not finite.
         """
         q = self._check_one_q(q, "self_collision_pairs")
+        margin = self._check_margin(margin)
         objs = [o for o in self.collision_objects(q) if o[1] >= 0]
         hits = []
         for i in range(len(objs)):
@@ -510,10 +536,11 @@ class HandModel:
             ``{"palm": d, "<link>": d, ...}``: one signed distance [m] per hand shape.
 
         Raises:
-            OhraError: the model has no params; ``q`` is not (22,) or not finite.
+            OhraError: the model has no params; ``q`` is not (22,) or not finite; ``T_palm_object`` is not a finite
+                (4, 4) transform.
         """
         q = self._check_one_q(q, "object_distances")
-        To = np.eye(4) if T_palm_object is None else np.asarray(T_palm_object, dtype=float)
+        To = self._check_pose(T_palm_object, "T_palm_object")
         obj = coal.CollisionObject(geometry, _se3(To))
         is_mesh = isinstance(geometry, coal.BVHModelBase)
         out: dict[str, float] = {}

@@ -606,7 +606,19 @@ class ObjectModel:
         """Signed-distance grid of the body covering its bounds plus ``padding`` [m].
 
         ``spacing`` defaults to the largest padded extent / ``max_cells``. Cached per settings.
+
+        Raises:
+            ObjectError: ``spacing`` not > 0, ``padding`` not >= 0, ``max_cells`` not a whole number >= 1.
         """
+        def number(v) -> bool:
+            return not isinstance(v, bool) and isinstance(v, (int, float, np.integer, np.floating)) and bool(np.isfinite(v))
+
+        if spacing is not None and not (number(spacing) and spacing > 0):
+            raise ObjectError(f"sdf: spacing must be a distance > 0 [m] (or None), got {spacing!r}")
+        if not (number(padding) and padding >= 0):
+            raise ObjectError(f"sdf: padding must be a distance >= 0 [m], got {padding!r}")
+        if isinstance(max_cells, bool) or not isinstance(max_cells, (int, np.integer)) or max_cells < 1:
+            raise ObjectError(f"sdf: max_cells must be a whole number >= 1, got {max_cells!r}")
         key = (spacing, padding, max_cells)
         cache = self.__dict__.setdefault("_sdf_cache", {})
         if key in cache:

@@ -7,9 +7,9 @@ import_pybullet()  # first, so that no submodule's `import pybullet` prints the 
 from ohra.sim.controller import closes_positive, squeeze_targets
 from ohra.sim.evaluator import PHASES, EvalReport, GraspEvaluator, GraspResult, evaluate_grasps, run_grasp
 from ohra.sim.hands import SimHand
-from ohra.sim.protocol import DIRECTION_NAMES, DIRECTIONS, Protocol
+from ohra.sim.protocol import DIRECTION_NAMES, DIRECTIONS, Protocol, ProtocolError
 
 __all__ = [
-    "GraspEvaluator", "Protocol", "EvalReport", "GraspResult", "SimHand", "DIRECTIONS", "DIRECTION_NAMES", "PHASES",
+    "GraspEvaluator", "Protocol", "ProtocolError", "EvalReport", "GraspResult", "SimHand", "DIRECTIONS", "DIRECTION_NAMES", "PHASES",
     "evaluate_grasps", "run_grasp", "closes_positive", "squeeze_targets",
 ]

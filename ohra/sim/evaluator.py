@@ -33,7 +33,7 @@ import numpy as np
 import pybullet as pb
 
 from ohra.errors import GraspError, ObjectWarning, OhraError, user_stacklevel
-from ohra.objects.model import ObjectModel
+from ohra.objects.model import DEFAULT_DENSITY, ObjectModel
 from ohra.objects.resolve import resolve_object
 from ohra.canonical.params import BaseParams, ExtendedParams, Params
 from ohra.rotations import check_grasps, grasp_to_pose, pose_to_grasp
@@ -55,7 +55,9 @@ class GraspResult:
 
     success: bool
     displacement: np.ndarray  # (7,): squeeze (from the start), then after each direction (from the end of the squeeze); NaN after an early exit
-    final_distance_from_origin: float  # of the object's mesh-frame origin at the end
+    # [m] how far the object's point (Protocol.object_point) lies at the end from where it started: the mesh-frame
+    # origin from the world origin ("frame"), the centre of mass from its start ("com")
+    final_distance_from_origin: float
     contacts: int  # hand links touching the object at the end of the squeeze
     initial_penetration: float  # deepest hand-object overlap at the input grasp (>= 0)
     post_grasp: np.ndarray  # (31,) canonical palm pose relative to the settled object + settled canonical joints
@@ -111,6 +113,8 @@ class EvalReport:
 
     @property
     def final_displacement(self) -> np.ndarray:
+        """(N,) [m] each grasp's displacement after the last direction (since the end of the squeeze); NaN for a grasp
+        whose test exited early (``GraspResult.early_exit``)."""
         return np.array([r.displacement[-1] for r in self.results])
 
     def to_dict(self) -> dict:
@@ -277,6 +281,13 @@ class GraspEvaluator:
 
         warn_if_ungraspable(obj)  # a millimetre mesh read as metres: an 80 m can, simulated without a word before
         self.hand = hand
+        protocol = protocol or Protocol()
+        if obj.density != DEFAULT_DENSITY and obj.density != protocol.density:
+            # the protocol fixes the test's density (the paper's 500 kg/m^3); an object's own density was dropped silently
+            warnings.warn(f"object {obj.name!r} has density {obj.density:g} kg/m^3; the six-direction test simulates it at "
+                          f"the protocol's {protocol.density:g} kg/m^3 ({1e3 * obj.volume * protocol.density:.4g} g): "
+                          f"Protocol(density={obj.density:g}) simulates it at its own", ObjectWarning,
+                          stacklevel=user_stacklevel())
         self.obj = obj
         self.protocol = protocol or Protocol()
         self._world: World | None = None

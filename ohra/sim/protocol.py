@@ -14,9 +14,11 @@ since in :meth:`ohra.sim.world.World.drive_joints`; they were not re-measured.)
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
+
+from ohra.errors import OhraError
 
 # Perturbation order of the reference: +x, +y, +z, -x, -y, -z (object / world frame).
 DIRECTIONS = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [-1, 0, 0], [0, -1, 0], [0, 0, -1]], dtype=float)
@@ -32,6 +34,10 @@ OBJECT_POINTS = ("frame", "com")
 # [m] GraspEvaluator warns when an object's mesh-frame origin lies farther than this from its centre of
 # mass under object_point="frame" (a 0.1 rad turn then moves the origin by over 0.5 cm)
 COM_OFFSET_WARN = 0.05
+
+
+class ProtocolError(OhraError, ValueError):
+    """A protocol setting out of range or not a number, or an unknown preset."""
 
 
 @dataclass(frozen=True)
@@ -83,14 +89,19 @@ class Protocol:
 
     def __post_init__(self) -> None:
         if self.object_point not in OBJECT_POINTS:
-            raise ValueError(f"Protocol.object_point must be one of {OBJECT_POINTS}, got {self.object_point!r}")
+            raise ProtocolError(f"Protocol.object_point must be one of {OBJECT_POINTS}, got {self.object_point!r}")
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.type in ("float", "int") and (isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating))
+                                              or not np.isfinite(v)):
+                raise ProtocolError(f"Protocol.{f.name} must be a finite number, got {v!r}")
         for name in ("dt", "squeeze_time", "direction_time", "density", "motor_force", "success_displacement"):
             if not getattr(self, name) > 0:
-                raise ValueError(f"Protocol.{name} must be > 0, got {getattr(self, name)}")
+                raise ProtocolError(f"Protocol.{name} must be > 0, got {getattr(self, name)}")
         if self.friction < 0 or self.force_per_mass < 0:
-            raise ValueError("Protocol.friction and force_per_mass must be >= 0")
+            raise ProtocolError(f"Protocol.friction and force_per_mass must be >= 0, got {self.friction} and {self.force_per_mass}")
         if int(self.substeps) < 1 or int(self.early_exit_every) < 1:
-            raise ValueError("Protocol.substeps and early_exit_every must be >= 1")
+            raise ProtocolError(f"Protocol.substeps and early_exit_every must be >= 1, got {self.substeps} and {self.early_exit_every}")
 
     @property
     def squeeze_steps(self) -> int:
@@ -144,4 +155,4 @@ class Protocol:
             return cls.isaac_step()
         if name == "isaac-drive":
             return cls.isaac_drive()
-        raise ValueError(f"unknown protocol preset {name!r}; expected 'reference', 'strict', 'isaac-step' or 'isaac-drive'")
+        raise ProtocolError(f"unknown protocol preset {name!r}; expected 'reference', 'strict', 'isaac-step' or 'isaac-drive'")

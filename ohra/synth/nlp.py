@@ -60,6 +60,10 @@ MAX_VIOLATION = 1e-3  # a solve counts as a success only if no row is violated b
 
 @dataclass(frozen=True)
 class NLPSettings:
+    """Settings of the force-closure NLP (:class:`GraspNLP`): design friction, contact band and clearances [m],
+    cost weights, IPOPT options, how fingers are kept apart, and the hand's couplings. Checked on construction
+    (:class:`~ohra.errors.OhraError` naming the setting)."""
+
     mu: float = 0.5  # design friction
     contact_band: tuple[float, float] = (-0.0005, 0.001)  # m, sdf - r at the contacts
     clearance: float = 0.001  # m, other links and palm
@@ -89,6 +93,24 @@ class NLPSettings:
     # the hand's joint couplings (``ohra.get_couplings``); non-empty adds equality rows after every
     # other family (so an uncoupled hand's rows, and its solutions, are unchanged)
     couplings: tuple[Coupling, ...] = ()
+
+    def __post_init__(self) -> None:
+        choices = {"middle_spheres": ("all", "fingertips", "none"), "finger_pairs": ("capsules", "spheres"),
+                   "hessian": ("limited-memory", "exact"), "mu_oracle": ("probing", "quality-function", "loqo")}
+        for name, allowed in choices.items():
+            if getattr(self, name) not in allowed:
+                raise OhraError(f"NLPSettings.{name} must be one of {', '.join(allowed)}, got {getattr(self, name)!r}")
+        for name in ("mu", "clearance", "finger_gap", "w_force", "w_posture", "torque_length", "tol", "pair_margin"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not np.isfinite(v) or v < 0:
+                raise OhraError(f"NLPSettings.{name} must be a finite number >= 0, got {v!r}")
+        for name in ("max_iter", "sdf_cells"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+                raise OhraError(f"NLPSettings.{name} must be a whole number >= 1, got {v!r}")
+        lo, hi = self.contact_band
+        if not (np.isfinite(lo) and np.isfinite(hi) and lo <= hi):
+            raise OhraError(f"NLPSettings.contact_band must be (low, high) [m] with low <= high, got {self.contact_band!r}")
 
 
 def capsule_pair_indices(hand: HandModel, v: GraspVariables, s: NLPSettings) -> list[tuple[int, int]]:

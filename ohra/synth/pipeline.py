@@ -80,10 +80,20 @@ class SynthSettings:
     protocol: Protocol = field(default_factory=Protocol)
 
     def __post_init__(self) -> None:
-        if int(self.grasps_per_object) < 1:
-            raise OhraError(f"grasps per object must be >= 1, got {self.grasps_per_object}")
-        if self.cap is not None and int(self.cap) < 1:
-            raise OhraError(f"cap must be >= 1 (or None), got {self.cap}")
+        def whole(v) -> bool:
+            return not isinstance(v, bool) and isinstance(v, (int, np.integer))
+
+        if not whole(self.grasps_per_object) or self.grasps_per_object < 1:
+            raise OhraError(f"grasps per object must be a whole number >= 1, got {self.grasps_per_object!r}")
+        if self.cap is not None and (not whole(self.cap) or self.cap < 1):
+            raise OhraError(f"cap must be a whole number >= 1 (or None), got {self.cap!r}")
+        m = self.max_penetration_m
+        if m is not None and (isinstance(m, bool) or not isinstance(m, (int, float, np.integer, np.floating))
+                              or not np.isfinite(m) or m < 0):
+            raise OhraError(f"max_penetration_m must be a distance >= 0 [m] (or None), got {m!r}")
+        lo, hi = self.object_extent_m
+        if not (np.isfinite(lo) and np.isfinite(hi) and 0 < lo < hi):
+            raise OhraError(f"object_extent_m must be (smallest, largest) [m] with 0 < smallest < largest, got {self.object_extent_m!r}")
         require_seed(self.seed, OhraError)  # a recipe's seed is held to the same (ohra data build refused -1, synth ran it)
 
     def to_dict(self) -> dict:
@@ -298,6 +308,16 @@ def synthesize(hands: list[tuple], objects: list[ObjectModel], out: str | Path, 
             corrupt or was written with other settings.
         FolderInUseError: another process is building into ``out``.
     """
+    if not isinstance(settings, SynthSettings):
+        raise OhraError(f"settings: expected SynthSettings, got {type(settings).__name__}")
+    for i, h in enumerate(hands):
+        if not isinstance(h, (tuple, list)) or len(h) not in (2, 3) or not isinstance(h[1], (BaseParams, ExtendedParams)):
+            raise OhraError(f"hands[{i}]: expected (name, params) or (name, params, couplings), got {h!r}; e.g. "
+                            f"({str(h)!r}, ohra.get_hand({str(h)!r}))" if isinstance(h, str) else
+                            f"hands[{i}]: expected (name, params) or (name, params, couplings), got {type(h).__name__}")
+    from ohra.objects.resolve import resolve_object
+
+    objects = [resolve_object(o) for o in objects]  # ObjectModels, or specs as the CLI takes them ("builtin:box", a mesh)
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise OhraError(f"output path {out} exists and is not a directory")

@@ -22,6 +22,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from ohra.errors import OhraError
 from ohra.sim.hands import SimHand
 from ohra.sim.rotation import observations as obs_terms
 from ohra.sim.rotation import rewards, termination
@@ -29,6 +30,10 @@ from ohra.sim.rotation.config import RotationConfig
 from ohra.sim.rotation.grasps import GraspSet, load_or_generate
 from ohra.sim.rotation.scene import RotationScene
 from ohra.sim.rotation.task import resolve
+
+
+class RotationActionError(OhraError, ValueError):
+    """An action or reset option the rotation env cannot take (wrong size, NaN or infinity, no such starting state)."""
 
 
 class InHandRotateEnv(gym.Env):
@@ -76,8 +81,14 @@ class InHandRotateEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
         """Start from a cached starting state: ``options={"grasp": i}`` picks one, else ``np_random`` does."""
         super().reset(seed=seed)
-        i = int(options["grasp"]) if options and "grasp" in options else int(self.np_random.integers(len(self.grasps)))
         g = self.grasps
+        if options and "grasp" in options:
+            i = options["grasp"]
+            if isinstance(i, bool) or not isinstance(i, (int, np.integer)) or not 0 <= int(i) < len(g.q):
+                raise RotationActionError(f"options['grasp'] must be a starting state index 0-{len(g.q) - 1}, got {i!r}")
+            i = int(i)
+        else:
+            i = int(self.np_random.integers(len(g.q)))
         self.scene.set_hand(g.q[i])
         # "perturbed": the motors continue the settled state exactly; "settled": they hold the joints where they are
         target = g.target[i] if self.cfg.start_targets == "perturbed" else g.q[i]
@@ -93,7 +104,17 @@ class InHandRotateEnv(gym.Env):
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:
         cfg = self.cfg
-        a = np.clip(np.asarray(action, dtype=float).reshape(self.action_space.shape), -1.0, 1.0)
+        try:
+            a = np.asarray(action, dtype=float)
+        except (TypeError, ValueError):
+            raise RotationActionError(f"action: expected {self.action_space.shape[0]} numbers, got {type(action).__name__}") from None
+        if a.size != self.action_space.shape[0]:
+            raise RotationActionError(f"action: expected {self.action_space.shape[0]} numbers (one per driven joint), got shape {a.shape}")
+        if not np.all(np.isfinite(a)):
+            # clipping keeps NaN: it reached the motors, and PyBullet's joint state stayed NaN for every later episode
+            raise RotationActionError(f"action holds NaN or infinity at {np.flatnonzero(~np.isfinite(a.ravel())).tolist()} "
+                                      "(a diverged policy?)")
+        a = np.clip(a.reshape(self.action_space.shape), -1.0, 1.0)
         self._target = np.clip(self._target + cfg.action_scale * a, self._lo, self._hi)
         self.scene.drive(self.space.to_sim(self._target))
         self.scene.step()
