@@ -52,7 +52,15 @@ def add_hand(vis: Any, hand: HandModel, q: np.ndarray, T_world_palm: np.ndarray 
     """Draw the canonical hand (palm cylinder + finger capsules) at configuration ``q``."""
     import meshcat.geometry as g
 
+    if not isinstance(hand, HandModel):
+        from ohra.errors import OhraError
+
+        raise OhraError(f"add_hand: expected a HandModel (HandModel.from_params(params)), got {type(hand).__name__}")
     T0 = np.eye(4) if T_world_palm is None else np.asarray(T_world_palm, dtype=float)
+    if T0.shape != (4, 4):
+        from ohra.errors import OhraError
+
+        raise OhraError(f"add_hand: T_world_palm must be a (4, 4) transform, got shape {T0.shape}")
     mat = _material(color, opacity)
     vis[path].delete()
     palm = hand.palm

@@ -189,7 +189,7 @@ def test_ctrl_c_during_a_solve_stops_the_run_instead_of_storing_a_failed_solve()
 
 @pytest.mark.parametrize("make, message", [
     (lambda: SynthSettings(grasps_per_object=1.5), "grasps per object must be a whole number >= 1, got 1.5"),
-    (lambda: SynthSettings(max_penetration_m=-0.001), "max_penetration_m must be a distance >= 0"),
+    (lambda: SynthSettings(max_penetration_m=float("nan")), "max_penetration_m must be a finite distance"),
     (lambda: SynthSettings(object_extent_m=(0.5, 0.01)), "0 < smallest < largest"),
     (lambda: NLPSettings(hessian="full"), "NLPSettings.hessian must be one of limited-memory, exact, got 'full'"),
     (lambda: NLPSettings(mu=-0.5), "NLPSettings.mu must be a finite number >= 0"),

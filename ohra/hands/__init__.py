@@ -96,6 +96,11 @@ def couplings_of(params: Params) -> tuple[Coupling, ...]:
     ``synthesize([(name, params)], ...)``) drive a coupled hand as simulation and synthesis by name do."""
     import numpy as np
 
+    if not isinstance(params, (BaseParams, ExtendedParams)):
+        from ohra.errors import ParamsError
+
+        hint = f" (a hand name: get_couplings({str(params)!r}))" if isinstance(params, (str, Path)) else ""
+        raise ParamsError(f"couplings_of: expected BaseParams or ExtendedParams, got {type(params).__name__}{hint}")
     reg = _registry()
     files = reg._spec_files()
     key = tuple((n, str(p), p.stat().st_mtime_ns) for n, p in sorted(files.items()))

@@ -105,6 +105,9 @@ def _as_batch(v: Any, width: int, what: str) -> tuple[np.ndarray, bool]:
     arr = np.atleast_2d(arr)
     if arr.ndim != 2 or arr.shape[1] != width:
         raise LatentError(f"{what}: expected shape ({width},) or (N, {width}), got {np.shape(v)}")
+    if not np.all(np.isfinite(arr)):  # a NaN input gave a NaN latent, silently
+        rows, cols = np.nonzero(~np.isfinite(arr))
+        raise LatentError(f"{what} has non-finite values (NaN or infinity at row {int(rows[0])}, entry {int(cols[0])})")
     return arr, single
 
 

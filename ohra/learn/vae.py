@@ -62,9 +62,15 @@ class VAEConfig:
     tip_scale: float = 0.01  # m
 
     def __post_init__(self) -> None:
+        from ohra.errors import ParamsError
+
         enc = get_encoding(self.encoding)
         if self.input_dim != enc.dim:
-            raise ValueError(f"VAEConfig: input_dim {self.input_dim} does not match encoding {enc.name!r} ({enc.dim})")
+            raise ParamsError(f"VAEConfig: input_dim {self.input_dim} does not match encoding {enc.name!r} ({enc.dim})")
+        sizes = [self.latent_dim, *self.hidden]
+        if any(isinstance(k, bool) or not isinstance(k, int) or k < 1 for k in sizes):
+            raise ParamsError(f"VAEConfig: latent_dim and hidden sizes must be whole numbers >= 1, got latent_dim="
+                              f"{self.latent_dim!r}, hidden={tuple(self.hidden)!r}")
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)

@@ -282,6 +282,9 @@ class GraspEvaluator:
         warn_if_ungraspable(obj)  # a millimetre mesh read as metres: an 80 m can, simulated without a word before
         self.hand = hand
         protocol = protocol or Protocol()
+        if not isinstance(protocol, Protocol):
+            raise GraspError(f"protocol: expected a Protocol (e.g. Protocol(friction=1.0) or Protocol.preset('strict')), "
+                             f"got {type(protocol).__name__}")
         if obj.density != DEFAULT_DENSITY and obj.density != protocol.density:
             # the protocol fixes the test's density (the paper's 500 kg/m^3); an object's own density was dropped silently
             warnings.warn(f"object {obj.name!r} has density {obj.density:g} kg/m^3; the six-direction test simulates it at "
@@ -334,6 +337,8 @@ class GraspEvaluator:
         under other inputs is replaced. The file is left in place; delete it once the report is kept."""
         if mode not in ("eval", "filter"):
             raise GraspError(f"mode must be 'eval' or 'filter', got {mode!r}")
+        if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)):
+            raise GraspError(f"workers must be a whole number >= 1, got {workers!r}")
         if int(workers) < 1:
             raise GraspError(f"workers must be >= 1, got {workers}")
         g, out = self.check(grasps)

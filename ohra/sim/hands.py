@@ -139,7 +139,11 @@ class SimHand:
         from ohra.canonical.urdfgen import render
 
         if not isinstance(params, (BaseParams, ExtendedParams)):
-            raise TypeError(f"expected BaseParams or ExtendedParams, got {type(params).__name__}")
+            from ohra.errors import ParamsError
+
+            hint = (f" (a hand name: SimHand.from_params(ohra.get_hand({str(params)!r}), name={str(params)!r}, "
+                    f"couplings=ohra.get_couplings({str(params)!r})))") if isinstance(params, (str, Path)) else ""
+            raise ParamsError(f"SimHand.from_params: expected BaseParams or ExtendedParams, got {type(params).__name__}{hint}")
         if name is None:
             name = "canonical_" + hashlib.sha256(params.to_json().encode()).hexdigest()[:8]
         lo, up = np.asarray(params.joint_lowers, dtype=float), np.asarray(params.joint_uppers, dtype=float)

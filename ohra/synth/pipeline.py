@@ -89,8 +89,8 @@ class SynthSettings:
             raise OhraError(f"cap must be a whole number >= 1 (or None), got {self.cap!r}")
         m = self.max_penetration_m
         if m is not None and (isinstance(m, bool) or not isinstance(m, (int, float, np.integer, np.floating))
-                              or not np.isfinite(m) or m < 0):
-            raise OhraError(f"max_penetration_m must be a distance >= 0 [m] (or None), got {m!r}")
+                              or not np.isfinite(m)):  # negative: that much clearance demanded
+            raise OhraError(f"max_penetration_m must be a finite distance [m] (or None), got {m!r}")
         lo, hi = self.object_extent_m
         if not (np.isfinite(lo) and np.isfinite(hi) and 0 < lo < hi):
             raise OhraError(f"object_extent_m must be (smallest, largest) [m] with 0 < smallest < largest, got {self.object_extent_m!r}")
