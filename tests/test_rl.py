@@ -714,3 +714,48 @@ def test_a_run_is_loaded_and_resumed_in_the_form_it_recorded_not_the_hands_defau
         else:  # null and the form it stands for are one setting, either way round
             _check_resume(tmp_path, env_cfg, ppo)
             _check_resume(tmp_path, env_cfg.with_overrides(form="extended"), ppo)
+
+
+def test_every_checkpoint_holds_the_updates_of_all_its_steps(tiny, monkeypatch):
+    """Saved on a rollout's last step, before PPO used that rollout, a checkpoint at N steps lacked one update, and a
+    resume from it never made that update (a resumed run trailed an uninterrupted one by an update per interruption)."""
+    import ohra.learn.rl.train as rl_train
+
+    env_cfg, ppo, run = tiny
+    seen, real = [], rl_train.save_checkpoint
+
+    def recording(model, run_dir, wall_s):
+        seen.append((int(model.num_timesteps), int(model._n_updates)))
+        real(model, run_dir, wall_s)
+
+    monkeypatch.setattr(rl_train, "save_checkpoint", recording)
+    train_rotation(env_cfg, ppo, run)
+    assert [t for t, _ in seen][:2] == [24, 48]
+    for steps, updates in seen:
+        assert updates == steps // ppo.n_steps * ppo.n_epochs, seen
+
+
+def test_a_finished_runs_torn_files_are_mended_on_resume_and_never_evaluated_half(tiny):
+    """The final model.zip and vecnormalize.pkl were written in place one after the other: a kill could leave a torn
+    policy (which --resume then reported as written) or a policy without its observation statistics (evaluated on raw
+    observations without a word). A row torn from progress.csv was kept and merged with the next one."""
+    from ohra.learn.rl.evaluate import Policy
+    from ohra.learn.rl.plots import read_progress
+
+    env_cfg, ppo, run = tiny
+    ppo = with_budget(ppo, total_steps=24)
+    train_rotation(env_cfg, ppo, run)
+    whole = (run / "model.zip").read_bytes()
+    (run / "model.zip").write_bytes(whole[:1000])  # torn
+    with pytest.warns(UserWarning, match="nothing to train"):
+        train_rotation(env_cfg, ppo, run, resume=True)
+    Policy(run)  # whole again, from the checkpoint
+    (run / "vecnormalize.pkl").unlink()
+    with pytest.raises(CheckpointError, match="vecnormalize.pkl does not exist, and the run normalised its observations"):
+        Policy(run)
+    with open(run / "progress.csv", "a") as fh:
+        fh.write("2")  # a row torn by a kill mid-append
+    assert list(read_progress(run)["timesteps"]) == [24]  # the torn row is left out, not a crash
+    train_rotation(env_cfg, with_budget(ppo, total_steps=48), run, resume=True)
+    assert list(read_progress(run)["timesteps"]) == [24, 48]
+    Policy(run)

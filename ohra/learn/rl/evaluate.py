@@ -166,6 +166,11 @@ class Policy:
 
         self._policy = load_checked(zip_path, "SB3 policy (.zip)",
                                     lambda: ppo_class(self.ppo.policy).load(zip_path, device="cpu").policy)
+        if not stats.is_file() and self.ppo.normalize_obs:
+            # evaluated on raw observations, a policy trained on normalised ones turns the object the wrong way
+            raise CheckpointError(f"{stats} does not exist, and the run normalised its observations (config.json: "
+                                  f"normalize_obs true): its policy cannot be evaluated without them"
+                                  + ("; --resume writes them again from the last checkpoint" if which == "model" else ""))
         if stats.is_file():
             vn = load_pickle(stats, "SB3 VecNormalize statistics (.pkl)")
             if not hasattr(vn, "norm_obs"):

@@ -15,9 +15,19 @@ def read_progress(run_dir: str | Path) -> dict[str, np.ndarray]:
     path = Path(run_dir) / "progress.csv"
     with open(path, newline="") as fh:
         rows = list(csv.DictReader(fh))
-    if not rows:
+
+    def parsed(r: dict) -> dict[str, float] | None:  # None: a row torn by a kill mid-append (cells missing)
+        if None in r or any(v is None for v in r.values()):
+            return None
+        try:
+            return {k: float(v) if v not in ("", "nan") else np.nan for k, v in r.items()}
+        except ValueError:
+            return None
+
+    good = [p for p in map(parsed, rows) if p is not None]
+    if not good:
         return {}
-    return {k: np.array([float(r[k]) if r[k] not in ("", "nan") else np.nan for r in rows]) for k in rows[0]}
+    return {k: np.array([r[k] for r in good]) for k in good[0]}
 
 
 def smooth(y: np.ndarray, window: int) -> np.ndarray:

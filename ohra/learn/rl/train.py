@@ -23,6 +23,7 @@ wall seconds ``wall_s``, and the environment settings that differ), so a budget 
 from __future__ import annotations
 
 import csv
+import io
 import json
 import os
 import time
@@ -141,10 +142,14 @@ def _callback(run_dir: Path, ppo: PPOSettings, wall_before: float):
                     self.ep_r.append(ep["r"])
                     self.ep_l.append(ep["l"])
                     self.ep_rot.append(ep.get("cumulative_rotation", np.nan))
+            return ppo.max_minutes is None or self.wall() < 60.0 * ppo.max_minutes
+
+        def _on_rollout_start(self) -> None:
+            # here, not on the rollout's last step: the previous rollout's update has now run, so a checkpoint at
+            # N steps holds every update of the first N steps (saved before it, the resume lost one update)
             if self.num_timesteps >= self.next_ckpt:
                 save_checkpoint(self.model, run_dir, self.wall())
-                self.next_ckpt += ppo.checkpoint_every
-            return ppo.max_minutes is None or self.wall() < 60.0 * ppo.max_minutes
+                self.next_ckpt = (self.num_timesteps // ppo.checkpoint_every + 1) * ppo.checkpoint_every
 
         def _on_rollout_end(self) -> None:
             if self.ep_rot:  # to TensorBoard too (when on) with SB3's own scalars
@@ -175,15 +180,28 @@ def _append_csv(path: Path, row: dict[str, Any]) -> None:
         w.writerow(row)
 
 
+def _whole_row(row: dict) -> bool:
+    """A progress row with every column present and a whole-number ``timesteps``."""
+    if None in row or any(row.get(k) is None for k in CSV_FIELDS):
+        return False
+    try:
+        return float(row["timesteps"]).is_integer()
+    except ValueError:
+        return False
+
+
 def truncate_progress(path: Path, timesteps: int) -> int:
     """Drop the rows of ``path`` (progress.csv) logged past ``timesteps`` (atomic rewrite); returns how
     many were dropped. A run interrupted between two checkpoints logged rollouts its resume repeats."""
     if not path.is_file():
         return 0
     with open(path, newline="") as fh:
-        rows = list(csv.DictReader(fh))
-    keep = [r for r in rows if int(float(r["timesteps"])) <= timesteps]
-    if len(keep) == len(rows):
+        text = fh.read()
+    rows = list(csv.DictReader(io.StringIO(text)))
+    # a row torn by a kill mid-append (no newline, missing cells) is dropped, and so is the merge of it with the
+    # next append ("20" + "1152,...": a 201,152-step row)
+    keep = [r for r in rows if _whole_row(r) and int(float(r["timesteps"])) <= timesteps]
+    if len(keep) == len(rows) and text.endswith("\n"):
         return 0
     tmp = path.with_name(f".{path.name}.tmp")
     with open(tmp, "w", newline="") as fh:
@@ -207,6 +225,36 @@ def save_checkpoint(model, run_dir: Path, wall_s: float) -> None:
     tmp = d / ".last.tmp.json"
     tmp.write_text(json.dumps({"timesteps": int(model.num_timesteps), "wall_s": wall_s}))
     os.replace(tmp, d / "last.json")
+
+
+def save_final(model, run_dir: Path) -> None:
+    """Write ``model.zip`` and ``vecnormalize.pkl``: each to a temporary file first, the old policy removed before
+    either is replaced and the policy written last, so a kill leaves either the new pair or no ``model.zip`` (a run
+    ``--resume`` finishes from its checkpoint), never a policy beside statistics of another."""
+    tmp_model, tmp_stats = run_dir / ".model.tmp.zip", run_dir / ".vecnormalize.tmp.pkl"
+    model.save(tmp_model)
+    venv = model.get_vec_normalize_env()
+    if venv is not None:
+        venv.save(str(tmp_stats))
+    (run_dir / "model.zip").unlink(missing_ok=True)
+    if venv is not None:
+        os.replace(tmp_stats, run_dir / "vecnormalize.pkl")
+    os.replace(tmp_model, run_dir / "model.zip")
+
+
+def _final_intact(run_dir: Path) -> bool:
+    """Whether ``model.zip`` is a whole zip archive (and its statistics exist when the run normalises observations)."""
+    import zipfile
+
+    path = run_dir / "model.zip"
+    try:
+        with zipfile.ZipFile(path) as z:
+            if z.testzip() is not None:
+                return False
+    except (OSError, zipfile.BadZipFile):
+        return False
+    cfg = read_config(run_dir)
+    return not bool(cfg.get("ppo", {}).get("normalize_obs", True)) or (run_dir / "vecnormalize.pkl").is_file()
 
 
 def _vec_env(env_cfg: RotationConfig, ppo: PPOSettings):
@@ -433,14 +481,14 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
                 warnings.warn(f"{run_dir}: already at {model.num_timesteps:,} of {ppo.total_steps:,} steps"
                               + (f" and {wall_before / 60:.0f} of {ppo.max_minutes:g} minutes" if ppo.max_minutes else "")
                               + ": nothing to train; give a larger --steps / --minutes to continue", UserWarning, stacklevel=2)
-                if (run_dir / "model.zip").is_file():  # finished: its files and recorded budget stay as they are
-                    return run_dir / "model.zip"
+                if not _final_intact(run_dir):  # missing or torn (a kill while writing them): the checkpoint holds them
+                    save_final(model, run_dir)
+                return run_dir / "model.zip"  # finished: its files and recorded budget stay as they are
             if resume:
                 _save_budget(run_dir, ppo)  # a later plain resume continues to this budget
             model.learn(total_timesteps=remaining, callback=cb, reset_num_timesteps=False, tb_log_name="ppo")
             save_checkpoint(model, run_dir, cb.wall())
-            model.save(run_dir / "model.zip")
-            model.get_vec_normalize_env().save(str(run_dir / "vecnormalize.pkl"))
+            save_final(model, run_dir)
         finally:
             venv.close()
         return run_dir / "model.zip"
