@@ -73,3 +73,14 @@ def test_a_vae_of_no_size_is_refused():
 
     with pytest.raises(OhraError, match="latent_dim and hidden sizes must be whole numbers >= 1"):
         VAEConfig(latent_dim=-1)
+
+
+def test_a_dataset_and_the_hand_list_take_what_they_say():
+    from ohra.data.dataset import DatasetError, GraspDataset
+    from ohra.hands import list_hands
+
+    with pytest.raises(DatasetError, match="expected a dataset folder path, got int"):
+        GraspDataset(3)
+    with pytest.raises(OhraError, match="include_variants must be True or False, got 'leap'"):
+        list_hands("leap")
+    assert len(list_hands(True)) == len(list_hands()) + 256

@@ -85,6 +85,8 @@ class GraspDataset:
 
     def __init__(self, path: str | Path, hands: list[str] | None = None, objects: list[str] | None = None,
                  max_per_pair: int | None = None, which: str = "pre", split: str | None = None):
+        if not isinstance(path, (str, Path)):
+            raise DatasetError(f"GraspDataset: expected a dataset folder path, got {type(path).__name__}")
         if split not in (None, "train", "test"):
             raise DatasetError(f"split must be 'train', 'test' or None, got {split!r}")
         if which not in ("pre", "post"):

@@ -36,6 +36,8 @@ def list_hands(include_variants: bool = False) -> list[str]:
     Returns:
         Names :func:`get_hand` accepts.
     """
+    if not isinstance(include_variants, bool):  # list_hands("leap") listed the registered hands only
+        raise HandNotFoundError(f"list_hands: include_variants must be True or False, got {include_variants!r}")
     reg = _registry()
     names = sorted(reg.registered_hands()) if reg is not None else []
     if include_variants:
