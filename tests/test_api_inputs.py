@@ -79,8 +79,12 @@ def test_a_dataset_and_the_hand_list_take_what_they_say():
     from ohra.data.dataset import DatasetError, GraspDataset
     from ohra.hands import list_hands
 
-    with pytest.raises(DatasetError, match="expected a dataset folder path, got int"):
+    with pytest.raises(DatasetError, match="expected a dataset folder path or a list of them, got int"):
         GraspDataset(3)
+    with pytest.raises(DatasetError, match="got int in the list"):
+        GraspDataset(["datasets/a", 3])
+    with pytest.raises(DatasetError, match="an empty list"):
+        GraspDataset([])
     with pytest.raises(OhraError, match="include_variants must be True or False, got 'leap'"):
         list_hands("leap")
     assert len(list_hands(True)) == len(list_hands()) + 256

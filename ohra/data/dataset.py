@@ -85,8 +85,11 @@ class GraspDataset:
 
     def __init__(self, path: str | Path, hands: list[str] | None = None, objects: list[str] | None = None,
                  max_per_pair: int | None = None, which: str = "pre", split: str | None = None):
-        if not isinstance(path, (str, Path)):
-            raise DatasetError(f"GraspDataset: expected a dataset folder path, got {type(path).__name__}")
+        listed = isinstance(path, (list, tuple))
+        bad = [p for p in (path if listed else [path]) if not isinstance(p, (str, Path))]
+        if bad or (listed and not path):
+            got = f"{type(bad[0]).__name__}{' in the list' if listed else ''}" if bad else "an empty list"
+            raise DatasetError(f"GraspDataset: expected a dataset folder path or a list of them, got {got}")
         if split not in (None, "train", "test"):
             raise DatasetError(f"split must be 'train', 'test' or None, got {split!r}")
         if which not in ("pre", "post"):
