@@ -23,6 +23,9 @@ ORIGINAL_COLOR = 0xB0B0B0
 _Y_TO_Z = np.array([[1.0, 0, 0, 0], [0, 0, -1.0, 0], [0, 1.0, 0, 0], [0, 0, 0, 1.0]])
 
 
+SERVERS: list = []  # meshcat server processes this process started (the CLI stops them on SIGTERM / SIGHUP)
+
+
 def new_visualizer(open_browser: bool = False):
     """Start a meshcat server (local, loopback) and return its Visualizer (``vis.url()`` is its address).
 
@@ -36,6 +39,9 @@ def new_visualizer(open_browser: bool = False):
 
     with contextlib.redirect_stdout(io.StringIO()):
         vis = meshcat.Visualizer()
+    proc = getattr(getattr(vis, "window", None), "server_proc", None)
+    if proc is not None:
+        SERVERS.append(proc)
     if open_browser:  # pragma: no cover - interactive
         vis.open()
     return vis

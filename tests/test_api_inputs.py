@@ -88,3 +88,18 @@ def test_a_dataset_and_the_hand_list_take_what_they_say():
     with pytest.raises(OhraError, match="include_variants must be True or False, got 'leap'"):
         list_hands("leap")
     assert len(list_hands(True)) == len(list_hands()) + 256
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda: HandModel.from_params(get_hand("leap_3303")).random_configurations(3, seed=-1),
+     "random_configurations: seed must be a whole number >= 0, got -1"),
+    (lambda: HandModel.from_params(get_hand("leap_3303")).fingertips(["a"] * 22), "22 joint angles"),
+    (lambda: ObjectModel.builtin("box").sample_surface(5, seed=1.5), "sample_surface's seed must be a whole number"),
+    (lambda: ObjectModel.builtin("box").sample_surface(2.5), "sample_surface's n: expected a whole number, got 2.5"),
+    (lambda: ObjectModel.builtin("box").signed_distance(np.zeros((2, 2))), r"expected \(N, 3\) points \[m\], got shape \(2, 2\)"),
+    (lambda: __import__("ohra.objects.model", fromlist=["x"]).farthest_point_sampling(np.zeros((4, 3)), 0), "k must be"),
+    (lambda: ObjectModel.builtin("box", density="a"), "density must be a finite number > 0"),
+])
+def test_seeds_counts_points_and_densities_of_the_wrong_kind_are_named(call, message):
+    with pytest.raises(OhraError, match=message):
+        call()

@@ -1,5 +1,5 @@
-"""A command stopped by SIGTERM (a scheduler, `timeout`, `kill`) or SIGHUP (a closed terminal) stops as Ctrl-C does:
-one stderr line, exit 130, and its cleanup runs (meshcat's server, started in its own session, was left running)."""
+"""A command stopped by SIGTERM (a scheduler, `timeout`, `kill`) or SIGHUP (a closed terminal) ends at once, as before,
+but stops the meshcat servers it started first (started in their own session, they were left running)."""
 
 from __future__ import annotations
 
@@ -32,8 +32,8 @@ def test_a_terminated_command_stops_its_meshcat_server_and_says_so_in_one_line(s
     server = int(p.stdout.readline())
     assert os.path.exists(f"/proc/{server}")
     p.send_signal(sig)
-    _, err = p.communicate(timeout=60)
-    assert p.returncode == 130 and err == "ohra: interrupted\n"
+    p.communicate(timeout=60)
+    assert p.returncode == -sig  # ended by the signal, at once
     for _ in range(50):
         if not os.path.exists(f"/proc/{server}"):
             break
@@ -42,7 +42,7 @@ def test_a_terminated_command_stops_its_meshcat_server_and_says_so_in_one_line(s
 
 
 @pytest.mark.e2e
-def test_a_terminated_evaluation_on_a_worker_pool_ends_in_one_line_without_worker_tracebacks(tmp_path):
+def test_a_terminated_evaluation_on_a_worker_pool_ends_without_worker_tracebacks_or_workers_left(tmp_path):
     from ohra.canonical.kinematics import HandModel
     from ohra.hands import get_hand
     from ohra.objects.model import ObjectModel
@@ -56,4 +56,21 @@ def test_a_terminated_evaluation_on_a_worker_pool_ends_in_one_line_without_worke
     assert p.poll() is None, "finished before it could be stopped"
     p.send_signal(signal.SIGTERM)
     _, err = p.communicate(timeout=60)
-    assert p.returncode == 130 and "Traceback" not in err and err.strip().splitlines()[-1] == "ohra: interrupted"
+    assert p.returncode == -signal.SIGTERM and "Traceback" not in err
+
+    def left() -> list[str]:  # forked workers carry the driver's command line
+        out = []
+        for proc in os.listdir("/proc"):
+            try:
+                with open(f"/proc/{proc}/cmdline", "rb") as fh:
+                    if str(grasps).encode() in fh.read():
+                        out.append(proc)
+            except OSError:
+                continue
+        return out
+
+    for _ in range(100):
+        if not left():
+            break
+        time.sleep(0.1)
+    assert not left(), "pool workers outlived the evaluation"

@@ -31,7 +31,7 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from ohra.errors import OhraError
+from ohra.errors import OhraError, require_seed
 from ohra.canonical.params import FINGERS, JOINT_NAMES, BaseParams, ExtendedParams, Params, load_params, require_params
 from ohra.canonical.urdfgen import palm_geometry, render
 from ohra.transforms import axis_angle_to_matrix
@@ -186,7 +186,11 @@ class HandModel:
 
     def check_q(self, q: np.ndarray) -> np.ndarray:
         """Validate a (22,) or (N,22) configuration; returns it as a float array."""
-        q = np.asarray(q, dtype=float)
+        try:
+            q = np.asarray(q, dtype=float)
+        except (TypeError, ValueError):
+            raise OhraError(f"expected a canonical configuration of 22 joint angles [rad], got {type(q).__name__} of "
+                            "non-numbers") from None
         if q.shape[-1:] != (22,) or q.ndim > 2:
             raise OhraError(f"expected a canonical configuration of shape (22,) or (N, 22), got {q.shape}")
         if not np.all(np.isfinite(q)):
@@ -220,11 +224,11 @@ class HandModel:
             (n, 22) joint angles [rad], canonical joint order.
 
         Raises:
-            OhraError: ``n`` is not a whole number >= 0.
+            OhraError: ``n`` is not a whole number >= 0; ``seed`` not a whole number >= 0.
         """
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
             raise OhraError(f"random_configurations: n must be a whole number >= 0, got {n!r}")
-        rng = np.random.default_rng(seed)
+        rng = np.random.default_rng(require_seed(seed, OhraError, "random_configurations: seed"))
         return self.lower + rng.random((int(n), 22)) * (self.upper - self.lower)
 
     def _to_pin(self, q: np.ndarray) -> np.ndarray:

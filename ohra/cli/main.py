@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import signal
 import sys
 import threading
@@ -153,13 +154,28 @@ def execute(args: argparse.Namespace) -> int:
 
 
 def _terminate(signum, frame) -> None:
-    raise KeyboardInterrupt  # handled like Ctrl-C: one line, exit 130, cleanup runs
+    # meshcat's server runs in its own session, so the signal does not reach it: stop it, then end as the default
+    # action would (at once; files are written atomically). Raising into the command instead ran its cleanup, which
+    # could block on the meshcat connection under load.
+    viz = sys.modules.get("ohra.viz")
+    for proc in list(getattr(viz, "SERVERS", ())):
+        try:
+            proc.kill()
+        except OSError:
+            pass
+    if "multiprocessing" in sys.modules:  # pool workers (default handlers: they end quietly), not left to find a broken pipe
+        import multiprocessing
+
+        for child in multiprocessing.active_children():
+            child.terminate()
+    signal.signal(signum, signal.SIG_DFL)
+    os.kill(os.getpid(), signum)
 
 
 def _stop_on_termination() -> dict:
-    """SIGTERM (a scheduler, `timeout`, `kill`) and SIGHUP (a closed terminal) stop a command as Ctrl-C does, so its
-    cleanup runs: Python's default for them ends the process at once, which left meshcat's server (started in its own
-    session) running and holding its ports. Returns the handlers to put back (none outside the main thread)."""
+    """SIGTERM (a scheduler, `timeout`, `kill`) and SIGHUP (a closed terminal) still end a command at once, but first
+    stop the meshcat servers it started (they outlived it, holding their ports). Returns the handlers to put back
+    (none outside the main thread)."""
     if threading.current_thread() is not threading.main_thread():
         return {}
     old = {}

@@ -24,7 +24,7 @@ import trimesh
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from ohra.errors import ObjectError, ObjectWarning, user_stacklevel
+from ohra.errors import ObjectError, ObjectWarning, require_seed, require_whole, user_stacklevel
 from ohra.objects.body import BODY_TOLERANCE_M, BODY_VOLUME_RANGE, SDF, Body, Fidelity, MassProperties, fidelity
 from ohra.objects.decompose import DECOMPOSITION_NAMES, check_solid, convex_components, load_convex_pieces, vhacd_pieces
 from ohra.objects.repair import RepairReport, repair_mesh
@@ -170,7 +170,8 @@ class ObjectModel:
                  pieces_label: str = "provided", body_choice: str = "auto"):
         if body_choice not in BODY_CHOICES:
             raise ObjectError(f"object {name!r}: body must be one of {', '.join(BODY_CHOICES)}, got {body_choice!r}")
-        if not (np.isfinite(float(density)) and float(density) > 0):
+        if (isinstance(density, bool) or not isinstance(density, (int, float, np.integer, np.floating))
+                or not (np.isfinite(float(density)) and float(density) > 0)):
             raise ObjectError(f"object {name!r}: density must be a finite number > 0 kg/m^3, got {density}")
         if len(mesh.faces) == 0:
             raise ObjectError(f"object {name!r}: mesh has no faces")
@@ -291,8 +292,8 @@ class ObjectModel:
         else:
             raise ObjectError(f"{path}: unsupported object file type {path.suffix!r} (use {', '.join(MESH_SUFFIXES)} or .urdf)")
         if scale is not None:
-            if not float(scale) > 0:
-                raise ObjectError(f"{path}: scale must be > 0, got {scale}")
+            if isinstance(scale, bool) or not isinstance(scale, (int, float, np.integer, np.floating)) or not float(scale) > 0:
+                raise ObjectError(f"{path}: scale must be a number > 0, got {scale!r}")
             mesh.apply_scale(float(scale))
             for pc in pieces or []:
                 pc.apply_scale(float(scale))
@@ -554,11 +555,13 @@ class ObjectModel:
             (n, 3) points in the mesh frame [m] and (n, 3) unit outward normals (of their faces).
 
         Raises:
-            ObjectError: ``n`` < 1.
+            ObjectError: ``n`` or ``oversample`` not a whole number >= 1; ``seed`` not a whole number >= 0.
         """
-        if not int(n) >= 1:
+        if isinstance(n, (int, np.integer)) and not isinstance(n, bool) and n < 1:
             raise ObjectError(f"object {self.name!r}: sample_surface needs n >= 1 points, got {n}")
-        m = int(n) * max(int(oversample), 1)
+        n = require_whole(n, ObjectError, f"object {self.name!r}: sample_surface's n", 1)
+        seed = require_seed(seed, ObjectError, f"object {self.name!r}: sample_surface's seed")
+        m = n * max(require_whole(oversample, ObjectError, "sample_surface's oversample", 1), 1)
         pts, fid = trimesh.sample.sample_surface(self.mesh, m, seed=seed)
         nrm = self.mesh.face_normals[fid]
         if m > n:
@@ -599,8 +602,19 @@ class ObjectModel:
 
         Returns:
             (N,) signed distances [m], negative inside.
+
+        Raises:
+            ObjectError: ``points`` not (N, 3) finite numbers.
         """
-        return self.body.signed_distance(points)
+        try:
+            p = np.asarray(points, dtype=float)
+        except (TypeError, ValueError):
+            raise ObjectError(f"signed_distance: expected (N, 3) points [m], got {type(points).__name__}") from None
+        if p.ndim != 2 or p.shape[1] != 3:
+            raise ObjectError(f"signed_distance: expected (N, 3) points [m], got shape {p.shape}")
+        if not np.all(np.isfinite(p)):
+            raise ObjectError("signed_distance: points contain NaN or infinity")
+        return self.body.signed_distance(p)
 
     def sdf(self, spacing: float | None = None, padding: float = 0.05, max_cells: int = 64) -> SDFGrid:
         """Signed-distance grid of the body covering its bounds plus ``padding`` [m].
@@ -661,8 +675,10 @@ def farthest_point_sampling(points: np.ndarray, k: int, seed: int = 0) -> np.nda
     """Indices of ``k`` points chosen by farthest-point sampling from a seeded random start."""
     p = np.asarray(points, dtype=float)
     n = len(p)
-    k = min(int(k), n)
-    rng = np.random.default_rng(seed)
+    k = min(require_whole(k, ObjectError, "farthest_point_sampling's k", 1), n)
+    if n == 0:
+        raise ObjectError("farthest_point_sampling: no points to choose from")
+    rng = np.random.default_rng(require_seed(seed, ObjectError, "farthest_point_sampling's seed"))
     idx = np.empty(k, dtype=int)
     idx[0] = rng.integers(n)
     d = np.linalg.norm(p - p[idx[0]], axis=1)
