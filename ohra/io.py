@@ -39,6 +39,8 @@ def check_suffix(path: str | Path, suffix: str, flag: str = "-o") -> Path:
     from ohra.errors import OutputPathError
 
     path = Path(path)
+    if str(path) == os.devnull:  # output discarded on purpose
+        return path
     if path.suffix.lower() != suffix.lower():
         hint = f" (a file name is needed before {suffix})" if path.name.lower() == suffix.lower() else ""
         raise OutputPathError(f"{flag} must end in {suffix}, got {path}{hint}")

@@ -270,3 +270,20 @@ def test_output_folders_take_dash_o_like_every_other_command():
     assert parser.parse_args(["data", "build", "r.yaml", "-o", "ds"]).out == "ds"
     assert parser.parse_args(["synth", "--hand", "leap_3303", "-o", "ds"]).out == "ds"
     assert parser.parse_args(["rotate", "train", "-o", "run"]).output == "run"
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["hand", "render", "leap_3303", "-o", "h.png"], "-o must end in .urdf, got"),
+    (["hand", "mirror", "leap_3303", "-o", "m.png"], "-o must end in .json, got"),
+    (["hand", "compare", "barrett_hand", "--samples", "2", "--html", "c.png"], "--html must end in .html, got"),
+    (["vae", "decode", "enc.json", "-o", "dec.png"], "-o must end in .json, got"),
+    (["vae", "decode", "enc.json", "--urdf", "dec.html"], "--urdf must end in .urdf, got"),
+    (["rotate", "plot", "a=run", "-o", "plot.html"], "-o must end in .png, got"),
+])
+def test_an_output_of_the_wrong_kind_is_refused_before_anything_is_written(argv, message, tmp_path, capsys, monkeypatch):
+    """A URDF was written to h.png, JSON to m.png, a PNG to plot.html (a CLI sweep)."""
+    monkeypatch.chdir(tmp_path)
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0]
+    assert not any(tmp_path.iterdir())

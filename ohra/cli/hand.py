@@ -149,6 +149,10 @@ def _cmd_render(args: argparse.Namespace) -> int:
     from ohra.canonical.urdfgen import render, write
     from ohra.hands.resolve import resolve_hand
 
+    if args.output:  # a URDF written to plot.png was accepted
+        from ohra.io import check_output, check_suffix
+
+        check_suffix(check_output(args.output), ".urdf", "-o")
     ref = resolve_hand(args.hand, "extended" if args.extended else None)  # the hand's name becomes the robot's
     params = ref.params.to_extended() if args.extended and isinstance(ref.params, BaseParams) else ref.params
     if args.output:
@@ -167,6 +171,10 @@ def _cmd_mirror(args: argparse.Namespace) -> int:
 
     ref = resolve_hand(args.hand, "extended" if args.extended else None)
     params = ref.params.to_extended() if args.extended and isinstance(ref.params, BaseParams) else ref.params
+    if args.output:
+        from ohra.io import check_output, check_suffix
+
+        check_suffix(check_output(args.output), ".json", "-o")
     image = mirror_params(params)
     text = params_json(image.params, mirror_couplings(ref.couplings, image.signs))
     if args.output:
@@ -246,13 +254,13 @@ def _cmd_check(args: argparse.Namespace) -> int:
 
 
 def _cmd_parse(args: argparse.Namespace) -> int:
-    from ohra.io import check_output
+    from ohra.io import check_output, check_suffix
     from ohra.original.fidelity import compare
     from ohra.original.parse import parse
     from ohra.original.spec import load_spec
 
     if args.output:
-        check_output(args.output)  # before the parse and the fit (seconds), not after
+        check_suffix(check_output(args.output), ".json", "-o")  # before the parse and the fit (seconds), not after
     spec = load_spec(args.spec)
     if not args.extended and "base" not in spec.forms and "extended" in spec.forms:
         args.extended = True  # the spec's only form, as info and render take it (it was "has no 'base' form")
@@ -299,13 +307,13 @@ def _cmd_parse(args: argparse.Namespace) -> int:
 def _cmd_compare(args: argparse.Namespace) -> int:
     from ohra.errors import OhraError
     from ohra.hands.resolve import keep_mesh_warnings, resolve_hand
-    from ohra.io import check_output
+    from ohra.io import check_output, check_suffix
     from ohra.original.fidelity import compare
 
     if args.samples < 1:
         raise OhraError(f"--samples must be >= 1 (random configurations compared), got {args.samples}")
     if args.html:
-        check_output(args.html)  # before the comparison (seconds), not after
+        check_suffix(check_output(args.html), ".html", "--html")  # before the comparison (seconds), not after
     with warnings.catch_warnings():
         # the parse's notes are not this command's output; a missing mesh is: the fidelity numbers (and the
         # surface column) are measured on the geometry that is there

@@ -176,13 +176,13 @@ def _finite(z: np.ndarray, where: str) -> np.ndarray:
 
 
 def _cmd_decode(args: argparse.Namespace) -> int:
-    from ohra.io import check_output
+    from ohra.io import check_output, check_suffix
 
-    for out in (args.output, args.urdf):  # both checked before either is written
-        if out:
-            check_output(out)
     if args.output and args.urdf and Path(args.output).resolve() == Path(args.urdf).resolve():
         raise OhraError(f"-o and --urdf name the same file ({args.output}): the URDF would overwrite the params JSON")
+    for out, suffix, flag in ((args.output, ".json", "-o"), (args.urdf, ".urdf", "--urdf")):  # both before either is written
+        if out:
+            check_suffix(check_output(out), suffix, flag)
     z = _read_latent(args.latent)  # before the model loads (seconds): a typo is told at once
     vae = _load(args.model)
     params = vae.decode(z)

@@ -270,9 +270,9 @@ def _cmd_eval(args: argparse.Namespace) -> int:
 def _cmd_plot(args: argparse.Namespace) -> int:
     from ohra.learn.rl.plots import reward_curves
 
-    from ohra.io import check_output
+    from ohra.io import check_output, check_suffix
 
-    check_output(args.output)
+    check_suffix(check_output(args.output), ".png", "-o")  # a PNG written to plot.html was accepted
     groups: dict[str, list[str]] = {}
     for g in args.groups:
         label, sep, runs = g.partition("=")
