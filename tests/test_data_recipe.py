@@ -124,6 +124,7 @@ def test_a_recipe_builds_resumes_and_summarises(tmp_path):
     assert proc.returncode == 0 and "leap_2200" in proc.stdout and "1 test" in proc.stdout, proc.stderr
 
 
+@pytest.mark.e2e  # ~8 s of CLI subprocesses: moved out of the default suite (stop 56) to keep it near 5 min
 def test_data_commands_report_bad_input_in_one_line(tmp_path):
     (tmp_path / "binary.yaml").write_bytes(b"\xff\xfe\x00PK")
     with pytest.raises(RecipeError, match="not a text file"):

@@ -119,6 +119,7 @@ def test_cosine_learning_rate_schedule():
 
 
 # -- training ---------------------------------------------------------------------------------------
+@pytest.mark.e2e  # ~11 s of VAE training: moved out of the default suite (stop 56) to keep it near 5 min
 def test_a_few_hundred_steps_reduce_every_reconstruction_term():
     cfg = TrainConfig(samples=4096, batch_size=256, epochs=15, threads=1, heldout=512)  # 240 steps
     res = train(cfg, progress=False)
