@@ -108,6 +108,21 @@ def require_whole(value: object, error: type[OhraError], what: str, least: int, 
     return int(value)
 
 
+def is_finite_real(value: object) -> bool:
+    """Whether ``value`` is a finite real number (Python or NumPy; a bool is not one)."""
+    import math
+    import numbers
+
+    return not isinstance(value, bool) and isinstance(value, numbers.Real) and math.isfinite(value)
+
+
+def is_whole(value: object) -> bool:
+    """Whether ``value`` is a whole number (Python or NumPy integer; a bool or a float is not one)."""
+    import numbers
+
+    return not isinstance(value, bool) and isinstance(value, numbers.Integral)
+
+
 def require_finite(value: object, error: type[OhraError], what: str, positive: bool = False) -> float:
     """``value`` as a float when it is a finite real number >= 0 (> 0 when ``positive``), or ``error`` naming ``what``."""
     import math

@@ -31,7 +31,7 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from ohra.errors import OhraError, require_seed
+from ohra.errors import OhraError, is_finite_real, require_seed
 from ohra.canonical.params import FINGERS, JOINT_NAMES, BaseParams, ExtendedParams, Params, load_params, require_params
 from ohra.canonical.urdfgen import palm_geometry, render
 from ohra.transforms import axis_angle_to_matrix
@@ -395,7 +395,7 @@ class HandModel:
 
     @staticmethod
     def _check_margin(margin: float) -> float:
-        if isinstance(margin, bool) or not isinstance(margin, (int, float, np.integer, np.floating)) or not np.isfinite(margin):
+        if not is_finite_real(margin):
             raise OhraError(f"margin must be a finite distance [m], got {margin!r}")
         return float(margin)
 

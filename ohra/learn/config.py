@@ -5,9 +5,8 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
-import numpy as np
 
-from ohra.errors import ParamsError, reject_unknown, require_seed
+from ohra.errors import ParamsError, is_finite_real, is_whole, reject_unknown, require_seed
 
 # What a configuration written before a key existed meant (the paper's reference setup).
 LEGACY_DEFAULTS: dict[str, Any] = {
@@ -55,10 +54,10 @@ class TrainConfig:
         require_seed(self.seed, ParamsError, "TrainConfig: seed")
         for name in ("epochs", "batch_size", "checkpoint_every"):  # epochs=0 returned an untrained model
             v = getattr(self, name, None)
-            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1):
+            if v is not None and (not is_whole(v) or v < 1):
                 raise ParamsError(f"TrainConfig: {name} must be a whole number >= 1, got {v!r}")
         lr = self.lr
-        if isinstance(lr, bool) or not isinstance(lr, (int, float, np.integer, np.floating)) or not np.isfinite(lr) or lr <= 0:
+        if not is_finite_real(lr) or lr <= 0:
             raise ParamsError(f"TrainConfig: lr must be a finite number > 0, got {lr!r}")
 
     @classmethod

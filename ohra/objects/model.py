@@ -24,7 +24,7 @@ import trimesh
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from ohra.errors import ObjectError, ObjectWarning, require_seed, require_whole, user_stacklevel
+from ohra.errors import ObjectError, ObjectWarning, is_finite_real, is_whole, require_seed, require_whole, user_stacklevel
 from ohra.objects.body import BODY_TOLERANCE_M, BODY_VOLUME_RANGE, SDF, Body, Fidelity, MassProperties, fidelity
 from ohra.objects.decompose import DECOMPOSITION_NAMES, check_solid, convex_components, load_convex_pieces, vhacd_pieces
 from ohra.objects.repair import RepairReport, repair_mesh
@@ -170,8 +170,7 @@ class ObjectModel:
                  pieces_label: str = "provided", body_choice: str = "auto"):
         if body_choice not in BODY_CHOICES:
             raise ObjectError(f"object {name!r}: body must be one of {', '.join(BODY_CHOICES)}, got {body_choice!r}")
-        if (isinstance(density, bool) or not isinstance(density, (int, float, np.integer, np.floating))
-                or not (np.isfinite(float(density)) and float(density) > 0)):
+        if not (is_finite_real(density) and density > 0):
             raise ObjectError(f"object {name!r}: density must be a finite number > 0 kg/m^3, got {density}")
         if len(mesh.faces) == 0:
             raise ObjectError(f"object {name!r}: mesh has no faces")
@@ -292,7 +291,7 @@ class ObjectModel:
         else:
             raise ObjectError(f"{path}: unsupported object file type {path.suffix!r} (use {', '.join(MESH_SUFFIXES)} or .urdf)")
         if scale is not None:
-            if isinstance(scale, bool) or not isinstance(scale, (int, float, np.integer, np.floating)) or not float(scale) > 0:
+            if not (is_finite_real(scale) and scale > 0):
                 raise ObjectError(f"{path}: scale must be a number > 0, got {scale!r}")
             mesh.apply_scale(float(scale))
             for pc in pieces or []:
@@ -624,14 +623,11 @@ class ObjectModel:
         Raises:
             ObjectError: ``spacing`` not > 0, ``padding`` not >= 0, ``max_cells`` not a whole number >= 1.
         """
-        def number(v) -> bool:
-            return not isinstance(v, bool) and isinstance(v, (int, float, np.integer, np.floating)) and bool(np.isfinite(v))
-
-        if spacing is not None and not (number(spacing) and spacing > 0):
+        if spacing is not None and not (is_finite_real(spacing) and spacing > 0):
             raise ObjectError(f"sdf: spacing must be a distance > 0 [m] (or None), got {spacing!r}")
-        if not (number(padding) and padding >= 0):
+        if not (is_finite_real(padding) and padding >= 0):
             raise ObjectError(f"sdf: padding must be a distance >= 0 [m], got {padding!r}")
-        if isinstance(max_cells, bool) or not isinstance(max_cells, (int, np.integer)) or max_cells < 1:
+        if not is_whole(max_cells) or max_cells < 1:
             raise ObjectError(f"sdf: max_cells must be a whole number >= 1, got {max_cells!r}")
         key = (spacing, padding, max_cells)
         cache = self.__dict__.setdefault("_sdf_cache", {})

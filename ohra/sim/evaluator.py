@@ -292,7 +292,7 @@ class GraspEvaluator:
                           f"Protocol(density={obj.density:g}) simulates it at its own", ObjectWarning,
                           stacklevel=user_stacklevel())
         self.obj = obj
-        self.protocol = protocol or Protocol()
+        self.protocol = protocol
         self._world: World | None = None
         offset = float(np.linalg.norm(obj.center_mass))
         if self.protocol.object_point == "frame" and offset > COM_OFFSET_WARN:

@@ -18,7 +18,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from ohra.errors import OhraError
+from ohra.errors import OhraError, is_finite_real
 
 # Perturbation order of the reference: +x, +y, +z, -x, -y, -z (object / world frame).
 DIRECTIONS = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [-1, 0, 0], [0, -1, 0], [0, 0, -1]], dtype=float)
@@ -92,8 +92,7 @@ class Protocol:
             raise ProtocolError(f"Protocol.object_point must be one of {OBJECT_POINTS}, got {self.object_point!r}")
         for f in fields(self):
             v = getattr(self, f.name)
-            if f.type in ("float", "int") and (isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating))
-                                              or not np.isfinite(v)):
+            if f.type in ("float", "int") and not is_finite_real(v):
                 raise ProtocolError(f"Protocol.{f.name} must be a finite number, got {v!r}")
         for name in ("dt", "squeeze_time", "direction_time", "density", "motor_force", "success_displacement"):
             if not getattr(self, name) > 0:

@@ -39,7 +39,7 @@ import numpy as np
 from ohra.canonical.couplings import Coupling, project, residual
 from ohra.canonical.kinematics import HandModel
 from ohra.canonical.params import FINGER_GAP
-from ohra.errors import OhraError
+from ohra.errors import OhraError, is_finite_real, is_whole
 from ohra.objects.model import ObjectModel
 from ohra.rotations import matrix_to_rot6d
 from ohra.synth.constraints import ConstraintBlock, stack
@@ -102,11 +102,11 @@ class NLPSettings:
                 raise OhraError(f"NLPSettings.{name} must be one of {', '.join(allowed)}, got {getattr(self, name)!r}")
         for name in ("mu", "clearance", "finger_gap", "w_force", "w_posture", "torque_length", "tol", "pair_margin"):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not np.isfinite(v) or v < 0:
+            if not is_finite_real(v) or v < 0:
                 raise OhraError(f"NLPSettings.{name} must be a finite number >= 0, got {v!r}")
         for name in ("max_iter", "sdf_cells"):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+            if not is_whole(v) or v < 1:
                 raise OhraError(f"NLPSettings.{name} must be a whole number >= 1, got {v!r}")
         lo, hi = self.contact_band
         if not (np.isfinite(lo) and np.isfinite(hi) and lo <= hi):

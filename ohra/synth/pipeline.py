@@ -35,7 +35,7 @@ from ohra.canonical.params import BaseParams, ExtendedParams, Params
 from ohra.data.backends import check_backend, run_tasks
 from ohra.data.dataset import atomic_write_bytes, npz_bytes, shard_name
 from ohra.data.manifest import ManifestWriter, hand_entry, object_keys, open_manifest, rekey_shards, shard_complete
-from ohra.errors import ObjectError, OhraError, require_seed
+from ohra.errors import ObjectError, OhraError, is_finite_real, is_whole, require_seed
 from ohra.io import folder_lock
 from ohra.synth import MIN_GRASP_FINGERS
 from ohra.objects.model import ObjectModel
@@ -80,16 +80,12 @@ class SynthSettings:
     protocol: Protocol = field(default_factory=Protocol)
 
     def __post_init__(self) -> None:
-        def whole(v) -> bool:
-            return not isinstance(v, bool) and isinstance(v, (int, np.integer))
-
-        if not whole(self.grasps_per_object) or self.grasps_per_object < 1:
+        if not is_whole(self.grasps_per_object) or self.grasps_per_object < 1:
             raise OhraError(f"grasps per object must be a whole number >= 1, got {self.grasps_per_object!r}")
-        if self.cap is not None and (not whole(self.cap) or self.cap < 1):
+        if self.cap is not None and (not is_whole(self.cap) or self.cap < 1):
             raise OhraError(f"cap must be a whole number >= 1 (or None), got {self.cap!r}")
         m = self.max_penetration_m
-        if m is not None and (isinstance(m, bool) or not isinstance(m, (int, float, np.integer, np.floating))
-                              or not np.isfinite(m)):  # negative: that much clearance demanded
+        if m is not None and not is_finite_real(m):  # negative: that much clearance demanded
             raise OhraError(f"max_penetration_m must be a finite distance [m] (or None), got {m!r}")
         lo, hi = self.object_extent_m
         if not (np.isfinite(lo) and np.isfinite(hi) and 0 < lo < hi):
