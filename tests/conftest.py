@@ -43,6 +43,19 @@ ASSETS_MISSING = "shared assets missing"
 BROWSER_MISSING = "no headless Chromium"
 
 
+@pytest.fixture
+def terminal_sigint():
+    """Python's own Ctrl-C handler, as in a terminal, for the duration of a test: a pytest started in the
+    background of a non-interactive shell inherits SIGINT ignored, where ohra rightly installs nothing."""
+    import signal
+
+    inherited = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, inherited)
+
+
 def _require(root: Path) -> Path:
     if not root.is_dir():
         msg = f"{ASSETS_MISSING}: {root} is not a folder"

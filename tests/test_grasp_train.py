@@ -281,6 +281,38 @@ def test_resume_equals_an_uninterrupted_run(dataset, tmp_path):
     assert longer.metrics["history"][-1]["step"] == 8
 
 
+@pytest.mark.parametrize("signum, ends_with", [("SIGINT", KeyboardInterrupt), ("SIGTERM", _Stop)])
+def test_ctrl_c_saves_the_step_it_stopped_at_and_the_resume_equals_an_uninterrupted_run(dataset, tmp_path, signum, ends_with,
+                                                                                          terminal_sigint):
+    """Ctrl-C (or a scheduler's SIGTERM) between two checkpoints loses no step: the trainer finishes the step,
+    checkpoints it, then stops as the signal would have (KeyboardInterrupt; SIGTERM's own handler)."""
+    import os
+    import signal
+
+    full = train_grasp(dataset, tiny_model_config(), tiny_train_config(), tmp_path / "full", progress=False)
+
+    def terminated(*_):  # stands in for SIGTERM's default end
+        raise _Stop
+
+    def interrupt(step, _):
+        if step == 4:  # after the checkpoint at step 3, before the one at 6
+            os.kill(os.getpid(), getattr(signal, signum))
+
+    previous = signal.signal(signal.SIGTERM, terminated)
+    try:
+        with pytest.raises(ends_with):
+            train_grasp(dataset, tiny_model_config(), tiny_train_config(), tmp_path / "cut", progress=False, on_step=interrupt)
+        assert signal.getsignal(signal.SIGTERM) is terminated  # the handlers are put back
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    assert torch.load(tmp_path / "cut" / "checkpoints" / "last.pt", weights_only=False)["step"] == 4
+    resumed = train_grasp(dataset, tiny_model_config(), tiny_train_config(), tmp_path / "cut", resume=True, progress=False)
+    assert [h["step"] for h in resumed.metrics["history"]] == [h["step"] for h in full.metrics["history"]]
+    for (k, v), w in zip(full.model.net.state_dict().items(), resumed.model.net.state_dict().values()):
+        assert torch.equal(v, w), k
+
+
 def test_a_resume_with_no_step_left_keeps_the_training_time(dataset, tmp_path):
     first = train_grasp(dataset, tiny_model_config(), tiny_train_config(), tmp_path / "r", progress=False).metrics
     again = train_grasp(dataset, tiny_model_config(), tiny_train_config(), tmp_path / "r", resume=True, progress=False).metrics

@@ -161,6 +161,25 @@ def test_resume_after_interruption_equals_uninterrupted_training(tmp_path):
         train(TrainConfig(**{**SMALL.to_dict(), "seed": 9, "betas": SMALL.betas}), tmp_path / "a", resume=True, progress=False)
 
 
+def test_ctrl_c_waits_for_the_epoch_checkpoints_it_and_the_resume_is_exact(tmp_path, terminal_sigint):
+    """With checkpoints every 3 epochs, Ctrl-C in epoch 2 still keeps epoch 2 (the loop finishes it, saves, stops)."""
+    import os
+    import signal
+
+    cfg = TrainConfig(**{**SMALL.to_dict(), "checkpoint_every": 3, "betas": SMALL.betas})
+    full = train(cfg, progress=False)
+
+    def interrupt(epoch, losses):
+        if epoch == 2:
+            os.kill(os.getpid(), signal.SIGINT)
+
+    with pytest.raises(KeyboardInterrupt):
+        train(cfg, tmp_path / "b", progress=False, on_epoch=interrupt)
+    assert torch.load(tmp_path / "b" / "checkpoints" / "last.pt", weights_only=True)["epoch"] == 2
+    resumed = train(cfg, tmp_path / "b", resume=True, progress=False)
+    assert _states_equal(full.model.state_dict(), resumed.model.state_dict())
+
+
 def test_training_is_deterministic_for_a_seed():
     cfg = TrainConfig(samples=1024, batch_size=256, epochs=2, threads=1, heldout=0)
     a, b = train(cfg, progress=False), train(cfg, progress=False)

@@ -284,6 +284,42 @@ def raw_obs_run(tmp_path_factory):
     return root / "run", root / "cache", root / "export"
 
 
+def test_ctrl_c_checkpoints_the_last_update_and_the_run_resumes_from_it(raw_obs_run, tmp_path, monkeypatch,
+                                                                       terminal_sigint):
+    """Ctrl-C in the second rollout, long before the first periodic checkpoint: the run stops at once (the
+    rollout is dropped), saves the weights of its one finished update counted as 24 steps, and resumes."""
+    import os
+    import signal
+
+    from ohra.sim.rotation.env import InHandRotateEnv
+
+    _, cache, _ = raw_obs_run
+    monkeypatch.setenv("OHRA_CACHE_DIR", str(cache))
+    env_cfg = RotationConfig(grasp_count=2, episode_steps=24)
+    ppo = PPOSettings(total_steps=72, n_envs=1, n_steps=24, batch_size=24, n_epochs=1, net_arch=(16, 16),
+                      checkpoint_every=1000, normalize_obs=False)
+    calls, real_step = [], InHandRotateEnv.step
+
+    def step(self, action):
+        calls.append(1)
+        if len(calls) == 30:  # 6 steps into the second rollout
+            os.kill(os.getpid(), signal.SIGINT)
+        return real_step(self, action)
+
+    monkeypatch.setattr(InHandRotateEnv, "step", step)
+    run = tmp_path / "run"
+    with pytest.raises(KeyboardInterrupt):
+        train_rotation(env_cfg, ppo, run)
+    assert len(calls) == 30  # stopped at the step the signal came in, not at the end of the run
+    assert json.loads((run / "checkpoints" / "last.json").read_text())["timesteps"] == 24
+    assert (run / "checkpoints" / "last.zip").is_file() and not (run / "model.zip").exists()
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    monkeypatch.setattr(InHandRotateEnv, "step", real_step)
+    train_rotation(env_cfg, ppo, run, resume=True)
+    assert json.loads((run / "checkpoints" / "last.json").read_text())["timesteps"] == 72
+    assert (run / "model.zip").is_file()
+
+
 def test_a_run_trained_without_observation_normalisation_exports_and_reads_back_unnormalised(raw_obs_run, tmp_path,
                                                                                              monkeypatch):
     """The export says ``norm_obs=False`` (no pickled None) and its policy acts on raw observations as the

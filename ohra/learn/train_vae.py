@@ -30,6 +30,7 @@ import numpy as np
 import torch
 
 from ohra.errors import CheckpointError
+from ohra.interrupts import DeferredStop
 from ohra.io import atomic_write, check_output, folder_lock, write_text
 from ohra.learn.config import TrainConfig
 from ohra.learn.encoding import Standardizer
@@ -302,15 +303,23 @@ def train(config: TrainConfig = TrainConfig(), run_dir: str | Path | None = None
         bar = tqdm(range(epoch, cfg.epochs), initial=epoch, total=cfg.epochs, desc="train vae", unit="epoch",
                    disable=not progress, dynamic_ncols=True)
         t_run = time.perf_counter()
-        for ep in bar:
-            step, losses = _epoch(model, opt, data, geom, cfg, gens, step, total_steps)
-            history.append({"epoch": ep + 1, "step": step, **losses, "elapsed_s": elapsed_before + time.perf_counter() - t_run})
-            bar.set_postfix(loss=f"{losses['total']:.4f}", kl=f"{losses['kl']:.2f}")
-            done = ep + 1
-            if ckpt_path is not None and (done % cfg.checkpoint_every == 0 or done == cfg.epochs):
-                atomic_save(_state(model, opt, done, step, gens, history, cfg, std, digest), ckpt_path)
-            if on_epoch is not None:
-                on_epoch(done, losses)
+        with DeferredStop("VAE training", at="after the current epoch") as stop:
+            for ep in bar:
+                step, losses = _epoch(model, opt, data, geom, cfg, gens, step, total_steps)
+                history.append({"epoch": ep + 1, "step": step, **losses,
+                                "elapsed_s": elapsed_before + time.perf_counter() - t_run})
+                bar.set_postfix(loss=f"{losses['total']:.4f}", kl=f"{losses['kl']:.2f}")
+                done = ep + 1
+                periodic = ckpt_path is not None and (done % cfg.checkpoint_every == 0 or done == cfg.epochs)
+                if periodic:
+                    atomic_save(_state(model, opt, done, step, gens, history, cfg, std, digest), ckpt_path)
+                if on_epoch is not None:
+                    on_epoch(done, losses)
+                if stop.requested:  # Ctrl-C waits for the epoch's end: a checkpoint there resumes exactly
+                    if ckpt_path is not None and not periodic:
+                        atomic_save(_state(model, opt, done, step, gens, history, cfg, std, digest), ckpt_path)
+                    bar.close()
+                    stop.stop()
         bar.close()
         # the epochs' own time, as train_seconds_total counts it (not the last checkpoint's save after them)
         this_run = float(history[-1]["elapsed_s"]) - elapsed_before if len(history) > done_before else 0.0

@@ -33,6 +33,7 @@ from ohra.learn.grasp.config import GraspConfigError, GraspModelConfig, GraspTra
 from ohra.learn.grasp.contact import FingerCapsules, SDFGrids, contact_gap, penetration
 from ohra.learn.grasp.data import TrainingData, make_batch
 from ohra.learn.grasp.model import CHECKPOINT_FORMAT, GraspModel, GraspNet
+from ohra.interrupts import DeferredStop
 from ohra.io import folder_lock, write_text
 from ohra.learn.train_vae import _peak_rss_mib, atomic_save, load_torch_file, torch_settings
 from ohra.objects.model import ObjectModel
@@ -249,14 +250,25 @@ def _loop(st: _State, spec: RunSpec, ckpt_path: Path | None, progress: bool,
     """Train from ``st.step`` to ``spec.train.steps``; returns the wall time [s]."""
     from tqdm import tqdm
 
-    cfg, net, opt = spec.train, st.model.net, st.opt
+    cfg, net = spec.train, st.model.net
     elapsed_before = float(st.history[-1]["elapsed_s"]) if st.history else 0.0
     sums, count = st.window
-    terms_logged = loss_terms(cfg)
     net.train()
     bar = tqdm(range(st.step, cfg.steps), initial=st.step, total=cfg.steps, desc="train grasp", unit="step",
                disable=not progress, dynamic_ncols=True)
     t_run = time.perf_counter()
+    with DeferredStop("grasp training") as stop:
+        _steps(st, spec, ckpt_path, on_step, bar, stop, elapsed_before, t_run, sums, count)
+    bar.close()
+    net.to("cpu")  # the model a run returns and saves samples on the CPU, like every loaded model
+    net.eval()
+    return time.perf_counter() - t_run
+
+
+def _steps(st: _State, spec: RunSpec, ckpt_path: Path | None, on_step, bar, stop: DeferredStop, elapsed_before: float,
+           t_run: float, sums: dict[str, float], count: int) -> None:
+    cfg, net, opt = spec.train, st.model.net, st.opt
+    terms_logged = loss_terms(cfg)
     for s in bar:
         lr = learning_rate(cfg, s)
         for group in opt.param_groups:
@@ -278,14 +290,18 @@ def _loop(st: _State, spec: RunSpec, ckpt_path: Path | None, progress: bool,
             st.history.append(entry)
             bar.set_postfix(diff=f"{entry['diffusion']:.4f}", joints=f"{entry['joints']:.4f}")
             sums, count = {k: 0.0 for k in terms_logged}, 0
-        if ckpt_path is not None and (done % cfg.checkpoint_every == 0 or done == cfg.steps):
+        st.step = done
+        periodic = ckpt_path is not None and (done % cfg.checkpoint_every == 0 or done == cfg.steps)
+        if periodic:
             atomic_save(_payload(st.model, opt, spec, done, st.history, st.model.meta["data_digest"], (sums, count)), ckpt_path)
         if on_step is not None:
             on_step(done, vals)
-    bar.close()
-    net.to("cpu")  # the model a run returns and saves samples on the CPU, like every loaded model
-    net.eval()
-    return time.perf_counter() - t_run
+        if stop.requested:  # batches are seeded by step, so a checkpoint at any step resumes exactly
+            if ckpt_path is not None and not periodic:
+                atomic_save(_payload(st.model, opt, spec, done, st.history, st.model.meta["data_digest"], (sums, count)),
+                            ckpt_path)
+            bar.close()
+            stop.stop()
 
 
 def train_grasp(data: str | Path | Sequence[str | Path], model_cfg: GraspModelConfig = GraspModelConfig(),

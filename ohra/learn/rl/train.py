@@ -25,7 +25,9 @@ from __future__ import annotations
 import csv
 import io
 import json
+import multiprocessing
 import os
+import signal
 import time
 from contextlib import contextmanager
 from dataclasses import replace
@@ -36,6 +38,7 @@ from typing import Any, Iterator
 import numpy as np
 
 from ohra.errors import CheckpointError
+from ohra.interrupts import DeferredStop
 from ohra.io import folder_lock, write_bytes
 from ohra.learn.rl.config import POLICIES, PPOSettings, RLConfigError
 from ohra.sim.rotation.config import RotationConfig
@@ -51,6 +54,10 @@ def _make_env(env_cfg: dict, rank: int):
 
     from ohra.sim.rotation.env import InHandRotateEnv
 
+    if multiprocessing.parent_process() is not None:
+        # a subprocess env worker: Ctrl-C reaches the whole process group, and the trainer (which saves a checkpoint
+        # before it stops) still needs its workers for that
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
     return Monitor(InHandRotateEnv(RotationConfig.from_dict(env_cfg)), info_keywords=("cumulative_rotation",))
 
 
@@ -121,14 +128,15 @@ def _adaptive(base):
     return AdaptiveKLPPO
 
 
-def _callback(run_dir: Path, ppo: PPOSettings, wall_before: float):
+def _callback(run_dir: Path, ppo: PPOSettings, wall_before: float, stop: DeferredStop | None = None):
     from stable_baselines3.common.callbacks import BaseCallback
 
     class RunCallback(BaseCallback):
-        """Per-rollout CSV row, atomic checkpoints, and the wall-clock budget."""
+        """Per-rollout CSV row, atomic checkpoints, the wall-clock budget, and a stop on Ctrl-C / SIGTERM."""
 
         def _on_training_start(self) -> None:
             self.t0 = time.perf_counter()
+            self.updated_steps = self.num_timesteps  # the steps every finished PPO update has learned from
             self.ep_r, self.ep_l, self.ep_rot = [], [], []
             self.next_ckpt = (self.num_timesteps // ppo.checkpoint_every + 1) * ppo.checkpoint_every
 
@@ -142,9 +150,12 @@ def _callback(run_dir: Path, ppo: PPOSettings, wall_before: float):
                     self.ep_r.append(ep["r"])
                     self.ep_l.append(ep["l"])
                     self.ep_rot.append(ep.get("cumulative_rotation", np.nan))
+            if stop is not None and stop.requested:
+                return False  # the rollout is dropped; the checkpoint keeps the last update (see train_rotation)
             return ppo.max_minutes is None or self.wall() < 60.0 * ppo.max_minutes
 
         def _on_rollout_start(self) -> None:
+            self.updated_steps = self.num_timesteps
             # here, not on the rollout's last step: the previous rollout's update has now run, so a checkpoint at
             # N steps holds every update of the first N steps (saved before it, the resume lost one update)
             if self.num_timesteps >= self.next_ckpt:
@@ -165,6 +176,16 @@ def _callback(run_dir: Path, ppo: PPOSettings, wall_before: float):
             self.ep_r, self.ep_l, self.ep_rot = [], [], []
 
     return RunCallback()
+
+
+def _close_quietly(venv) -> None:
+    """Close the vector env; workers a signal already ended leave nothing to close."""
+    if getattr(venv, "closed", False) or getattr(getattr(venv, "venv", None), "closed", False):
+        return
+    try:
+        venv.close()
+    except (EOFError, ConnectionError, OSError):
+        pass
 
 
 def _mean(x: list) -> float:
@@ -471,8 +492,9 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
 
                         shutil.rmtree(run_dir, ignore_errors=True)  # a folder this call made holds only its lock
                     raise
+        stop = DeferredStop("rotation training", at="at its last PPO update")
         try:
-            cb = _callback(run_dir, ppo, wall_before)
+            cb = _callback(run_dir, ppo, wall_before, stop)
             remaining = max(0, ppo.total_steps - model.num_timesteps)
             spent = ppo.max_minutes is not None and wall_before >= 60.0 * ppo.max_minutes
             if resume and (remaining == 0 or spent):
@@ -486,11 +508,23 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
                 return run_dir / "model.zip"  # finished: its files and recorded budget stay as they are
             if resume:
                 _save_budget(run_dir, ppo)  # a later plain resume continues to this budget
-            model.learn(total_timesteps=remaining, callback=cb, reset_num_timesteps=False, tb_log_name="ppo")
+            with stop:
+                try:
+                    model.learn(total_timesteps=remaining, callback=cb, reset_num_timesteps=False, tb_log_name="ppo")
+                except (EOFError, ConnectionError):  # a signal sent to the whole group also ended the env workers
+                    if not stop.requested:
+                        raise
+                if stop.requested:
+                    # the weights are those of the last finished update: count only the steps it learned from, so a
+                    # resume collects the dropped rollout again
+                    model.num_timesteps = cb.updated_steps
+                    save_checkpoint(model, run_dir, cb.wall())
+                    truncate_progress(run_dir / "progress.csv", int(model.num_timesteps))
+                    stop.stop()
             save_checkpoint(model, run_dir, cb.wall())
             save_final(model, run_dir)
         finally:
-            venv.close()
+            _close_quietly(venv)
         return run_dir / "model.zip"
 
 
