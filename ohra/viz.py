@@ -15,6 +15,16 @@ import numpy as np
 
 from ohra.canonical.kinematics import HandModel
 
+__all__ = [
+    # a scene and what goes in it
+    "new_visualizer", "add_hand", "add_capsules", "add_original", "add_overlay", "add_mesh", "add_points", "add_frame",
+    "add_grasp", "show_hand",
+    # pages, pictures and framing
+    "static_html", "save_html", "embed", "compare_html", "grasp_png", "caption_div",
+    "CameraView", "scene_bounds", "clear_bounds", "frame_bounds", "framing_script",
+    "HAND_COLOR", "OBJECT_COLOR", "ORIGINAL_COLOR", "SERVERS",
+]
+
 HAND_COLOR = 0x66BFFF
 OBJECT_COLOR = 0xD9A066
 ORIGINAL_COLOR = 0xB0B0B0
@@ -119,23 +129,40 @@ def add_mesh(vis: Any, vertices: np.ndarray, faces: np.ndarray, T: np.ndarray | 
     _grow_bounds(vis, np.asarray(vertices, dtype=float) @ T[:3, :3].T + T[:3, 3])
 
 
+def _array(x: Any, what: str, shape: tuple[int | None, ...]) -> np.ndarray:
+    """``x`` as a finite float array of ``shape`` (None: any length); else an :class:`~ohra.errors.OhraError`
+    naming ``what``."""
+    from ohra.errors import OhraError
+
+    try:
+        a = np.asarray(x, dtype=float)
+    except (TypeError, ValueError):
+        raise OhraError(f"{what} must be numbers, got {type(x).__name__}") from None
+    if isinstance(x, (str, bytes)) or a.ndim != len(shape) or any(n is not None and n != m for n, m in zip(shape, a.shape)):
+        want = "x".join("N" if n is None else str(n) for n in shape)
+        raise OhraError(f"{what} must be an array of shape ({want}), got {getattr(a, 'shape', type(x).__name__)}")
+    if not np.all(np.isfinite(a)):
+        raise OhraError(f"{what} holds non-finite values")
+    return a
+
+
 def add_points(vis: Any, points: np.ndarray, path: str = "points", color: int = 0xFF3030, size: float = 0.004) -> None:
-    """Draw a point cloud (N,3)."""
+    """Draw a point cloud (N,3) [m, world frame]; ``color`` 0xRRGGBB, ``size`` [m]."""
     import meshcat.geometry as g
 
-    pts = np.asarray(points, dtype=np.float32).T
+    pts = _array(points, "add_points: points", (None, 3)).astype(np.float32).T
     colors = np.tile(np.array([[(color >> 16) & 255], [(color >> 8) & 255], [color & 255]], dtype=np.float32) / 255.0, (1, pts.shape[1]))
     vis[path].set_object(g.PointCloud(pts, colors, size=size))
     _grow_bounds(vis, pts.T)
 
 
 def add_frame(vis: Any, T: np.ndarray, path: str = "frame", length: float = 0.05) -> None:
-    """Draw a coordinate triad (x red, y green, z blue)."""
+    """Draw a coordinate triad (x red, y green, z blue) at the 4x4 pose ``T`` [m, world frame]; ``length`` [m]."""
     import meshcat.geometry as g
 
+    T = _array(T, "add_frame: T", (4, 4))
     vis[path].set_object(g.triad(length))
-    vis[path].set_transform(np.asarray(T, dtype=float))
-    T = np.asarray(T, dtype=float)
+    vis[path].set_transform(T)
     _grow_bounds(vis, np.vstack([T[:3, 3], T[:3, 3] + length * T[:3, :3].T]))
 
 

@@ -39,6 +39,8 @@ def test_eval_reports_success_rate_and_writes_json(setup, capsys):
     assert rep["protocol"]["friction"] == 3.0 and rep["object_info"]["mass_kg"] > 0
     assert (tmp / "s.png").read_bytes()[:4] == b"\x89PNG"
     assert rep["protocol"]["dt"] == pytest.approx(1 / 240)
+    # every file it wrote is named on stderr (the report was not), the result on stdout
+    assert f"wrote {tmp / 'r.json'}" in err and f"to {tmp / 's.png'}" in err and "wrote" not in out
 
 
 def test_isaac_step_option_runs_the_literal_reference_step(setup, capsys):

@@ -108,8 +108,8 @@ def test_eval_of_a_shipped_policy_by_name_writes_beside_the_user_not_into_the_pa
     before = {p.name: p.stat().st_mtime_ns for p in package.iterdir()}
     monkeypatch.chdir(tmp_path)
     assert main(["eval", "leap_canonical", "--episodes", "1"]) == 0
-    out = capsys.readouterr().out
-    assert (tmp_path / "rotate_leap_canonical" / "eval.json").is_file() and "rotate_leap_canonical/eval.json" in out
+    err = capsys.readouterr().err
+    assert (tmp_path / "rotate_leap_canonical" / "eval.json").is_file() and "wrote rotate_leap_canonical/eval.json" in err
     assert {p.name: p.stat().st_mtime_ns for p in package.iterdir()} == before
     assert main(["eval", "rotate_leap_canonical", "--episodes", "1", "-o", "mine"]) == 0
     assert (tmp_path / "mine" / "eval.json").is_file()
@@ -216,6 +216,45 @@ def test_plot_of_a_column_progress_csv_lacks_names_the_columns(tmp_path, capsys)
     assert err.count("\n") == 1 and "no column 'nope' (columns: timesteps, ep_reward_mean)" in err
 
 
+def test_plot_takes_shipped_policies_by_name_and_names_a_folder_without_progress_or_a_run_given_twice(tmp_path, capsys):
+    png = tmp_path / "p.png"
+    assert main(["plot", "canonical=leap_canonical", "original=rotate_leap_original", "-o", str(png)]) == 0
+    assert png.read_bytes()[:4] == b"\x89PNG" and f"wrote {png}" in capsys.readouterr().err
+    assert main(["plot", f"a={tmp_path}", "-o", str(png)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{tmp_path} has no progress.csv" in err
+    assert main(["plot", "o=leap_original,rotate_leap_original", "-o", str(png)]) == 2  # one run, not two seeds
+    assert "names one run twice" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv, said", [
+    (["train", "--envs", "0"], "--envs must be >= 1, got 0"),
+    (["train", "--n-steps", "100", "--batch-size", "64"], "--envs x --n-steps = 200 must be a multiple of --batch-size = 64"),
+    (["grasps", "--grasps", "0"], "--grasps must be >= 1, got 0"),
+    (["train", "--set", "episode_steps=0"], "RotationConfig.episode_steps must be >= 1"),  # set by field name: named so
+])
+def test_setting_errors_name_the_option_the_user_typed(argv, said, tmp_path, capsys):
+    """They named the library's fields (``PPOSettings.n_envs``, ``RotationConfig.grasp_count``), not ``--envs``."""
+    if argv[0] == "train":
+        argv = [*argv, "-o", str(tmp_path / "run")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and said in err, err
+
+
+def test_python_m_ohra_cli_rotate_fails_in_one_line_like_ohra_rotate(tmp_path):
+    """It had its own parser and caught only ohra's errors: a missing file or a usage error gave a traceback."""
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, "-m", "ohra.cli.rotate", "plot", f"a={tmp_path / 'gone'}", "-o",
+                           str(tmp_path / "p.png")], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1 and proc.stderr.startswith("ohra: error:"), proc.stderr
+    with pytest.raises(SystemExit) as exit_:
+        main(["train", "--hand"])
+    assert exit_.value.code == 2
+
+
 def test_init_from_takes_the_source_runs_settings_and_changes_only_the_options_given(tmp_path, capsys, monkeypatch):
     import ohra.learn.rl.train as rl_train
 
@@ -235,6 +274,7 @@ def test_init_from_takes_the_source_runs_settings_and_changes_only_the_options_g
     assert main(["train", "-o", out, "--init-from", src, "--seed", "3"]) == 0 and calls[1][1].seed == 3
     assert main(["train", "-o", out, "--init-from", "leap_canonical"]) == 0  # a shipped policy by name
     assert calls[2][2].endswith("rotate_leap_canonical") and calls[2][0].hand == "leap_hand_right"
+    capsys.readouterr()
     assert main(["train", "-o", out, "--resume", "--init-from", src]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--init-from starts a new run" in err and len(calls) == 3
@@ -267,7 +307,7 @@ def test_steps_zero_is_refused_not_read_as_the_default(tmp_path, capsys, monkeyp
 
     monkeypatch.setattr(rl_train, "train_rotation", lambda *a, **k: pytest.fail("--steps 0 reached training"))
     assert main(["train", "--steps", "0", "-o", str(tmp_path / "r")]) == 2
-    assert "total_steps" in capsys.readouterr().err and not (tmp_path / "r").exists()
+    assert "--steps must be >= 1, got 0" in capsys.readouterr().err and not (tmp_path / "r").exists()
 
 
 def test_outputs_that_are_files_and_runs_without_an_ended_episode_are_one_line(tmp_path, capsys):

@@ -5,9 +5,12 @@ from __future__ import annotations
 
 import warnings
 
+import numpy as np
+
 import pytest
 
 import ohra
+from ohra import viz
 from ohra.errors import DatasetError, GraspError, HandNotFoundError, ObjectError, OhraError, ParamsError
 
 
@@ -249,7 +252,7 @@ def test_a_spec_file_where_a_registered_hand_is_needed_says_how_to_register_it(t
 
     spec = tmp_path / "trident.yaml"
     spec.write_text("name: trident\n")
-    with pytest.raises(HandNotFoundError, match=rf"pass --hands {tmp_path} .*and the spec's name"):
+    with pytest.raises(HandNotFoundError, match=rf"pass ohra --hands-path {tmp_path} .*and the spec's name"):
         registry.spec_path(str(spec))
     with pytest.raises(HandNotFoundError, match="unknown hand 'tridnet'; registered: ") as exc:
         registry.spec_path("tridnet")
@@ -290,3 +293,52 @@ def test_an_interrupted_resumable_command_says_how_to_continue(tmp_path, capsys,
     monkeypatch.setattr(pipeline, "synthesize", interrupted)
     assert main(["synth", "--hand", "leap_3303", "--objects", "builtin:box", "--out", str(tmp_path / "o")]) == 130
     assert capsys.readouterr().err == "ohra: interrupted; the same command with --resume continues it\n"
+
+
+# -- odd arguments to the action map, the LEAP variants, the original loader and the viewer (they gave a numpy
+#    or regex TypeError / ValueError, or a matmul message about gufunc signatures) -------------------------------
+def _action_map():
+    return ohra.resolve_hand("leap_hand_right").action_map()
+
+
+@pytest.mark.parametrize("call, said", [
+    (lambda am: am.to_canonical("abc"), "original joint vector must be numbers, got the string 'abc'"),
+    (lambda am: am.to_original("x"), "canonical joint vector must be numbers"),
+    (lambda am: am.wrist_to_canonical(np.eye(3)), r"wrist_to_canonical: the original root pose must be a 4x4 .* got shape \(3, 3\)"),
+    (lambda am: am.wrist_to_original(np.full((4, 4), np.nan)), "wrist_to_original: the canonical palm pose holds non-finite"),
+    (lambda am: ohra.ActionMap("abc", ["j1"]), "slots must be a mapping of canonical slot -> original joint"),
+    (lambda am: ohra.ActionMap({}, "j1"), "original_joints must be a sequence of joint names"),
+    (lambda am: ohra.SlotMap(3), "the original joint's name must be a non-empty string, got 3"),
+])
+def test_odd_action_map_arguments_are_mapping_errors(call, said):
+    from ohra.errors import MappingError
+
+    with pytest.raises(MappingError, match=said):
+        call(_action_map())
+
+
+def test_a_stack_of_wrist_poses_still_maps():
+    am = _action_map()
+    T = np.tile(np.eye(4), (3, 1, 1))
+    np.testing.assert_allclose(am.wrist_to_original(am.wrist_to_canonical(T)), T, atol=1e-12)
+
+
+def test_a_number_for_a_hand_name_is_a_hand_error():
+    with pytest.raises(HandNotFoundError, match="3 is not a LEAP variant name"):
+        ohra.hands.leap_variant(3)
+    with pytest.raises(HandNotFoundError, match="unknown hand 3"):
+        ohra.load_original(3)
+
+
+@pytest.mark.parametrize("call, said", [
+    (lambda vis: viz.add_points(vis, np.zeros((5, 2))), r"add_points: points must be an array of shape \(Nx3\), got \(5, 2\)"),
+    (lambda vis: viz.add_points(vis, "pts"), "add_points: points must be"),
+    (lambda vis: viz.add_frame(vis, np.eye(3)), r"add_frame: T must be an array of shape \(4x4\), got \(3, 3\)"),
+    (lambda vis: viz.add_frame(vis, np.full((4, 4), np.inf)), "add_frame: T holds non-finite values"),
+])
+def test_odd_shapes_given_to_the_viewer_name_the_call(call, said):
+    import meshcat
+
+    vis = meshcat.Visualizer.__new__(meshcat.Visualizer)  # no server: the check comes before anything is drawn
+    with pytest.raises(OhraError, match=said):
+        call(vis)

@@ -65,7 +65,8 @@ def _gaussian_oracle(s: DDIMScheduler, mu: torch.Tensor, sd: float):
     return predict
 
 
-@pytest.mark.parametrize("steps, std_range", [(10, (0.8, 0.9)), (1000, (0.98, 1.02))])
+@pytest.mark.parametrize("steps, std_range", [(10, (0.8, 0.9)),
+                                              pytest.param(1000, (0.98, 1.02), marks=pytest.mark.e2e)])  # ~3-6 s
 def test_ddim_with_the_exact_denoiser_of_a_gaussian_recovers_it(steps, std_range):
     """The deterministic sampler maps noise onto N(mu, sd^2): the mean exactly, the spread up to the
     known shrinkage of a 10-step discretisation (a wrong update formula fails both)."""

@@ -61,6 +61,7 @@ def test_geodesic_beats_the_straight_line_where_a_thumb_turns_130_degrees(vae):
     assert not any(HandModel.from_params(BaseParams.from_vector(v)).self_collision(np.zeros(22)) for v in V)
 
 
+@pytest.mark.e2e  # two full geodesics (~2-6 s): moved out of the default suite (stop 57) to keep it near 5 min
 def test_geodesic_is_deterministic(vae):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

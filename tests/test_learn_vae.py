@@ -353,7 +353,8 @@ def test_cli_interpolate_writes_urdfs_png_and_html(vae, tmp_path, capsys):
     assert "<html" in scene[:2000].lower()
     assert "dex3_right -&gt; shadow_hand_right: decoded hands left to right at path fraction a = 0.00, " in scene
     assert "1.00; grey, above the ends: the two hands as given</div>" in scene
-    assert "wrote 4 URDFs" in capsys.readouterr().out
+    out = capsys.readouterr()
+    assert "wrote 4 URDFs" in out.err and "interp_00.urdf: " in out.out  # the files on stderr, what they hold on stdout
 
 
 def test_cli_bad_input_is_one_line_and_exit_2(vae, tmp_path, capsys):
@@ -422,6 +423,7 @@ def test_cli_train_small_run_and_resume(tmp_path, capsys):
     assert load_vae(out).latent_dim == TrainConfig().latent_dim
     # the default cosine learning rate depends on the run's length: it cannot be extended
     args[args.index("--epochs") + 1] = "2"
+    capsys.readouterr()
     assert cli_main(args + ["--resume"]) == 2
     err = capsys.readouterr().err
     assert "epochs=1" in err and err.count("\n") == 1

@@ -237,7 +237,7 @@ def test_show_no_wait_saves_a_page_that_outlives_the_command_and_says_when_there
     page = tmp_path / "hand.html"
     assert cli.main(["hand", "show", "leap_3303", "--no-wait", "-o", str(page)]) == 0
     out = capsys.readouterr()
-    assert f"wrote {page}" in out.out and "127.0.0.1" not in out.out
+    assert f"wrote {page}" in out.err and "127.0.0.1" not in out.out + out.err
     html = page.read_text()
     assert "ohra: open framed on the content" in html  # a static export, framed on the hand
     assert cli.main(["hand", "show", "leap_3303", "--no-wait"]) == 0

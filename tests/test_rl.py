@@ -163,6 +163,7 @@ def test_resume_drops_progress_rows_logged_after_the_checkpoint(tmp_path):
     assert truncate_progress(tmp_path / "absent.csv", 0) == 0
 
 
+@pytest.mark.e2e  # ~4 s of sb3-contrib training and evaluation (stop 57: out of the default suite)
 def test_a_recurrent_policy_trains_resumes_and_carries_its_state_within_an_episode_only(tiny):
     """``policy="lstm"`` (sb3-contrib RecurrentPPO): trains and resumes like the MLP; the evaluated policy
     feeds its LSTM state from step to step and starts every episode blank, so a seeded evaluation repeats

@@ -22,7 +22,7 @@ def register(sub: Any) -> None:
 
     p = dsub.add_parser("build", help="synthesise the dataset a recipe describes (resumable)")
     p.add_argument("recipe", help="recipe YAML (hands, objects, grasps per pair, cap, split, seed, protocol)")
-    p.add_argument("-o", "--out", default=None, help="dataset directory (default out/<recipe name>, out/<name>_s<seed> with --seed)")
+    p.add_argument("-o", "--output", "--out", dest="out", default=None, help="dataset directory (default out/<recipe name>, out/<name>_s<seed> with --seed)")
     p.add_argument("--seed", type=int, default=None,
                    help="replace the recipe's seed: more data from the same recipe, into another directory")
     p.add_argument("--workers", type=int, default=1, help="processes, or local Ray CPUs (default 1)")

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ohra.cli.main import BODY_CHOICES, BODY_HELP
+from ohra.cli.main import BODY_CHOICES, BODY_HELP, wrote
 from ohra.errors import GraspError, ObjectError
 
 EPILOG = "Exit codes: 0 ok, 2 bad input. The report is JSON (success, displacements per phase, contacts, penetration)."
@@ -41,7 +41,7 @@ def register(subparsers) -> None:
     p.add_argument("--workers", type=int, default=1, help="processes (default 1)")
     p.add_argument("--backend", choices=("process", "ray"), default="process", help="process pool (default) or Ray")
     p.add_argument("--address", default=None, help="Ray cluster address (with --backend ray; default: a local cluster)")
-    p.add_argument("--mode", choices=("eval", "filter"), default="eval", help="filter also needs the object within 5 cm of the origin")
+    p.add_argument("--mode", choices=("eval", "filter"), default="eval", help="eval (default) or filter, which also needs the object within 5 cm of the origin")
     p.add_argument("--strict", action="store_true", help="strict preset: friction 1.0, gravity during the perturbations")
     p.add_argument("--isaac-step", action="store_true", help="Isaac's literal time step (100 Hz x 2 substeps) instead of 240 Hz")
     p.add_argument("--isaac-drive", action="store_true",
@@ -61,7 +61,7 @@ def register(subparsers) -> None:
     p.add_argument("--limit", type=int, default=None, help="evaluate only the first N grasps")
     p.add_argument("--render", metavar="PNG", default=None, help="write a contact sheet of the grasps (first 16)")
     p.add_argument("--meshcat", metavar="HTML", default=None, help="write a meshcat scene of the first grasp as static HTML")
-    p.add_argument("-o", "--output", metavar="JSON", default=None,
+    p.add_argument("-o", "--output", "--out", dest="output", metavar="JSON", default=None,
                    help="write the JSON report here; until it is written, finished grasps are kept in OUTPUT's "
                         ".partial.npz beside it, and a rerun after an interruption simulates only the rest")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -259,6 +259,7 @@ def run(args: argparse.Namespace) -> int:
 
         write_json(args.output, rep.to_dict())
         partial.unlink(missing_ok=True)
+        wrote(args.output)
         if rep.meta.get("resumed"):
             print(f"ohra: note: {rep.meta['resumed']} of {len(rep.results)} grasps came from the interrupted run's "
                   f"{partial}", file=sys.stderr)
@@ -267,7 +268,7 @@ def run(args: argparse.Namespace) -> int:
 
         k = min(16, len(g))
         write_png(contact_sheet(render_grasps(hand, obj, g[:k]), rep.success[:k]), args.render)
-        print(f"wrote a contact sheet of {k} grasp(s) to {args.render}", file=sys.stderr)
+        wrote(f"a contact sheet of {k} grasp(s) to {args.render}")
     if args.meshcat and len(g):
         first = g[0].copy()
         if hand.coupled:  # drawn as simulated
@@ -275,7 +276,7 @@ def run(args: argparse.Namespace) -> int:
 
             first[9:] = project(hand.couplings, first[9:])
         _meshcat(args, hand, obj, first)
-        print(f"wrote the first grasp's meshcat page to {args.meshcat}", file=sys.stderr)
+        wrote(f"the first grasp's meshcat page to {args.meshcat}")
     n = len(rep.results)
     if n == 0:
         print(f"{args.hand} on {obj.name}: {args.grasps} holds no grasps; nothing was simulated")

@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
-from ohra.cli.main import BODY_CHOICES, BODY_HELP, subcommand_group
+from ohra.cli.main import BODY_CHOICES, BODY_HELP, subcommand_group, wrote
 from ohra.errors import OhraError
 
 if TYPE_CHECKING:
@@ -76,7 +76,7 @@ def register(sub: Any) -> None:
     p.add_argument("--mirror", choices=("auto", "on", "off"), default="auto", help=MIRROR_HELP)
     p.add_argument("--condition-hand", help="condition the model on this hand instead (paper Table 9); the joints stay "
                    "within --hand's limits")
-    p.add_argument("-o", "--output", required=True, help="output .npz")
+    p.add_argument("-o", "--output", "--out", dest="output", required=True, help="output .npz")
     p.set_defaults(func=_cmd_sample)
 
     p = g.add_parser("eval", help="sample N grasps per (hand, unseen object) and run the six-direction test")
@@ -110,7 +110,7 @@ def register(sub: Any) -> None:
                    help="the point the fingers close toward and whose displacement is measured: the mesh frame's origin "
                         "(default, the reference's) or the object's centre of mass")
     p.add_argument("--allow-seen", action="store_true", help="also evaluate objects the model was trained on")
-    p.add_argument("-o", "--output", help="write the JSON report here")
+    p.add_argument("-o", "--output", "--out", dest="output", help="write the JSON report here")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_eval)
 
@@ -134,13 +134,13 @@ def register_train(train_sub: Any) -> None:
                    help="diffuse the 22 joints with the wrist translation (no joint network; default: the paper's joint "
                         "network given the sampled translation)")
     p.add_argument("--steps", type=int, default=t.steps, help=f"training steps (default {t.steps})")
-    p.add_argument("--batch-size", type=int, default=t.batch_size)
-    p.add_argument("--lr", type=float, default=t.lr)
+    p.add_argument("--batch-size", type=int, default=t.batch_size, help=f"grasps per step (default {t.batch_size})")
+    p.add_argument("--lr", type=float, default=t.lr, help=f"Adam learning rate at step 0, cosine-annealed (default {t.lr:g})")
     p.add_argument("--seed", type=int, default=t.seed)
-    p.add_argument("--threads", type=int, default=t.threads, help="torch CPU threads (results depend on it)")
+    p.add_argument("--threads", type=int, default=t.threads, help=f"torch CPU threads (default {t.threads}; results depend on it)")
     p.add_argument("--device", default=t.device,
                    help="torch device: cpu (default), cuda, cuda:N, mps; batches are drawn on the CPU either way")
-    p.add_argument("--rotated-copies", type=int, default=t.rotated_copies, help="rotated copies per object and batch (0: none)")
+    p.add_argument("--rotated-copies", type=int, default=t.rotated_copies, help=f"rotated copies per object and batch (default {t.rotated_copies}; 0: none)")
     p.add_argument("--objects-per-step", type=int, default=t.objects_per_step, help="cap on distinct objects per batch (0: none)")
     p.add_argument("--max-per-pair", type=int, default=t.max_per_pair, help="cap on grasps per (hand, object) (0: all)")
     p.add_argument("--condition-noise", type=float, default=t.condition_noise,
@@ -154,10 +154,11 @@ def register_train(train_sub: Any) -> None:
                         "to the data's (base-form hands; 0: off)")
     p.add_argument("--contact-form", choices=("capped", "target"), default=t.contact_form,
                    help="'capped': both distances capped at 1 cm; 'target': a link the data has on the surface is pulled "
-                        "there from any distance")
-    p.add_argument("--checkpoint-every", type=int, default=t.checkpoint_every)
+                        f"there from any distance (default {t.contact_form})")
+    p.add_argument("--checkpoint-every", type=int, default=t.checkpoint_every,
+                   help=f"steps between checkpoints (default {t.checkpoint_every}; Ctrl-C also saves one)")
     p.add_argument("--vae", help="VAE for the 'vae' condition (default: the shipped one)")
-    p.add_argument("-o", "--output", required=True, help="run directory")
+    p.add_argument("-o", "--output", "--out", dest="output", required=True, help="run directory")
     p.add_argument("--resume", action="store_true", help="continue from OUTPUT/checkpoints/last.pt")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_train)
@@ -216,7 +217,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
             print(f"ohra: note: test hand(s) {', '.join(unheld)} are in none of the datasets by name (held out by their "
                   "parameters too; check the spelling if they should be there)", file=sys.stderr)
     # a test object in no dataset is warned about by the library when the data load (ohra.learn.grasp.data)
-    print(f"model: {out / 'model.pt'}  metrics: {out / 'metrics.json'}")
+    wrote(f"{out / 'model.pt'} and {out / 'metrics.json'}")
     return 0
 
 
@@ -309,7 +310,8 @@ def _cmd_sample(args: argparse.Namespace) -> int:
               "(grasp synthesis refuses such hands)", file=sys.stderr)
     extra = f", refinement {1e3 * timing['refine_seconds'] / len(g):.1f} ms per grasp" if args.refine else ""
     how = " (sampled as its mirror image)" if mirrored else ""
-    print(f"wrote {len(g)} grasps of {args.hand}{how} on {args.object} to {out} ({1e3 * timing['seconds'] / len(g):.2f} ms per grasp{extra})")
+    print(f"{len(g)} grasps of {args.hand}{how} on {args.object} ({1e3 * timing['seconds'] / len(g):.2f} ms per grasp{extra})")
+    wrote(out)
     return 0
 
 
@@ -359,5 +361,5 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     if note:
         print(note, file=sys.stderr)
     if args.output:
-        print(f"report: {args.output}", file=sys.stderr)
+        wrote(args.output)
     return 0

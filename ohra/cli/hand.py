@@ -24,6 +24,8 @@ import warnings
 
 import numpy as np
 
+from ohra.cli.main import wrote
+
 HAND_HELP = "registered hand, leap_XXXX, hand spec YAML (parsed with the fit), or params JSON file"
 # what compare needs: a hand whose original is known
 ORIGINAL_HAND_HELP = ("registered hand, hand spec YAML (parsed with the fit), or params JSON file with its spec "
@@ -43,7 +45,7 @@ def register(sub) -> None:
 
     p = hsub.add_parser("render", help="write the canonical URDF of a hand")
     p.add_argument("hand", help=HAND_HELP)
-    p.add_argument("-o", "--output", help="output URDF path (default: stdout)")
+    p.add_argument("-o", "--output", "--out", dest="output", help="output URDF path (default: stdout)")
     p.add_argument("--extended", action="store_true", help="use the extended form")
     p.set_defaults(func=_cmd_render)
 
@@ -62,7 +64,7 @@ def register(sub) -> None:
 
     p = hsub.add_parser("parse", help="parse an original hand URDF from a hand spec (YAML) into canonical params")
     p.add_argument("spec", help="hand spec YAML (see ohra.original.spec)")
-    p.add_argument("-o", "--output", help="write params JSON here (default: stdout)")
+    p.add_argument("-o", "--output", "--out", dest="output", help="write params JSON here (default: stdout)")
     p.add_argument("--extended", action="store_true", help="extended form (default: base)")
     p.add_argument("--fit", action="store_true", help="refine by least squares against the original kinematics")
     p.add_argument("--no-fidelity", action="store_true", help="skip the fidelity table")
@@ -87,12 +89,12 @@ def register(sub) -> None:
     p.add_argument("--q", help="22 canonical joint values (comma or space separated)")
     p.add_argument("--no-wait", action="store_true", help="draw and exit: the viewer stops with the command (with -o, the "
                    "page stays)")
-    p.add_argument("-o", "--output", help="also save the view as a static, framed HTML page (opens without a server)")
+    p.add_argument("-o", "--output", "--out", dest="output", help="also save the view as a static, framed HTML page (opens without a server)")
     p.set_defaults(func=_cmd_show)
 
     p = hsub.add_parser("mirror", help="the hand's mirror image (left <-> right) as params JSON")
     p.add_argument("hand", help=HAND_HELP)
-    p.add_argument("-o", "--output", help="write params JSON here (default: stdout)")
+    p.add_argument("-o", "--output", "--out", dest="output", help="write params JSON here (default: stdout)")
     p.add_argument("--extended", action="store_true", help="mirror the extended form (default: the hand's own form)")
     p.set_defaults(func=_cmd_mirror)
 
@@ -157,7 +159,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
     params = ref.params.to_extended() if args.extended and isinstance(ref.params, BaseParams) else ref.params
     if args.output:
         path = write(params, args.output, robot_name=ref.name)
-        print(f"wrote {path}", file=sys.stderr)
+        wrote(path)
     else:
         sys.stdout.write(render(params, robot_name=ref.name))
     return 0
@@ -184,7 +186,9 @@ def _cmd_mirror(args: argparse.Namespace) -> int:
     else:
         sys.stdout.write(text)
     reversed_ = [JOINT_NAMES[i] for i in np.flatnonzero((image.signs < 0) & np.asarray(params.movable_joints))]
-    print(f"{'wrote ' + args.output + ': ' if args.output else ''}the mirror image of {ref.name} "
+    if args.output:
+        wrote(args.output)
+    print(f"the mirror image of {ref.name} "
           f"({params.handedness} -> {image.params.handedness} hand); joints turning the other way "
           f"(angle -q, limits [-upper, -lower]): {', '.join(reversed_) or 'none'}", file=sys.stderr)
     return 0
@@ -280,7 +284,7 @@ def _cmd_parse(args: argparse.Namespace) -> int:
     text = params_json(res.params, res.couplings)  # + the optional "couplings" key of a coupled hand
     if args.output:
         write_text(args.output, text)
-        print(f"wrote {args.output}", file=sys.stderr)
+        wrote(args.output)
     else:
         sys.stdout.write(text)
     if res.fit is not None:
@@ -326,7 +330,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         from ohra import viz
 
         path = viz.compare_html(ref, ref.form, args.html)
-        print(f"wrote {path}", file=sys.stderr)
+        wrote(path)
     return 0
 
 
@@ -351,7 +355,7 @@ def _cmd_show(args: argparse.Namespace) -> int:  # pragma: no cover - starts a s
     viz.show_hand(vis, ref, ref.form, q=q, original=args.original)
     if args.output:
         viz.save_html(vis, args.output)
-        print(f"wrote {args.output}")
+        wrote(args.output)
     if args.no_wait:
         if not args.output:  # the server lives as long as this process: its URL would be dead once printed
             print("ohra: note: --no-wait stops the viewer with the command; -o PAGE.html saves a page that stays",

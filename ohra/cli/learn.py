@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ohra.cli.main import subcommand_group
+from ohra.cli.main import subcommand_group, wrote
 from ohra.errors import OhraError
 
 
@@ -31,10 +31,10 @@ def register(sub) -> None:
     p.add_argument("--seed", type=int, default=d.seed, help=f"seed of data, init and noise (default {d.seed})")
     p.add_argument("--batch-size", type=int, default=d.batch_size, help=f"default {d.batch_size}")
     p.add_argument("--threads", type=int, default=d.threads, help=f"torch CPU threads (default {d.threads})")
-    p.add_argument("--checkpoint-every", type=int, default=d.checkpoint_every, help="epochs between checkpoints")
+    p.add_argument("--checkpoint-every", type=int, default=d.checkpoint_every, help=f"epochs between checkpoints (default {d.checkpoint_every})")
     p.add_argument("--heldout", type=int, default=d.heldout,
                    help=f"number of sampled hands held out for the final metrics (default {d.heldout})")
-    p.add_argument("-o", "--output", default="out/vae", help="run directory (default out/vae)")
+    p.add_argument("-o", "--output", "--out", dest="output", default="out/vae", help="run directory (default out/vae)")
     p.add_argument("--resume", action="store_true", help="continue from OUTPUT/checkpoints/last.pt")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_train_vae)
@@ -49,7 +49,7 @@ def register(sub) -> None:
     p = vae.add_parser("decode", help="decode a latent vector into base params JSON")
     p.add_argument("latent", help="comma-separated numbers, or a .json / .npy file with one latent (a first number "
                    "below 0: put -- before it, after the options, e.g. ohra vae decode -o h.json -- -0.1,0.2,...)")
-    p.add_argument("-o", "--output", help="params JSON path (default: stdout)")
+    p.add_argument("-o", "--output", "--out", dest="output", help="params JSON path (default: stdout)")
     p.add_argument("--urdf", help="also write the canonical URDF here")
     p.add_argument("--model", help=model_help)
     p.set_defaults(func=_cmd_decode)
@@ -63,7 +63,7 @@ def register(sub) -> None:
                    help="geodesic (default): a bent latent path of short fingertip travel, at equal fingertip arc "
                    "length (4 s per pair on average, up to ~10 s, in bench_vae on one free core); arc: the straight latent line at equal fingertip arc length; even: the straight "
                    "line at even latent steps")
-    p.add_argument("-o", "--output", required=True, help="output directory")
+    p.add_argument("-o", "--output", "--out", dest="output", required=True, help="output directory")
     p.add_argument("--model", help=model_help)
     p.add_argument("--no-png", action="store_true", help="skip the PNG strip")
     p.add_argument("--no-html", action="store_true", help="skip the meshcat HTML scene")
@@ -98,7 +98,7 @@ def _cmd_train_vae(args: argparse.Namespace) -> int:
     if "heldout" in m:
         h = m["heldout"]
         print(f"held-out ({h['n']} hands): presence {100 * h['presence_accuracy']:.2f} %, thumb axes {100 * h['axis_accuracy']:.2f} %")
-    print(f"model: {out / 'model.pt'}  metrics: {out / 'metrics.json'}")
+    wrote(f"{out / 'model.pt'} and {out / 'metrics.json'}")
     return 0
 
 
@@ -191,14 +191,14 @@ def _cmd_decode(args: argparse.Namespace) -> int:
                         "several with ohra.learn.load_vae().decode(Z) in Python)")
     if args.output:
         params.to_json(args.output)
-        print(f"wrote {args.output}", file=sys.stderr)
+        wrote(args.output)
     else:
         sys.stdout.write(params.to_json())
     if args.urdf:
         from ohra.canonical.urdfgen import write
 
         write(params, args.urdf)
-        print(f"wrote {args.urdf}", file=sys.stderr)
+        wrote(args.urdf)
     return 0
 
 
@@ -215,14 +215,14 @@ def _cmd_interpolate(args: argparse.Namespace) -> int:
     _warnings_to_stderr(caught)
     out = Path(args.output)
     paths = interp.write(out)
-    print(f"wrote {len(paths)} URDFs to {out}")
+    wrote(f"{len(paths)} URDFs to {out}")
     for p, params in zip(paths, interp.params):
         print(f"  {p.name}: {params.num_fingers} fingers, {params.dof} dof, {params.handedness} hand")
     if not args.no_png:
         from ohra.learn.strip import strip_png
 
         png = strip_png(interp.params, out / "strip.png", labels=interp.labels(), originals=interp.labelled_originals())
-        print(f"wrote {png}")
+        wrote(png)
     if not args.no_html:
         from ohra.learn.strip import sequence_html
 
@@ -230,5 +230,5 @@ def _cmd_interpolate(args: argparse.Namespace) -> int:
         html = sequence_html(interp.params, out / "scene.html", originals=interp.originals,
                              caption=f"{args.hand_a} -> {args.hand_b}: decoded hands left to right at path fraction a = {where}"
                                      + ("; grey, above the ends: the two hands as given" if interp.originals is not None else ""))
-        print(f"wrote {html}")
+        wrote(html)
     return 0

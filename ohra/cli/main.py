@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import re
 import signal
 import sys
 import threading
@@ -40,10 +41,32 @@ EXIT_USAGE = 2
 
 
 class Parser(argparse.ArgumentParser):
-    """argparse that reports usage errors in one line (``PROG: error: MESSAGE``) with exit code 2."""
+    """argparse that reports usage errors in one line (``PROG: error: MESSAGE``) with exit code 2, and leaves
+    in the parsed namespace (``_options``) the options of the command that parsed it, by destination."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        # no prefixes of long options: `--hand` would read as a top-level `--hands-path` in one release and be
+        # ambiguous in the next, whenever an option is added
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> None:  # type: ignore[override]
         self.exit(EXIT_USAGE, f"{self.prog}: error: {message}\n")
+
+    def parse_known_args(self, args=None, namespace=None):  # type: ignore[override]
+        # set before parsing: a subcommand's parser parses into a namespace of its own, copied over this one
+        namespace = argparse.Namespace() if namespace is None else namespace
+        namespace._options = {a.dest: max(a.option_strings, key=len) for a in self._actions if a.option_strings}
+        return super().parse_known_args(args, namespace)
+
+
+def option_names(message: str, options: dict[str, str]) -> str:
+    """``message`` with a leading setting name that is an option of the command (``batch_size must be >= 1``,
+    ``GraspTrainConfig.batch_size must be ...``) named as the user typed it (``--batch-size must be >= 1``)."""
+    m = re.match(r"(?:[A-Z]\w*\.)?([a-z_]\w*) must ", message)
+    if m and m.group(1) in options:
+        return options[m.group(1)] + message[m.end(1):]
+    return message
 
 
 _Parser = Parser  # the name this class had before the CLI became a package
@@ -56,6 +79,12 @@ BODY_HELP = ("the body object files are grasped and simulated as: auto (default:
 BODY_CHOICES = ("auto", "hull", "provided", "vhacd")  # ohra.objects.model.BODY_CHOICES (a test holds them equal)
 
 SHARED_GROUP_HELP = {"train": "train learned models: vae, grasp, rotate"}
+
+
+def wrote(what: str | Path) -> None:
+    """Announce a file (or folder) the command wrote: one ``wrote WHAT`` line on stderr, so that stdout carries only
+    the command's data and results (URDFs, JSON, tables, summaries)."""
+    print(f"wrote {what}", file=sys.stderr)
 
 
 def subcommand_group(sub: argparse._SubParsersAction, name: str, help_text: str, dest: str) -> argparse._SubParsersAction:
@@ -83,8 +112,8 @@ def build_parser(prog: str = "ohra") -> argparse.ArgumentParser:
     parser = Parser(prog=prog, description="Canonical dexterous hands: render, inspect, parse, evaluate, synthesise, learn.",
                     epilog="Run 'ohra COMMAND --help' for a command's options. Exit codes: 0 ok, 2 bad input or usage.")
     parser.add_argument("--version", action="version", version=f"ohra {__version__}")
-    parser.add_argument("--hands", action="append", default=[], metavar="DIR", dest="hands_dirs",
-                        help="user hand folder: its *.yaml specs join the registry (also $OHRA_HANDS_PATH)")
+    parser.add_argument("--hands-path", "--hands", action="append", default=[], metavar="DIR", dest="hands_dirs",
+                        help="user hand folder: its *.yaml specs join the registry (also $OHRA_HANDS_PATH; --hands is its older spelling)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
     sub.required = True
     for name in COMMANDS:
@@ -134,7 +163,7 @@ def execute(args: argparse.Namespace) -> int:
             add_hands_path(folder)
         return int(args.func(args) or 0)
     except OhraError as exc:
-        print(f"ohra: error: {exc}", file=sys.stderr)
+        print(f"ohra: error: {option_names(str(exc), getattr(args, '_options', {}))}", file=sys.stderr)
         return EXIT_USAGE
     except (FileNotFoundError, IsADirectoryError, NotADirectoryError, PermissionError) as exc:
         print(f"ohra: error: {exc.strerror or exc}: {exc.filename}", file=sys.stderr)

@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 from typing import Any, Sequence
 
+from ohra.cli.main import wrote
 from ohra.errors import OhraError
 
 
@@ -102,14 +103,52 @@ def _train_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--ppo", action="append", default=[], metavar="KEY=JSON",
                    help="any other PPOSettings field, e.g. --ppo kl_target=null for a constant learning rate (repeatable; "
                         "with --resume only the run's own values: a resumed run keeps its settings)")
-    p.add_argument("-o", "--output", required=True, help="run directory")
+    p.add_argument("-o", "--output", "--out", dest="output", required=True, help="run directory")
     p.add_argument("--resume", action="store_true", help="continue OUTPUT from its last checkpoint")
     p.add_argument("--init-from", metavar="RUN", help="a new run that starts from RUN's trained policy and settings "
                    "(RUN: a run, an exported policy, or a shipped one by name such as leap_canonical) "
                    "(a fine-tune): options given here change them, e.g. --set 'weights={\"fall\": -25}'; "
                    "--steps and --minutes count the new run only")
     p.add_argument("--tensorboard", action="store_true", help="also log to OUTPUT/tensorboard (tensorboard --logdir OUTPUT)")
-    p.set_defaults(func=_cmd_train)
+    p.set_defaults(func=_named_by_flags(_cmd_train))
+
+
+FLAGS = {"RotationConfig.grasp_count": "--grasps", "RotationConfig.object_size": "--object-size",
+         "PPOSettings.total_steps": "--steps", "PPOSettings.max_minutes": "--minutes", "PPOSettings.seed": "--seed",
+         "PPOSettings.n_envs": "--envs", "PPOSettings.n_steps": "--n-steps", "PPOSettings.batch_size": "--batch-size",
+         "PPOSettings.checkpoint_every": "--checkpoint-every"}
+"""The settings that have an option of their own, as the library's errors name them (``Class.field``)."""
+
+
+def flag_names(message: str) -> str:
+    """``message`` with every setting that has an option of its own named by that option: ``PPOSettings.n_envs
+    must be >= 1`` -> ``--envs must be >= 1``; the bare ``n_envs x n_steps ... batch_size`` too. Settings without one
+    (``--set``, ``--ppo``) and messages about those options keep the field names, which are what they take."""
+    import re
+
+    for key, flag in FLAGS.items():
+        message = message.replace(key, flag)
+    if "must be a multiple of batch_size" in message:  # PPOSettings names these three bare
+        for field in ("n_envs", "n_steps", "batch_size"):
+            message = re.sub(rf"(?<![\w.-]){field}(?![\w=])", FLAGS[f"PPOSettings.{field}"], message)
+    return message
+
+
+def _named_by_flags(command):
+    """``command`` whose setting errors name the command's options instead of the library's fields."""
+    from functools import wraps
+
+    from ohra.learn.rl.config import RLConfigError
+    from ohra.sim.rotation.config import RotationConfigError
+
+    @wraps(command)
+    def run(args: argparse.Namespace) -> int:
+        try:
+            return command(args)
+        except (RLConfigError, RotationConfigError) as exc:
+            raise type(exc)(flag_names(str(exc))) from None
+
+    return run
 
 
 def register(sub: Any) -> None:
@@ -121,7 +160,7 @@ def register(sub: Any) -> None:
 
     p = rs.add_parser("grasps", help="generate (or load) the cached starting states and print where they are")
     _env_args(p)
-    p.set_defaults(func=_cmd_grasps)
+    p.set_defaults(func=_named_by_flags(_cmd_grasps))
 
     _train_args(rs.add_parser("train", help=TRAIN_HELP))
     # the same command under the train group, beside ``ohra train vae`` and ``ohra train grasp``
@@ -131,21 +170,22 @@ def register(sub: Any) -> None:
     p = rs.add_parser("eval", help="Steps-to-Fall and Cumulative Rotation of a trained run; renders an episode")
     p.add_argument("run", help="run directory, or a shipped policy by name (rotate_leap_canonical, or leap_canonical; "
                                 "its results go to ./NAME unless -o says where)")
-    p.add_argument("-o", "--out", help="folder for eval*.json and episode*/ (default: the run directory)")
-    p.add_argument("--episodes", type=int, default=20)
+    p.add_argument("-o", "--output", "--out", dest="out", help="folder for eval*.json and episode*/ (default: the run directory)")
+    p.add_argument("--episodes", type=int, default=20, help="seeded episodes (default 20)")
     p.add_argument("--seed", type=int, default=1000, help="first episode seed (default 1000)")
-    p.add_argument("--checkpoint", choices=("model", "last"), default="model", help="final model or last checkpoint")
+    p.add_argument("--checkpoint", choices=("model", "last"), default="model", help="the final model (default) or the last checkpoint")
     p.add_argument("--render", action="store_true", help="also write OUT/episode/{rollout.gif,strip.png}")
     p.add_argument("--replay", action="store_true", help="also write OUT/episode/replay.html (meshcat)")
     p.add_argument("--on-urdf", choices=("canonical", "original"),
                    help="run the policy on the hand's other URDF through the canonical joint space (a policy "
                         "trained with space canonical); writes OUT/eval_on_URDF.json and OUT/episode_on_URDF/; the first "
                         "use generates that URDF's starting states (minutes; cached)")
-    p.set_defaults(func=_cmd_eval)
+    p.set_defaults(func=_named_by_flags(_cmd_eval))
 
     p = rs.add_parser("plot", help="reward curves, mean +- std over seeds: LABEL=RUN[,RUN...] per group")
-    p.add_argument("groups", nargs="+", metavar="LABEL=RUNS")
-    p.add_argument("-o", "--output", required=True, help="PNG path")
+    p.add_argument("groups", nargs="+", metavar="LABEL=RUNS",
+                   help="a label and its runs: training run folders or shipped policies by name (leap_canonical)")
+    p.add_argument("-o", "--output", "--out", dest="output", required=True, help="PNG path")
     p.add_argument("--key", default="ep_reward_mean", help="progress.csv column (default ep_reward_mean)")
     p.set_defaults(func=_cmd_plot)
 
@@ -198,7 +238,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         ppo = PPOSettings.from_dict(given, "command line (--ppo)")
     path = train_rotation(env_cfg, ppo, out, resume=args.resume, verbose=0, tensorboard=args.tensorboard,
                           init_from=args.init_from)
-    print(f"wrote {path}")
+    wrote(path)
     return 0
 
 
@@ -254,20 +294,23 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     s = res.summary()
     print(f"Steps-to-Fall {s['steps_to_fall_mean']:.1f} +- {s['steps_to_fall_std']:.1f} (of {res.episode_steps}), "
           f"Cumulative Rotation {s['rotation_mean']:.2f} +- {s['rotation_std']:.2f} rad, "
-          f"survived {100 * s['survived']:.0f} % over {res.episodes} episodes{where}; wrote {dest / f'eval{suffix}.json'}")
+          f"survived {100 * s['survived']:.0f} % over {res.episodes} episodes{where}")
+    wrote(dest / f"eval{suffix}.json")
     ret = res.return_summary()
     print("mean episode return " + f"{ret['total']:.1f} = " + " ".join(f"{k} {v:+.1f}" for k, v in ret.items() if k != "total"))
     if args.render or args.replay:
         out = dest / f"episode{suffix}"
         ep = record_episode(run, out, seed=args.seed, which=args.checkpoint, urdf=args.on_urdf)
-        print(f"episode (seed {args.seed}): {ep['steps']} steps, {ep['rotation']:.2f} rad; wrote {ep['gif']}, {ep['strip']}")
+        print(f"episode (seed {args.seed}): {ep['steps']} steps, {ep['rotation']:.2f} rad")
+        wrote(f"{ep['gif']} and {ep['strip']}")
         if args.replay:
             html = replay_html(cfg, ep["trajectory"], out / "replay.html")
-            print(f"wrote {html}")
+            wrote(html)
     return 0
 
 
 def _cmd_plot(args: argparse.Namespace) -> int:
+    from ohra.learn.rl.evaluate import policy_dir
     from ohra.learn.rl.plots import reward_curves
 
     from ohra.io import check_output, check_suffix
@@ -281,23 +324,22 @@ def _cmd_plot(args: argparse.Namespace) -> int:
             raise OhraError(f"expected LABEL=RUN[,RUN...] (no empty label or run), got {g!r}")
         if label in groups:
             raise OhraError(f"label {label!r} is given twice: put its runs in one group, {label}=RUN,RUN")
-        groups[label] = items
-    print(f"wrote {reward_curves(groups, args.output, key=args.key)}")
+        groups[label] = [policy_dir(r) for r in items]  # a run folder, or a shipped policy by name
+    for label, runs in groups.items():
+        if len({r.resolve() for r in runs}) < len(runs):  # it would count as two seeds
+            raise OhraError(f"group {label!r} names one run twice: {', '.join(map(str, runs))}")
+        for r in runs:
+            if not (r / "progress.csv").is_file():
+                raise OhraError(f"{r} has no progress.csv: give a training run's folder or a shipped policy's name")
+    wrote(reward_curves(groups, args.output, key=args.key))
     return 0
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Standalone entry (``python -m ohra.cli.rotate ...``): same commands as ``ohra rotate ...``."""
-    parser = argparse.ArgumentParser(prog="ohra")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    sub.required = True
-    register(sub)
-    args = parser.parse_args(["rotate", *(argv if argv is not None else sys.argv[1:])])
-    try:
-        return int(args.func(args) or 0)
-    except OhraError as exc:
-        print(f"ohra: error: {exc}", file=sys.stderr)
-        return 2
+    """Standalone entry (``python -m ohra.cli.rotate ...``): ``ohra rotate ...``, failing the same way (one line, exit 2)."""
+    from ohra.cli.main import main as ohra_main
+
+    return ohra_main(["rotate", *(argv if argv is not None else sys.argv[1:])])
 
 
 if __name__ == "__main__":

@@ -38,7 +38,7 @@ def configure(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--grasps-per-object", type=int, default=8, help="solver restarts per object (default 8)")
     p.add_argument("--workers", type=int, default=1, help="worker processes (default 1)")
     p.add_argument("--seed", type=int, default=0, help="seed of the solver starts (default 0)")
-    p.add_argument("-o", "--out", default="out/grasps", help="dataset directory (default out/grasps)")
+    p.add_argument("-o", "--output", "--out", dest="out", default="out/grasps", help="dataset directory (default out/grasps)")
     p.add_argument("--no-filter", action="store_true", help="skip the PyBullet filter")
     p.add_argument("--resume", action="store_true", help="skip shards that are complete (sha256 checked)")
     p.add_argument("--overwrite", action="store_true", help="replace a dataset in --out made with other settings (deletes its shards)")

@@ -10,7 +10,7 @@ templates with::
     python -m ohra.hands.registry shadow_hand_right
 
 User hands, no package edits: every folder in ``$OHRA_HANDS_PATH`` (``os.pathsep``-separated) or
-added with :func:`add_hands_path` (``ohra --hands DIR``) contributes its ``*.yaml`` specs; their
+added with :func:`add_hands_path` (``ohra --hands-path DIR``) contributes its ``*.yaml`` specs; their
 params are read from ``DIR/params/<form>/<name>.json`` when present and newer than the spec and its URDF (else
 the spec is parsed, with the fit, on first use and kept for the process; a stale file is named in a warning).
 ``OHRA_HANDS_PATH=DIR python -m ohra.hands.registry NAME`` writes those files (and ``DIR/urdf/<form>/<name>.urdf``),
@@ -42,7 +42,7 @@ def add_hands_path(folder: str | Path) -> None:
     ``$OHRA_HANDS_PATH`` too, which spawned and forkserver children read."""
     p = Path(folder).expanduser().resolve()
     if p.is_file():
-        raise HandNotFoundError(f"--hands takes the folder that holds your spec YAMLs, got the file {p} (--hands {p.parent}; "
+        raise HandNotFoundError(f"--hands-path takes the folder that holds your spec YAMLs, got the file {p} (--hands-path {p.parent}; "
                                 "or give the spec itself where a hand is asked for)")
     if not p.is_dir():
         raise HandNotFoundError(f"hand folder not found: {p}")
@@ -136,7 +136,7 @@ def _unknown(name: str) -> HandNotFoundError:
     msg = f"unknown hand {name!r}; registered: {', '.join(registered_hands())}"
     p = Path(str(name)).expanduser()
     if p.suffix.lower() in (".yaml", ".yml") and p.is_file():  # a spec file where a registered name is expected
-        msg += (f"; a hand spec is registered by its folder: pass --hands {p.parent} (or set $OHRA_HANDS_PATH) and "
+        msg += (f"; a hand spec is registered by its folder: pass ohra --hands-path {p.parent} (or set $OHRA_HANDS_PATH) and "
                 "the spec's name")
     return HandNotFoundError(msg)
 

@@ -181,7 +181,7 @@ def resolve_hand(ref: Any, form: str | None = None, spec: str | Path | None = No
     raise HandNotFoundError(
         f"unknown hand {key!r}: not a registered hand ({known}), not a LEAP variant "
         f"leap_ABCD (digits 0-3: links kept on the thumb, index, middle and little finger), not a spec YAML or params JSON file "
-        f"(a hand whose spec is in your own folder: ohra --hands DIR, or ${registry.PATH_ENV})"
+        f"(a hand whose spec is in your own folder: ohra --hands-path DIR, or ${registry.PATH_ENV})"
     )
 
 

@@ -35,6 +35,26 @@ from ohra.transforms import invert, xyzrpy_to_matrix
 MOVABLE_TYPES = ("revolute", "continuous", "prismatic")
 
 
+def _numbers(x, what: str) -> np.ndarray:
+    """``x`` as a float array; a :class:`MappingError` naming ``what`` when it is not numbers."""
+    if isinstance(x, (str, bytes)):
+        raise MappingError(f"{what} must be numbers, got the string {x!r:.60}")
+    try:
+        return np.asarray(x, dtype=float)
+    except (TypeError, ValueError):
+        raise MappingError(f"{what} must be numbers, got {type(x).__name__} {x!r:.60}") from None
+
+
+def _poses(T, what: str) -> np.ndarray:
+    """``T`` as homogeneous pose(s), shape (4, 4) or (..., 4, 4), all finite."""
+    T = _numbers(T, what)
+    if T.ndim < 2 or T.shape[-2:] != (4, 4):
+        raise MappingError(f"{what} must be a 4x4 homogeneous transform or a stack of them (..., 4, 4), got shape {T.shape}")
+    if not np.all(np.isfinite(T)):
+        raise MappingError(f"{what} holds non-finite values")
+    return T
+
+
 @dataclass(frozen=True)
 class SlotMap:
     """One canonical slot driven by the original joint ``name``: ``q_canon = sign * q_orig + offset``."""
@@ -44,6 +64,8 @@ class SlotMap:
     offset: float = 0.0
 
     def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name:
+            raise MappingError(f"SlotMap: the original joint's name must be a non-empty string, got {self.name!r}")
         if self.sign not in (1.0, -1.0, 1, -1):
             raise MappingError(f"sign of original joint {self.name!r} must be +1 or -1, got {self.sign}")
 
@@ -168,6 +190,11 @@ class ActionMap:
     mimic: Mimic = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        if not isinstance(self.slots, Mapping):
+            raise MappingError(f"slots must be a mapping of canonical slot -> original joint (a name, a SlotMap or "
+                               f"{{joint, sign, offset}}), got {type(self.slots).__name__} {self.slots!r:.60}")
+        if isinstance(self.original_joints, (str, bytes)) or not all(isinstance(j, str) for j in self.original_joints):
+            raise MappingError(f"original_joints must be a sequence of joint names, got {self.original_joints!r:.80}")
         self.original_joints = tuple(self.original_joints)
         if len(set(self.original_joints)) != len(self.original_joints):
             dup = [n for n in self.original_joints if self.original_joints.count(n) > 1][0]
@@ -305,7 +332,7 @@ class ActionMap:
         return m
 
     def _check(self, q: np.ndarray, n: int, what: str) -> np.ndarray:
-        q = np.asarray(q, dtype=float)
+        q = _numbers(q, f"{what} vector")
         if q.ndim not in (1, 2) or q.shape[-1] != n:
             raise MappingError(f"{what} vector must have shape ({n},) or (N, {n}), got {q.shape}")
         bad = np.argwhere(~np.isfinite(q))
@@ -348,8 +375,8 @@ class ActionMap:
 
     def wrist_to_canonical(self, T_root: np.ndarray) -> np.ndarray:
         """Pose(s) of the original root frame (…,4,4) -> pose(s) of the canonical palm frame."""
-        return np.asarray(T_root, dtype=float) @ self._T_palm
+        return _poses(T_root, "wrist_to_canonical: the original root pose") @ self._T_palm
 
     def wrist_to_original(self, T_palm: np.ndarray) -> np.ndarray:
         """Pose(s) of the canonical palm frame (…,4,4) -> pose(s) of the original root frame."""
-        return np.asarray(T_palm, dtype=float) @ invert(self._T_palm)
+        return _poses(T_palm, "wrist_to_original: the canonical palm pose") @ invert(self._T_palm)

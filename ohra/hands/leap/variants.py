@@ -32,11 +32,12 @@ def variant_names() -> list[str]:
 
 
 def is_variant(name: str) -> bool:
-    return bool(VARIANT_RE.match(name))
+    """Whether ``name`` is a LEAP variant's name, ``leap_ABCD`` (digits 0-3); False for anything not a string."""
+    return isinstance(name, str) and bool(VARIANT_RE.match(name))
 
 
 def parse_variant(name: str) -> tuple[int, int, int, int]:
-    m = VARIANT_RE.match(name)
+    m = VARIANT_RE.match(name) if isinstance(name, str) else None
     if not m:
         raise HandNotFoundError(f"{name!r} is not a LEAP variant name (expected leap_ABCD with digits 0-3)")
     return tuple(int(x) for x in m.groups())  # type: ignore[return-value]

@@ -364,7 +364,7 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
 
             why = ("a LEAP variant, a canonical hand with no original URDF (the original LEAP hand is leap_hand_right)"
                    if isinstance(hand, str) and is_variant(hand) else
-                   "not a registered hand (a spec of your own registers with ohra --hands DIR or $OHRA_HANDS_PATH)")
+                   "not a registered hand (a spec of your own registers with ohra --hands-path DIR or $OHRA_HANDS_PATH)")
             raise GraspError(f"{what} needs a registered hand's original URDF: give the hand by name; "
                              f"{hand if isinstance(hand, str) else type(hand).__name__!r} is {why}")
         params = resolve_hand(hand)
