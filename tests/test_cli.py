@@ -234,6 +234,19 @@ def test_a_prefix_of_an_option_is_not_that_option(capsys):
     assert main(["hand", "info", "leap_3303", "--json"]) == 0
 
 
+def test_hand_commands_take_form_as_eval_and_rotate_do_with_extended_as_its_shorthand(capsys):
+    import json
+
+    def form(*flags):
+        assert main(["hand", "info", "leap_hand_right", "--json", *flags]) == 0
+        return json.loads(capsys.readouterr().out)["form"]
+
+    assert (form(), form("--extended"), form("--form", "extended"), form("--form", "base")) == ("base", "extended", "extended", "base")
+    with pytest.raises(SystemExit):
+        main(["hand", "info", "leap_hand_right", "--form", "base", "--extended"])
+    assert "not allowed with argument --form" in capsys.readouterr().err
+
+
 def test_every_option_with_a_default_says_it_in_its_help():
     missing = []
     for name, parser in _leaf_parsers(build_parser()):

@@ -272,3 +272,18 @@ def test_the_form_note_suggests_the_hand_as_the_user_gave_it(tmp_path, capsys, h
     np.savez(g, grasps=pinch_grasp()[None], hand=np.array("my_allegro"), form=np.array("extended"))
     rc, _, err = _run(capsys, g, "--hand", spec, "--object", "builtin:box", "--limit", "1")
     assert rc == 0 and f"(--hand {spec} --form extended evaluates the hand the grasps were made for)" in err
+
+
+@pytest.mark.parametrize("preset", ["reference", "strict", "isaac-step", "isaac-drive"])
+def test_eval_takes_the_protocol_preset_as_grasp_eval_does_and_its_flag_means_the_same(preset):
+    """``ohra grasp eval --protocol X`` had no ``ohra eval`` spelling (only the flags ``--strict``, ``--isaac-*``)."""
+    from ohra.cli.eval import protocol_of
+    from ohra.cli.main import build_parser
+    from ohra.sim import Protocol
+
+    def parsed(*extra):
+        return build_parser().parse_args(["eval", "g.npz", "--hand", "leap_3303", "--object", "builtin:box", *extra])
+
+    assert protocol_of(parsed("--protocol", preset)) == Protocol.preset(preset)
+    if preset != "reference":
+        assert protocol_of(parsed(f"--{preset}")) == Protocol.preset(preset)

@@ -582,7 +582,7 @@ def test_ohra_hand_parse_names_a_poor_fit_too(tmp_path, no_hands_root, monkeypat
         assert main(argv) == 0
         err = capsys.readouterr().err
         assert ("warning: this base form follows the original URDF poorly" in err) == said, err
-        assert ("try --extended" in err) == said
+        assert ("try --form extended" in err) == said
 
 
 def test_pictures_of_an_original_hand_pose_its_mimic_joints_as_the_simulation_does(tmp_path, no_hands_root):

@@ -42,6 +42,9 @@ def register(subparsers) -> None:
     p.add_argument("--backend", choices=("process", "ray"), default="process", help="process pool (default) or Ray")
     p.add_argument("--address", default=None, help="Ray cluster address (with --backend ray; default: a local cluster)")
     p.add_argument("--mode", choices=("eval", "filter"), default="eval", help="eval (default) or filter, which also needs the object within 5 cm of the origin")
+    p.add_argument("--protocol", default="reference", choices=("reference", "strict", "isaac-step", "isaac-drive"),
+                   help="six-direction test preset, as in ohra grasp eval (default reference); the three flags below "
+                        "are the same presets and combine (--strict --isaac-step)")
     p.add_argument("--strict", action="store_true", help="strict preset: friction 1.0, gravity during the perturbations")
     p.add_argument("--isaac-step", action="store_true", help="Isaac's literal time step (100 Hz x 2 substeps) instead of 240 Hz")
     p.add_argument("--isaac-drive", action="store_true",
@@ -154,8 +157,7 @@ COUPLING_NOTE_RAD = 1e-3
 def run(args: argparse.Namespace) -> int:
     from ohra.hands import get_couplings, get_hand
     from ohra.objects.model import resolve_objects
-    from ohra.sim import GraspEvaluator, Protocol, SimHand
-    from ohra.sim.protocol import ISAAC_DRIVE, ISAAC_STEP
+    from ohra.sim import GraspEvaluator, SimHand
 
     if args.workers < 1:
         raise GraspError(f"--workers must be >= 1, got {args.workers}")
@@ -216,11 +218,7 @@ def run(args: argparse.Namespace) -> int:
         kind = made.get("body_kind") or "another body"
         print(f"ohra: note: {args.grasps} was synthesised on the body {kind} of this mesh; --body {args.body} gives "
               f"{obj.body.kind} (--body {kind.split(':', 1)[0]} evaluates on the body they were made on)", file=sys.stderr)
-    protocol = Protocol.strict() if args.strict else Protocol()
-    if args.isaac_step:
-        protocol = replace(protocol, **ISAAC_STEP)
-    if args.isaac_drive:
-        protocol = replace(protocol, position_gain=protocol.dt * ISAAC_DRIVE["stiffness"] / ISAAC_DRIVE["damping"], velocity_gain=1.0)
+    protocol = protocol_of(args)
     if args.no_early_exit:
         protocol = replace(protocol, early_exit=False)
     protocol = replace(protocol, object_point=args.object_point)
@@ -287,6 +285,21 @@ def run(args: argparse.Namespace) -> int:
           f"{rep.clamped_count} clamped, {wall:.1f} s ({simulated / wall if wall > 0 else 0:.1f} grasps/s"
           f"{f' over the {simulated} simulated now' if simulated < n else ''})")
     return 0
+
+
+def protocol_of(args: argparse.Namespace):
+    """The six-direction protocol ``--protocol`` and the preset flags ask for (``--protocol X`` is the flag of X)."""
+    from ohra.sim import Protocol
+    from ohra.sim.protocol import ISAAC_DRIVE, ISAAC_STEP
+
+    strict, step, drive = (args.strict or args.protocol == "strict", args.isaac_step or args.protocol == "isaac-step",
+                           args.isaac_drive or args.protocol == "isaac-drive")
+    protocol = Protocol.strict() if strict else Protocol()
+    if step:
+        protocol = replace(protocol, **ISAAC_STEP)
+    if drive:
+        protocol = replace(protocol, position_gain=protocol.dt * ISAAC_DRIVE["stiffness"] / ISAAC_DRIVE["damping"], velocity_gain=1.0)
+    return protocol
 
 
 def _meshcat(args: argparse.Namespace, hand, obj, grasp: np.ndarray) -> None:

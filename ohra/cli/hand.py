@@ -46,12 +46,12 @@ def register(sub) -> None:
     p = hsub.add_parser("render", help="write the canonical URDF of a hand")
     p.add_argument("hand", help=HAND_HELP)
     p.add_argument("-o", "--output", "--out", dest="output", help="output URDF path (default: stdout)")
-    p.add_argument("--extended", action="store_true", help="use the extended form")
+    _form_option(p)
     p.set_defaults(func=_cmd_render)
 
     p = hsub.add_parser("info", help="DoF, fingers, limits and fingertip positions")
     p.add_argument("hand", help=HAND_HELP)
-    p.add_argument("--extended", action="store_true", help="use the extended form")
+    _form_option(p)
     p.add_argument("--neutral", action="store_true", help="fingertips at 0 clamped into the limits")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=_cmd_info)
@@ -65,7 +65,7 @@ def register(sub) -> None:
     p = hsub.add_parser("parse", help="parse an original hand URDF from a hand spec (YAML) into canonical params")
     p.add_argument("spec", help="hand spec YAML (see ohra.original.spec)")
     p.add_argument("-o", "--output", "--out", dest="output", help="write params JSON here (default: stdout)")
-    p.add_argument("--extended", action="store_true", help="extended form (default: base)")
+    _form_option(p, "base")
     p.add_argument("--fit", action="store_true", help="refine by least squares against the original kinematics")
     p.add_argument("--no-fidelity", action="store_true", help="skip the fidelity table")
     p.add_argument("--surface", action="store_true",
@@ -74,7 +74,7 @@ def register(sub) -> None:
 
     p = hsub.add_parser("compare", help="canonical vs original fidelity of a hand (registered, spec YAML or params JSON)")
     p.add_argument("hand", help=ORIGINAL_HAND_HELP)
-    p.add_argument("--extended", action="store_true", help="use the extended form")
+    _form_option(p)
     p.add_argument("--samples", type=int, default=200, help="random configurations (default 200)")
     p.add_argument("--no-surface", action="store_true", help="skip the surface distance (faster)")
     p.add_argument("--json", action="store_true", help="print JSON")
@@ -83,7 +83,7 @@ def register(sub) -> None:
 
     p = hsub.add_parser("show", help="meshcat viewer of a hand (canonical, optionally over the original)")
     p.add_argument("hand", help=HAND_HELP)
-    p.add_argument("--extended", action="store_true", help="use the extended form")
+    _form_option(p)
     p.add_argument("--original", action="store_true",
                    help="overlay the original meshes (a registered hand, spec YAML, or params JSON with its spec beside it)")
     p.add_argument("--q", help="22 canonical joint values (comma or space separated)")
@@ -95,18 +95,26 @@ def register(sub) -> None:
     p = hsub.add_parser("mirror", help="the hand's mirror image (left <-> right) as params JSON")
     p.add_argument("hand", help=HAND_HELP)
     p.add_argument("-o", "--output", "--out", dest="output", help="write params JSON here (default: stdout)")
-    p.add_argument("--extended", action="store_true", help="mirror the extended form (default: the hand's own form)")
+    _form_option(p, "the hand's own form")
     p.set_defaults(func=_cmd_mirror)
 
 
+def _form_option(p: argparse.ArgumentParser, default: str = "the hand's own form: base for a registered hand "
+                 "that has one, extended for a LEAP variant or an extended params JSON") -> None:
+    """``--form base|extended`` (``args.form``; None when not given) and its shorthand ``--extended``."""
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--form", choices=("base", "extended"), default=None, help=f"canonical form (default: {default})")
+    g.add_argument("--extended", action="store_const", const="extended", dest="form", help="the same as --form extended")
+
+
 def _form(args: argparse.Namespace) -> str:
-    return "extended" if args.extended else "base"
+    return args.form or "base"
 
 
 def _natural_form(args: argparse.Namespace) -> str | None:
-    """``--extended``, else None: the hand's own form (base for a registered hand that has one; a LEAP variant's or
+    """``--form`` (or ``--extended``), else None: the hand's own form (base for a registered hand that has one; a LEAP variant's or
     an extended params JSON's extended form), as ``info`` and ``render`` take it."""
-    return "extended" if args.extended else None
+    return args.form
 
 
 def _jobs(names: list[str]) -> list[tuple[str, str | None]]:
@@ -155,8 +163,8 @@ def _cmd_render(args: argparse.Namespace) -> int:
         from ohra.io import check_output, check_suffix
 
         check_suffix(check_output(args.output), ".urdf", "-o")
-    ref = resolve_hand(args.hand, "extended" if args.extended else None)  # the hand's name becomes the robot's
-    params = ref.params.to_extended() if args.extended and isinstance(ref.params, BaseParams) else ref.params
+    ref = resolve_hand(args.hand, args.form)  # the hand's name becomes the robot's
+    params = ref.params.to_extended() if args.form == "extended" and isinstance(ref.params, BaseParams) else ref.params
     if args.output:
         path = write(params, args.output, robot_name=ref.name)
         wrote(path)
@@ -171,8 +179,8 @@ def _cmd_mirror(args: argparse.Namespace) -> int:
     from ohra.canonical.params import JOINT_NAMES, BaseParams
     from ohra.hands.resolve import resolve_hand
 
-    ref = resolve_hand(args.hand, "extended" if args.extended else None)
-    params = ref.params.to_extended() if args.extended and isinstance(ref.params, BaseParams) else ref.params
+    ref = resolve_hand(args.hand, args.form)
+    params = ref.params.to_extended() if args.form == "extended" and isinstance(ref.params, BaseParams) else ref.params
     if args.output:
         from ohra.io import check_output, check_suffix
 
@@ -200,8 +208,8 @@ def _cmd_info(args: argparse.Namespace) -> int:
     from ohra.canonical.params import FINGERS, JOINT_NAMES, BaseParams
     from ohra.hands.resolve import resolve_hand
 
-    ref = resolve_hand(args.hand, "extended" if args.extended else None)  # a spec YAML: its name and couplings
-    params = ref.params.to_extended() if args.extended and isinstance(ref.params, BaseParams) else ref.params
+    ref = resolve_hand(args.hand, args.form)  # a spec YAML: its name and couplings
+    params = ref.params.to_extended() if args.form == "extended" and isinstance(ref.params, BaseParams) else ref.params
     hm = HandModel.from_params(params)
     tips = hm.fingertips(np.zeros(22) if not args.neutral else hm.neutral())
     info = {
@@ -266,8 +274,8 @@ def _cmd_parse(args: argparse.Namespace) -> int:
     if args.output:
         check_suffix(check_output(args.output), ".json", "-o")  # before the parse and the fit (seconds), not after
     spec = load_spec(args.spec)
-    if not args.extended and "base" not in spec.forms and "extended" in spec.forms:
-        args.extended = True  # the spec's only form, as info and render take it (it was "has no 'base' form")
+    if args.form is None and "base" not in spec.forms and "extended" in spec.forms:
+        args.form = "extended"  # the spec's only form, as info and render take it (it was "has no 'base' form")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         res = parse(spec, _form(args), fit_params=args.fit)
@@ -295,7 +303,7 @@ def _cmd_parse(args: argparse.Namespace) -> int:
         if res.fit.final_rms_mm > POOR_FIT_MM:
             print(f"warning: this {_form(args)} form follows the original URDF poorly (keypoint RMS above {POOR_FIT_MM:.0f} mm; "
                   "registered hands: at most 17 mm): grasps or policies made on it may not carry over to the original"
-                  + ("; try --extended" if not args.extended and "extended" in spec.forms else ""), file=sys.stderr)
+                  + ("; try --form extended" if args.form is None and "extended" in spec.forms else ""), file=sys.stderr)
     print("measured: palm radius, finger radii, lengths, joint positions/axes, limits from the URDF", file=sys.stderr)
     rep = None if args.no_fidelity else compare(res, _form(args), samples=100, surface=args.surface)
     in_table = set() if rep is None else {f"coupling: {c}" for c in rep.couplings} | {approx + a for a in rep.approximations}
