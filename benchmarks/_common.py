@@ -19,17 +19,53 @@ RESULTS = Path(os.environ.get("OHRA_RESULTS_DIR") or Path(__file__).resolve().pa
 
 
 def run_script(main: Callable[[], Any], script: str) -> None:
-    """Run a benchmark script's ``main``; an ohra error (a missing data folder, nothing left to train on) is one
-    line on stderr and exit 2, as from the ``ohra`` commands."""
+    """Run a benchmark script's ``main`` and exit with its return code (None: 0). An ohra error (an unknown hand,
+    a missing data folder, nothing left to train on) or a missing file is one line on stderr and exit 2, as from
+    the ``ohra`` commands; Ctrl-C is one line and exit 130."""
     import sys
 
     from ohra.errors import OhraError
 
+    name = Path(script).name
     try:
-        main()
+        code = main()
     except OhraError as exc:
-        print(f"{Path(script).name}: error: {exc}", file=sys.stderr)
+        print(f"{name}: error: {exc}", file=sys.stderr)
         sys.exit(2)
+    except (FileNotFoundError, IsADirectoryError, NotADirectoryError) as exc:
+        print(f"{name}: error: {exc.strerror or exc}: {exc.filename}", file=sys.stderr)
+        sys.exit(2)
+    except KeyboardInterrupt:
+        print(f"{name}: interrupted", file=sys.stderr)
+        sys.exit(130)
+    sys.exit(int(code or 0))
+
+
+def script_parser(doc: str, script: str):
+    """The command-line parser of a benchmark script: its whole docstring as the help (what it measures, how
+    long, what it writes), usage errors in one line (exit 2), and every count option (an ``int`` option whose
+    name is not a seed) checked: >= 1, or >= 0 when its default is 0 or None (a negative count gave a
+    ZeroDivisionError or a numpy error deep inside the run)."""
+    import argparse
+
+    from ohra.cli.main import Parser
+
+    class ScriptParser(Parser):
+        def parse_args(self, args=None, namespace=None):  # type: ignore[override]
+            ns = super().parse_args(args, namespace)
+            for a in self._actions:
+                if a.type is not int or "seed" in a.dest:
+                    continue
+                values = getattr(ns, a.dest, None)
+                lowest = 0 if a.default in (0, None) or a.default == [0] else 1
+                for v in values if isinstance(values, list) else [values]:
+                    if v is not None and v < lowest:
+                        self.error(f"argument {'/'.join(a.option_strings) or a.dest}: must be >= {lowest}, got {v}")
+            return ns
+
+    return ScriptParser(prog=Path(script).name, description=doc, formatter_class=argparse.RawDescriptionHelpFormatter,
+                        epilog=f"Results go to {RESULTS} (OHRA_RESULTS_DIR writes them elsewhere). Bad input is one "
+                               "line on stderr and exit 2.")
 
 
 def natural_sorted(paths: list[str]) -> list[str]:

@@ -33,7 +33,11 @@ def data_fingerprint(data: list[str]) -> list[str]:
     file layout (a rewritten manifest, a packed directory: ``ohra data pack``) do not."""
     out = []
     for d in data:
-        man = read_manifest(Path(d) / "manifest.json") or {}
+        man = read_manifest(Path(d) / "manifest.json")
+        if man is None:  # a mistyped folder would otherwise be a key of its own, and a stamp on the run
+            from ohra.errors import DatasetError
+
+            raise DatasetError(f"--data {d}: no dataset there (no manifest.json)")
         pairs = sorted((h, k, sh.get("sha256")) for h, e in man.get("hands", {}).items() for k, sh in e.get("shards", {}).items())
         digest = hashlib.sha256(json.dumps([man.get("settings_digest"), pairs]).encode()).hexdigest()[:16]
         out.append(f"{Path(d).name}:{digest}")
@@ -60,6 +64,8 @@ def claim_run(run: Path, key: dict) -> bool:
     """Tie ``run`` to ``key``. True when the run is complete and may be reused; False when it must be
     trained (new, or resumed from its checkpoint). Exits with one line when ``run`` belongs to other settings."""
     f = run / KEY_FILE
+    if f.exists() and not _trained(run) and not _busy(run):  # a stamp of a run that failed before training holds nothing
+        f.unlink()
     if f.exists():
         old = json.loads(f.read_text())
         if old != key:
@@ -71,6 +77,29 @@ def claim_run(run: Path, key: dict) -> bool:
                          "delete it or pass another --runs")
     run.mkdir(parents=True, exist_ok=True)
     atomic_write_json(f, key)
+    return False
+
+
+def _trained(run: Path) -> bool:
+    """Whether ``run`` holds trained weights (a finished model or a checkpoint): a cache its key protects."""
+    return (run / "model.pt").exists() or any((run / "checkpoints").glob("*.pt"))
+
+
+def _busy(run: Path) -> bool:
+    """Whether another process holds ``run``'s folder lock (it is training there, maybe not checkpointed yet)."""
+    import fcntl
+
+    from ohra.io import LOCK_NAME
+
+    lock = run / LOCK_NAME
+    if not lock.exists():
+        return False
+    with open(lock) as fh:
+        try:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return True
+        fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
     return False
 
 

@@ -14,13 +14,12 @@ Run: python benchmarks/bench_ceiling.py [--grasps 12] [--starts 2]  -> benchmark
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import write_results  # noqa: E402
+from _common import run_script, script_parser, write_results  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -82,7 +81,7 @@ def measure(hand: str, root: Path, n_grasps: int, n_starts: int) -> dict:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = script_parser(__doc__, __file__)
     ap.add_argument("--grasps", type=int, default=12, help="stored robust grasps simulated per hand")
     ap.add_argument("--starts", type=int, default=2, help="IPOPT starts solved per object")
     args = ap.parse_args()
@@ -97,4 +96,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main, __file__)

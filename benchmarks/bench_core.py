@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import best_of, peak_rss_mib, write_results  # noqa: E402
+from _common import best_of, peak_rss_mib, run_script, script_parser, write_results  # noqa: E402
 
 import numpy as np  # noqa: E402
 import pinocchio as pin  # noqa: E402
@@ -97,7 +97,5 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    import argparse
-
-    argparse.ArgumentParser(description=__doc__.split("\n\n")[0]).parse_args()  # --help; no options
-    main()
+    script_parser(__doc__, __file__).parse_args()  # --help; no options
+    run_script(main, __file__)

@@ -28,7 +28,7 @@ far below any geometric difference between the two hands. *Contact gap*: at the 
 finger whose canonical links touch the object (signed distance <= 1 mm), the original finger's
 distance minus the canonical one [mm] (positive: the original finger surface lies farther out).
 
-Each (form, object) is written atomically to ``out/bench_couplings/`` (grasps and per-grasp
+Each (form, object) is written atomically to ``out/bench_couplings/`` (``--cache``; grasps and per-grasp
 outcomes) and reused on a re-run with the same starts and seed, so a killed run resumes;
 ``--reeval`` keeps the solved grasps and re-runs both evaluations (after a simulator fix). A third
 evaluation puts the same grasps on the canonical hand carrying the original URDF's finger masses
@@ -39,7 +39,6 @@ Run: python benchmarks/bench_couplings.py [--starts 24] [--seeds 0 1] [--reeval]
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import sys
@@ -47,7 +46,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import write_results  # noqa: E402
+from _common import run_script, script_parser, write_results  # noqa: E402
 
 import numpy as np  # noqa: E402
 import pybullet as pb  # noqa: E402
@@ -128,9 +127,9 @@ def shifted(grasps: np.ndarray, seed: int) -> np.ndarray:
     return g
 
 
-def run_object(ref, spec: str, starts: int, seed: int, reeval: bool) -> dict:
+def run_object(ref, spec: str, starts: int, seed: int, reeval: bool, cache: Path = CACHE) -> dict:
     """One (form, object): solved grasps and both evaluations, from the cache when it matches."""
-    f = CACHE / f"{ref.form}_{spec.replace('/', '_').replace(':', '_')}{f'_s{seed}' if seed else ''}.json"
+    f = cache / f"{ref.form}_{spec.replace('/', '_').replace(':', '_')}{f'_s{seed}' if seed else ''}.json"
     old = json.loads(f.read_text()) if f.is_file() else None
     if old and (old["starts"], old["seed"]) != (starts, seed):
         old = None
@@ -171,7 +170,7 @@ def origmass_evaluator(ref, obj: ObjectModel) -> GraspEvaluator:
 
 
 def _write(f: Path, row: dict) -> None:
-    CACHE.mkdir(parents=True, exist_ok=True)
+    f.parent.mkdir(parents=True, exist_ok=True)
     tmp = f.with_suffix(".tmp")
     tmp.write_text(json.dumps(row))
     os.replace(tmp, f)
@@ -208,7 +207,7 @@ def table(rows: list[dict], starts: int, seeds: list[int]) -> str:
              "canonical grasps evaluated (six directions, default protocol) on the coupled canonical hand and replayed on",
              "the original URDF (`ohra eval --original`). Change = original - canonical [points], paired per grasp, with",
              "its standard error sqrt(var(d)/n); agreement: both pass / canonical only / original only / both fail.",
-             f"Flips: grasps whose outcome differs from the canonical one on the original / on the canonical hand after a",
+             "Flips: grasps whose outcome differs from the canonical one on the original / on the canonical hand after a",
              f"{1e3 * SHIFT_M:.1f} mm palm shift (noise floor). Gap: median over canonical finger contacts (<= {1e3 * TOUCH_M:.0f} mm) of the",
              "original finger's distance to the object minus the canonical one, at the grasp pose [mm].",
              "Original masses: the same grasps on the canonical hand carrying the original URDF's finger masses",
@@ -230,19 +229,20 @@ def _num(x: float | None) -> str:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = script_parser(__doc__, __file__)
     ap.add_argument("--starts", type=int, default=24)
     ap.add_argument("--seeds", type=int, nargs="+", default=[0], help="start seeds; rows pool every seed's grasps")
     ap.add_argument("--objects", nargs="*", default=list(OBJECTS), help="object specs as on the command line; ycb/NAME under the objects root")
-    ap.add_argument("--forms", nargs="*", default=["base", "extended"])
     ap.add_argument("--reeval", action="store_true", help="keep cached grasps, re-run both evaluations")
+    ap.add_argument("--cache", type=Path, default=CACHE, help=f"folder of the per-(form, object) results (default {CACHE})")
+    ap.add_argument("--forms", nargs="*", default=["base", "extended"], choices=("base", "extended"))
     a = ap.parse_args()
     rows, every = [], []
     for form in a.forms:
         ref = resolve_hand(HAND, form)
         part = []
         for spec in a.objects:
-            mine = [run_object(ref, spec, a.starts, s, a.reeval) for s in a.seeds]
+            mine = [run_object(ref, spec, a.starts, s, a.reeval, a.cache) for s in a.seeds]
             part += mine
             rows.append(paired(form, mine[0]["object"], mine))
             print(rows[-1], flush=True)
@@ -257,4 +257,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main, __file__)

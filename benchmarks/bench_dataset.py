@@ -9,13 +9,12 @@ Run: python benchmarks/bench_dataset.py --data out/grasp_unified [--name dataset
 
 from __future__ import annotations
 
-import argparse
 import sys
 import warnings
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import write_results  # noqa: E402
+from _common import run_script, script_parser, write_results  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -28,7 +27,7 @@ from ohra.synth.robust import RobustnessSettings, perturb  # noqa: E402
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = script_parser(__doc__, __file__)
     ap.add_argument("--data", required=True, type=Path)
     ap.add_argument("--name", default=None)
     ap.add_argument("--no-replay", action="store_true")
@@ -37,6 +36,10 @@ def main() -> None:
     args = ap.parse_args()
     warnings.simplefilter("ignore")
     man = read_manifest(args.data / "manifest.json")
+    if man is None:
+        from ohra.errors import DatasetError
+
+        raise DatasetError(f"--data {args.data} holds no dataset (no manifest.json)")
     st = man["settings"]
     protocol = Protocol(**st["protocol"])
     rob = RobustnessSettings(**{**st["robustness"], "trials": 1})
@@ -95,4 +98,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main, __file__)

@@ -13,14 +13,12 @@ Run: python benchmarks/bench_drive.py [--hands ...] [--starts 8] [--trials 4] ->
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import write_results  # noqa: E402
+from _common import run_script, script_parser, write_results  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -68,7 +66,7 @@ def run(name: str, objects, starts: int, trials: int) -> dict:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = script_parser(__doc__, __file__)
     ap.add_argument("--hands", nargs="+", default=list(HANDS))
     ap.add_argument("--starts", type=int, default=8)
     ap.add_argument("--trials", type=int, default=4)
@@ -89,4 +87,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main, __file__)

@@ -7,12 +7,11 @@ mix a filter sees. Every (hand, object) pair is evaluated three times on the sam
 with early exit, 1 worker without (outcomes must be identical: early exit never changes one), and
 2 workers with early exit (outcomes must be identical again).
 
-    python benchmarks/bench_eval.py [--grasps 24] [--hands leap_3333,shadow_hand_right]
+    python benchmarks/bench_eval.py [--grasps 24] [--hands leap_3333 shadow_hand_right]
 """
 
 from __future__ import annotations
 
-import argparse
 import resource
 import sys
 import time
@@ -20,7 +19,7 @@ from dataclasses import replace
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import peak_rss_mib, write_results  # noqa: E402
+from _common import peak_rss_mib, run_script, script_parser, write_results  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -34,9 +33,10 @@ OBJECTS = ("TomatoSoupCan", "MustardBottle", "PottedMeatCan")
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = script_parser(__doc__, __file__)
     ap.add_argument("--grasps", type=int, default=24, help="grasps per (hand, object)")
-    ap.add_argument("--hands", default="leap_3333,shadow_hand_right")
+    ap.add_argument("--hands", nargs="+", default=["leap_3333", "shadow_hand_right"],
+                    help="hands, space- (as in the other scripts) or comma-separated (default leap_3333 shadow_hand_right)")
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
     rows, notes = [], []
@@ -47,12 +47,8 @@ def main(argv: list[str] | None = None) -> int:
             objs.append(ObjectModel.load(path))
         else:
             notes.append(f"{name}: not found under {objects_root()}")
-    for hand_name in args.hands.split(","):
-        try:
-            params = get_hand(hand_name)
-        except Exception as exc:  # a hand not registered yet: say so in the results
-            notes.append(f"{hand_name}: skipped ({exc.__class__.__name__}: {str(exc)[:80]})")
-            continue
+    hands = {h: get_hand(h) for h in ",".join(args.hands).split(",") if h}  # a misspelt hand: one line, before any result is written
+    for hand_name, params in hands.items():
         hm = HandModel.from_params(params)
         for obj in objs:
             G = heuristic_grasps(hm, obj, args.grasps, seed=args.seed)
@@ -109,4 +105,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_script(main, __file__)

@@ -17,7 +17,7 @@ import re
 import time
 import warnings
 
-from _common import write_results
+from _common import run_script, script_parser, write_results
 
 from ohra.original.fidelity import compare
 from ohra.hands import registry
@@ -70,12 +70,10 @@ def main(names: list[str]) -> None:
 
 
 if __name__ == "__main__":
-    import argparse
-
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = script_parser(__doc__, __file__)
     ap.add_argument("hands", nargs="*", help="registered hands to measure (default: all)")
     args = ap.parse_args()
     unknown = [h for h in args.hands if h not in registry.registered_hands()]
     if unknown:
         ap.error(f"unknown hand(s) {', '.join(unknown)}; registered: {', '.join(registry.registered_hands())}")
-    main(args.hands)
+    run_script(lambda: main(args.hands), __file__)

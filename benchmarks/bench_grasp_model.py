@@ -11,7 +11,6 @@ achieves, with the size of its training data printed beside them.
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import sys
@@ -19,7 +18,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import peak_rss_mib, write_results  # noqa: E402
+from _common import peak_rss_mib, run_script, script_parser, write_results  # noqa: E402
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
@@ -180,7 +179,7 @@ def _objects(names: list[str]) -> str:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = script_parser(__doc__, __file__)
     ap.add_argument("--model", help="trained run/model directory (default: a fresh default-architecture model for timing)")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--eval-objects", nargs="*", default=[])
@@ -190,6 +189,10 @@ def main() -> None:
     ap.add_argument("--reference-data", nargs="*", default=[], help="datasets whose grasps of the evaluation objects are re-evaluated as a reference")
     ap.add_argument("--dgcnn-steps", type=int, default=2, help="timed DGCNN train steps (slow on a CPU)")
     args = ap.parse_args()
+    from ohra.hands import resolve_hand
+
+    for h in args.eval_hands:  # a misspelt hand: one line now, not a results table without it
+        resolve_hand(h)
     torch.set_num_threads(args.threads)
     model = load_grasp_model(args.model) if args.model else fresh_model(GraspModelConfig())
     obj = ObjectModel.builtin("capsule")
@@ -211,4 +214,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main, __file__)

@@ -12,7 +12,6 @@ Run: python benchmarks/bench_levers.py --data DIR [--per-hand 40] -> benchmarks/
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 import warnings
@@ -20,7 +19,7 @@ from dataclasses import replace
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import write_results  # noqa: E402
+from _common import run_script, script_parser, write_results  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -118,10 +117,12 @@ def prefilter_and_cap(data: Path) -> list[dict]:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
+    ap = script_parser(__doc__, __file__)
     ap.add_argument("--data", type=Path, required=True)
     ap.add_argument("--per-hand", type=int, default=40)
     args = ap.parse_args()
+    if not sorted(args.data.glob("*-ycb-process-1")):  # nothing to measure: the results file is left as it is
+        ap.error(f"--data {args.data} holds no bench_synth.py runs (*-ycb-process-1 folders; bench_synth.py --keep)")
     warnings.simplefilter("ignore")
     pre = prefilter_and_cap(args.data)
     sol = solver_settings(args.data, args.per_hand)
@@ -142,4 +143,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main, __file__)

@@ -15,14 +15,13 @@ To time another version of the refinement, run this script with that version's
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 import warnings
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import run_script, write_results  # noqa: E402
+from _common import run_script, script_parser, write_results  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -31,7 +30,7 @@ OBJECTS = ("procedural:superquadric:900", "procedural:cylinder:77", "ycb/Mustard
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = script_parser(__doc__, __file__)
     ap.add_argument("--grasps", type=int, default=30, help="grasps per (hand, object)")
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0)

@@ -17,7 +17,6 @@ virtual machine the same 2,000-step loop measured 580 and 973 steps per CPU-seco
 
 from __future__ import annotations
 
-import argparse
 import multiprocessing as mp
 import os
 import statistics
@@ -26,7 +25,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import write_results  # noqa: E402
+from _common import run_script, script_parser, write_results  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -98,7 +97,7 @@ def grasp_rate(kw: dict) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = script_parser(__doc__, __file__)
     ap.add_argument("--steps", type=int, default=2000, help="control steps per measurement")
     ap.add_argument("--repeat", type=int, default=3, help="measurements per figure (the median is reported)")
     ap.add_argument("--quick", action="store_true", help="LEAP canonical only, no settings table")
@@ -155,4 +154,4 @@ def _table(rows: dict, settings: dict, physics: str, load: float) -> str:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_script(main, __file__)

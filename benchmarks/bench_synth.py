@@ -8,7 +8,6 @@ Run: python benchmarks/bench_synth.py [--grasps-per-object 8] [--hands ...] [--k
 
 from __future__ import annotations
 
-import argparse
 import os
 import resource
 import sys
@@ -18,12 +17,11 @@ import warnings
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import peak_rss_mib, write_results  # noqa: E402
+from _common import peak_rss_mib, run_script, script_parser, write_results  # noqa: E402
 
 import numpy as np  # noqa: E402
 
 from ohra.data.dataset import GraspDataset  # noqa: E402
-from ohra.errors import OhraError  # noqa: E402
 from ohra.hands import get_hand  # noqa: E402
 from ohra.objects.procedural import FAMILIES, procedural_objects  # noqa: E402
 from ohra.objects.resolve import resolve_objects  # noqa: E402
@@ -136,7 +134,7 @@ def _call(spec: tuple):
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
+    ap = script_parser(__doc__, __file__)
     ap.add_argument("--grasps-per-object", type=int, default=8)
     ap.add_argument("--hands", nargs="+", default=HANDS)
     ap.add_argument("--workers", nargs="+", type=int, default=[1, 2])
@@ -173,11 +171,7 @@ def main() -> None:
     rows, skipped = [], {}
     single, scaling = [], []  # one-worker runs may share the machine (--parallel); scaling runs go alone
     for hand in args.hands:
-        try:
-            get_hand(hand)
-        except OhraError as exc:
-            skipped[hand] = str(exc)
-            continue
+        get_hand(hand)  # a misspelt hand: one line, before the results file is replaced by an empty table
         single += [(hand, "ycb", 1), (hand, "procedural", 1)]
         scaling += [(hand, "ycb", w) for w in args.workers if w != 1 and hand in args.scaling_hands]
     sets = {"ycb": ycb, "procedural": proc}
@@ -216,4 +210,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main, __file__)

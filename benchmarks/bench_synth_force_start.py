@@ -10,13 +10,12 @@ Run: python benchmarks/bench_synth_force_start.py [--seeds 100 200] -> benchmark
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import write_results  # noqa: E402
+from _common import run_script, script_parser, write_results  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -87,7 +86,7 @@ def report(summary: list[dict], seeds: list[int], starts: int) -> None:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
+    ap = script_parser(__doc__, __file__)
     ap.add_argument("--seeds", nargs="+", type=int, default=[100, 200])
     ap.add_argument("--starts", type=int, default=8, help="starts per object")
     ap.add_argument("--hands", nargs="+", default=HANDS)
@@ -102,4 +101,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main, __file__)

@@ -19,7 +19,6 @@ Run: python benchmarks/bench_vae.py [--model DIR] [--latents N] [--heldout N]  -
 
 from __future__ import annotations
 
-import argparse
 import itertools
 import sys
 import time
@@ -27,7 +26,7 @@ import warnings
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import best_of, peak_rss_mib, write_results  # noqa: E402
+from _common import best_of, peak_rss_mib, run_script, script_parser, write_results  # noqa: E402
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
@@ -234,7 +233,7 @@ LABELS = [
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
+    ap = script_parser(__doc__, __file__)
     ap.add_argument("--model", help="model directory (default: the shipped model)")
     ap.add_argument("--heldout", type=int, default=16384)
     ap.add_argument("--latents", type=int, default=10000, help="random latents for the plausibility check")
@@ -292,5 +291,4 @@ def tables(data: dict, models: list[str]) -> str:
 
 if __name__ == "__main__":
     t0 = time.perf_counter()
-    main()
-    print(f"({time.perf_counter() - t0:.0f} s)")
+    run_script(lambda: main() or print(f"({time.perf_counter() - t0:.0f} s)"), __file__)

@@ -23,7 +23,6 @@ Each (hand, variant) is cached as JSON in ``--cache`` so runs can be split acros
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
@@ -31,7 +30,7 @@ from dataclasses import replace
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import write_results  # noqa: E402
+from _common import run_script, script_parser, write_results  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -204,15 +203,19 @@ def table(runs: list[dict]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = script_parser(__doc__, __file__)
     ap.add_argument("--hands", nargs="+", default=["allegro_hand_left", "barrett_hand", "shadow_hand_right"])
-    ap.add_argument("--variants", nargs="+", default=["spheres", "capsules"])
+    ap.add_argument("--variants", nargs="+", default=["spheres", "capsules"], choices=("spheres", "capsules"))
     ap.add_argument("--starts", type=int, default=16)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--cache", type=Path, default=Path("/tmp/ohra_bench_yield"))
     ap.add_argument("--report", action="store_true", help="only write results/yield.{json,md} from the cache")
     ap.add_argument("--drive", action="store_true", help="run the drive diagnosis (cached as drive-<hand>.json) instead")
     a = ap.parse_args(argv)
+    known = dict(Recipe.load(RECIPE).resolve_hands())
+    unknown = [h for h in a.hands if h not in known]
+    if unknown:  # the sample is the recipe's: another hand is another study
+        ap.error(f"--hands {' '.join(unknown)}: not a hand of {RECIPE.name} ({', '.join(known)})")
     a.cache.mkdir(parents=True, exist_ok=True)
     if a.drive:
         for hand in a.hands:
@@ -229,4 +232,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    run_script(main, __file__)

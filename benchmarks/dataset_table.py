@@ -11,14 +11,15 @@ Run: python benchmarks/dataset_table.py [--root datasets] [--check] [--exclude F
 
 from __future__ import annotations
 
-import argparse
 import re
 import sys
 from collections import defaultdict
 from functools import lru_cache
 from pathlib import Path
 
-from ohra.data.build import summary
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import run_script, script_parser  # noqa: E402
+from ohra.data.build import summary  # noqa: E402
 from ohra.data.dataset import read_manifest
 from ohra.data.recipe import Recipe
 
@@ -99,7 +100,7 @@ def table(root: Path, exclude: tuple[str, ...] = ()) -> str:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = script_parser(__doc__, __file__)
     ap.add_argument("--root", type=Path, default=ROOT / "datasets")
     ap.add_argument("--check", action="store_true")
     ap.add_argument("--exclude", nargs="+", default=[], help="folders to leave out (e.g. one still being built)")
@@ -119,4 +120,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_script(main, __file__)

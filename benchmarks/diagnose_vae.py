@@ -8,14 +8,13 @@ the sampler it was trained on, ``ohra.learn.sampler_reference``).
 
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 import warnings
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import write_results  # noqa: E402
+from _common import run_script, script_parser, write_results  # noqa: E402
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
@@ -111,7 +110,7 @@ def registered(vae) -> list[dict]:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
+    ap = script_parser(__doc__, __file__)
     ap.add_argument("--model", help="model directory (default: the kept reference model)")
     ap.add_argument("--n", type=int, default=4096, help="held-out hands")
     args = ap.parse_args()
@@ -142,4 +141,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main, __file__)

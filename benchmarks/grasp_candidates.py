@@ -21,12 +21,11 @@ Run: python benchmarks/grasp_candidates.py --data datasets/grasp_unified_s{0..22
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import natural_sorted, write_results  # noqa: E402
+from _common import natural_sorted, run_script, script_parser, write_results  # noqa: E402
 from grasp_scale_up import baseline  # noqa: E402
 from grasp_study import PAPER, ROOT, data_protocol, eval_objects, evaluated, paired_change, protocol_note  # noqa: E402
 
@@ -34,7 +33,7 @@ from ohra.learn.grasp.model import load_grasp_model  # noqa: E402
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = script_parser(__doc__, __file__)
     ap.add_argument("--data", nargs="+", required=True, help="the data the model was trained on (its protocol)")
     ap.add_argument("--hands", nargs="+", default=list(PAPER))
     ap.add_argument("--objects-file", type=Path, default=ROOT / "recipes" / "grasp_eval_objects.yaml")
@@ -73,4 +72,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main, __file__)

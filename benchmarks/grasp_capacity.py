@@ -57,6 +57,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
+from _common import run_script, script_parser  # noqa: E402
 
 HANDS = ["allegro_hand_left", "barrett_hand", "shadow_hand_right"]
 STUDY_DATA = [f"datasets/grasp_unified_s{i}" for i in range(23)]
@@ -202,7 +203,7 @@ def table(res: dict) -> str:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = script_parser(__doc__, __file__)
     ap.add_argument("phase", choices=("train", "eval"))
     ap.add_argument("--data", nargs="+", default=STUDY_DATA,
                     help="dataset folders (default: the study's 23 committed folders; run from the repository root)")
@@ -229,4 +230,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main, __file__)

@@ -46,7 +46,7 @@ import warnings
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import natural_sorted, write_results  # noqa: E402
+from _common import natural_sorted, run_script, script_parser, write_results  # noqa: E402
 from _study_cache import claim_run, train_key, when_free  # noqa: E402
 from grasp_scale_up import baseline, comparison_lines, paired_comparison, rates, require_data_of  # noqa: E402
 from grasp_study import PAPER, ROOT, data_protocol, eval_objects, evaluated, protocol_note  # noqa: E402
@@ -117,7 +117,7 @@ def table(res: dict) -> str:
 def arm_parser(doc: str, arms: dict) -> argparse.ArgumentParser:
     """The command line of a script that trains ``arms`` on the committed unified recipe and evaluates them
     against the committed study (this one and ``grasp_contact_term.py``)."""
-    ap = argparse.ArgumentParser(description=doc.split("\n\n")[0])
+    ap = script_parser(doc, __file__)
     ap.add_argument("--data", nargs="+", required=True)
     ap.add_argument("--hands", nargs="+", default=list(PAPER))
     ap.add_argument("--objects-file", type=Path, default=ROOT / "recipes" / "grasp_eval_objects.yaml")
@@ -164,4 +164,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main, __file__)

@@ -64,7 +64,7 @@ import warnings
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import natural_sorted, write_results  # noqa: E402
+from _common import natural_sorted, run_script, write_results  # noqa: E402
 from grasp_contact_loss import arm_parser, trained_arm  # noqa: E402
 from grasp_scale_up import baseline, comparison_lines, paired_comparison, rates, require_data_of  # noqa: E402
 from grasp_study import PAPER, ROOT, data_protocol, eval_objects, evaluated, protocol_note  # noqa: E402
@@ -163,4 +163,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main, __file__)

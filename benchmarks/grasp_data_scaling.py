@@ -15,13 +15,12 @@ Run: python benchmarks/grasp_data_scaling.py --data datasets/grasp_unified_s0 da
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import natural_sorted, write_results  # noqa: E402
+from _common import natural_sorted, run_script, script_parser, write_results  # noqa: E402
 from grasp_study import ROOT, add_run_args, data_protocol, evaluated, protocol_note, trained  # noqa: E402
 
 from ohra.data.recipe import Recipe  # noqa: E402
@@ -48,13 +47,16 @@ def table(res: dict) -> str:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = script_parser(__doc__, __file__)
     ap.add_argument("--data", nargs="+", required=True, help="dataset folders, in the order they are added")
     ap.add_argument("--hands", nargs="+", default=["allegro_hand_left", "barrett_hand", "shadow_hand_right"])
     ap.add_argument("--objects", nargs="+", default=DEFAULT_OBJECTS)
     ap.add_argument("--ks", type=int, nargs="+", default=None, help="only these prefix lengths (default 1..len(--data))")
     add_run_args(ap, steps=3000, n=40, runs="grasp_scaling", name="grasp_data_scaling")
     args = ap.parse_args()
+    bad = [k for k in args.ks or () if k > len(args.data)]
+    if bad:  # a model named unified-k5 trained on fewer folders would mislabel its row
+        ap.error(f"--ks {' '.join(map(str, bad))}: more than the {len(args.data)} --data folder(s) given")
     objs = objects(args.objects)
     args.data = natural_sorted(args.data)  # s2 before s10, whatever the glob gave
     protocol = data_protocol(args.data)
@@ -70,4 +72,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main, __file__)

@@ -26,13 +26,12 @@ Run: python benchmarks/grasp_mirror.py [-n 20] [--workers 2]
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import write_results  # noqa: E402
+from _common import run_script, script_parser, write_results  # noqa: E402
 from grasp_study import ROOT, data_protocol, eval_objects, protocol_note  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -74,7 +73,7 @@ def arm(model, hands: list, labels: list[str], objects: list, protocol, args, pa
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = script_parser(__doc__, __file__)
     ap.add_argument("-n", type=int, default=20, help="grasps per (hand, object)")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--objects-file", type=Path, default=ROOT / "recipes" / "grasp_eval_objects.yaml")
@@ -124,4 +123,4 @@ def _has_base(name: str) -> bool:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main, __file__)

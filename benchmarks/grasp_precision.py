@@ -14,12 +14,11 @@ Run: python benchmarks/grasp_precision.py --data datasets/grasp_unified_s{0..22}
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import natural_sorted, write_results  # noqa: E402
+from _common import natural_sorted, run_script, script_parser, write_results  # noqa: E402
 from grasp_study import PAPER, ROOT, eval_objects  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -33,7 +32,7 @@ from ohra.rotations import grasp_to_pose  # noqa: E402
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = script_parser(__doc__, __file__)
     ap.add_argument("--data", nargs="+", required=True, help="the data the model was trained on")
     ap.add_argument("--hands", nargs="+", default=list(PAPER))
     ap.add_argument("--seen-file", type=Path, default=ROOT / "recipes" / "grasp_seen_objects.yaml")
@@ -84,4 +83,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main, __file__)

@@ -25,14 +25,12 @@ Run: python benchmarks/grasp_seen_objects.py --data datasets/grasp_unified_s{0..
 
 from __future__ import annotations
 
-import argparse
-import json
 import sys
 import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import natural_sorted, write_results  # noqa: E402
+from _common import natural_sorted, run_script, script_parser, write_results  # noqa: E402
 from _study_cache import cached, eval_key, run_key, store  # noqa: E402
 from grasp_scale_up import baseline, difference, pooled  # noqa: E402
 from grasp_study import PAPER, ROOT, data_protocol, eval_objects, protocol_note  # noqa: E402
@@ -59,7 +57,7 @@ def optimiser_outcomes(data: list[str]) -> dict[str, np.ndarray]:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = script_parser(__doc__, __file__)
     ap.add_argument("--data", nargs="+", required=True, help="the data the model was trained on (its protocol)")
     ap.add_argument("--hands", nargs="+", default=list(PAPER))
     ap.add_argument("--seen-file", type=Path, default=ROOT / "recipes" / "grasp_seen_objects.yaml")
@@ -131,4 +129,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main, __file__)

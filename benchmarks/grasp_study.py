@@ -36,7 +36,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import RESULTS, natural_sorted, run_script, write_results  # noqa: E402
+from _common import RESULTS, natural_sorted, run_script, script_parser, write_results  # noqa: E402
 from _study_cache import cached, carried_over, claim_run, eval_key, run_key, store, train_key, when_free  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -340,7 +340,7 @@ def pictures(model, hands: list[str], objects: list, ev: dict, name: str, per_ro
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = script_parser(__doc__, __file__)
     ap.add_argument("--data", nargs="+", required=True)
     ap.add_argument("--hands", nargs="+", default=list(PAPER))
     ap.add_argument("--objects-file", type=Path, default=ROOT / "recipes" / "grasp_eval_objects.yaml")

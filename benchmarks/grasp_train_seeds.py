@@ -36,6 +36,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
+from _common import run_script, script_parser  # noqa: E402
 
 HANDS = ["allegro_hand_left", "barrett_hand", "shadow_hand_right"]
 STUDY_DATA = [f"datasets/grasp_unified_s{i}" for i in range(23)]
@@ -171,7 +172,7 @@ def table(res: dict) -> str:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = script_parser(__doc__, __file__)
     ap.add_argument("phase", choices=("train", "eval"))
     ap.add_argument("--data", nargs="+", default=STUDY_DATA, help="the study's folders (default; run from the repository root)")
     ap.add_argument("--models", nargs="+", default=MODELS, choices=MODELS)
@@ -198,4 +199,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main, __file__)

@@ -29,14 +29,13 @@ seed's mean), the episodes matched to an arm by their run folder.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import RESULTS, read_results, write_results  # noqa: E402
+from _common import RESULTS, read_results, run_script, script_parser, write_results  # noqa: E402
 from rotation_seeds import METRICS, pooled  # noqa: E402
 
 
@@ -82,7 +81,7 @@ def pooled_evals(names: list[str], arms: dict[str, list[str]]) -> dict[str, dict
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = script_parser(__doc__, __file__)
     ap.add_argument("--canonical", nargs="+", required=True, help="runs of the canonical URDF (seeds)")
     ap.add_argument("--original", nargs="+", required=True, help="runs of the original URDF (seeds)")
     ap.add_argument("--runs", nargs="+", required=True, help="LABEL=RUN[,RUN...] attribution arms (one run per seed)")
@@ -148,4 +147,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    run_script(main, __file__)

@@ -22,12 +22,11 @@ step with zero action (the motors holding the start targets; no policy):
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import write_results  # noqa: E402
+from _common import run_script, script_parser, write_results  # noqa: E402
 
 import numpy as np  # noqa: E402
 import pybullet as pb  # noqa: E402
@@ -111,7 +110,7 @@ def transfer_rows(name: str, pol, episodes: int, seed: int) -> tuple[list[str], 
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = script_parser(__doc__, __file__)
     ap.add_argument("--policies", nargs="+", default=DEFAULT)
     ap.add_argument("--states", type=int, default=40, help="starting states per policy (the first N of its set)")
     ap.add_argument("--rate", type=float, default=0.1, help="torque ramp [N m/s]")
@@ -184,4 +183,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_script(main, __file__)

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import write_results  # noqa: E402
+from _common import run_script, script_parser, write_results  # noqa: E402
 
 
 def row(label: str, res) -> tuple[str, dict]:
@@ -36,7 +36,7 @@ def row(label: str, res) -> tuple[str, dict]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = script_parser(__doc__, __file__)
     ap.add_argument("--runs", nargs="+", required=True, metavar="LABEL=DIR", help="runs or exported policies")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=JSON", help="environment settings changed")
     ap.add_argument("--which", choices=("model", "last"), default="model", help="final policy or last checkpoint")
@@ -83,4 +83,4 @@ def _run(args: argparse.Namespace) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_script(main, __file__)

@@ -19,14 +19,13 @@ runs reached), which compares the URDFs per step rather than per wall minute.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import RESULTS, read_results, write_results  # noqa: E402
+from _common import RESULTS, read_results, run_script, script_parser, write_results  # noqa: E402
 
 TARGET = 0.10  # issue 15: canonical within 10 % of original on each metric
 WINDOW = 200_000  # PPO steps of training episodes averaged for the per-step comparison
@@ -98,7 +97,7 @@ def matched_steps(groups: dict[tuple[str, str], list[tuple[str, dict]]]) -> dict
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = script_parser(__doc__, __file__)
     ap.add_argument("results", nargs="+", help="results names of rotation_table3.py runs (benchmarks/results/NAME.json)")
     ap.add_argument("--name", default="rotation_seeds")
     args = ap.parse_args(argv)
@@ -157,4 +156,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    run_script(main, __file__)

@@ -12,12 +12,11 @@ Each canonical-URDF policy is also run on the hand's original URDF through the a
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import RESULTS, write_results  # noqa: E402
+from _common import RESULTS, run_script, script_parser, write_results  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -36,7 +35,7 @@ def _budget_text(budget: dict) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = script_parser(__doc__, __file__)
     ap.add_argument("--episodes", type=int, default=20)
     ap.add_argument("--seed", type=int, default=1000)
     ap.add_argument("--runs", nargs="*", metavar="LABEL=DIR", help="default: the four shipped Table 3 policies")
@@ -163,4 +162,4 @@ def _shipped() -> dict[str, Path]:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_script(main, __file__)

@@ -12,12 +12,11 @@ all-data successes) with a 95 % interval from the object-cluster bootstrap over 
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import read_results, write_results  # noqa: E402
+from _common import read_results, run_script, script_parser, write_results  # noqa: E402
 from _stats import pool, ratio_interval  # noqa: E402
 
 TARGET = 0.95  # issue 14: zero-shot / all-data ratio on each test variant
@@ -29,7 +28,7 @@ def rate(success: dict) -> float:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = script_parser(__doc__, __file__)
     ap.add_argument("results", nargs="+", help="results names of zeroshot_study.py runs (benchmarks/results/NAME.json)")
     ap.add_argument("--name", default="zeroshot_long_seeds")
     args = ap.parse_args(argv)
@@ -66,4 +65,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_script(main, __file__)

@@ -33,7 +33,6 @@ the other runs in the other), then run the study without the flag (``--workers 2
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
@@ -41,7 +40,7 @@ from dataclasses import asdict
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import RESULTS, natural_sorted, run_script, write_results  # noqa: E402
+from _common import RESULTS, natural_sorted, run_script, script_parser, write_results  # noqa: E402
 from _stats import ratio_interval  # noqa: E402
 from _study_cache import cached, claim_run, eval_key, run_key, store, train_key, when_free  # noqa: E402
 
@@ -135,7 +134,7 @@ def pct(r: dict) -> str:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = script_parser(__doc__, __file__)
     ap.add_argument("--data", nargs="+", required=True)
     ap.add_argument("--objects-file", type=Path, default=ROOT / "recipes" / "grasp_eval_objects.yaml")
     add_run_args(ap, steps=12000, n=100, runs="zeroshot_study", name="zeroshot_study")

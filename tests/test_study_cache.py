@@ -60,3 +60,38 @@ def test_evaluations_cached_before_the_urdf_damping_setting_stay_valid_where_it_
     assert carried_over(path, eval_key(model, hands=hands, original=True, protocol=keep), undamped)["hands"] == hands
     assert carried_over(path, eval_key(model, hands=hands, original=True, protocol=replace(drop, friction=1.0)), undamped) is None
     assert carried_over(path, {**new, "n": 5}, undamped) is None
+
+
+def test_a_stamp_left_by_a_run_that_never_trained_does_not_block_the_corrected_run(tmp_path):
+    """A study started with a bad setting wrote its key, failed before training, and then refused the corrected
+    command ("cached with other settings"). A stamp over no weights is dropped; one over a checkpoint still holds."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    try:
+        from _study_cache import claim_run
+    finally:
+        sys.path.pop(0)
+
+    run = tmp_path / "run"
+    assert claim_run(run, {"steps": 5, "data": ["nope"]}) is False  # the mistyped first attempt stamps the run
+    assert claim_run(run, {"steps": 5, "data": ["grasps"]}) is False  # ... which held nothing: the fix goes ahead
+    (run / "checkpoints").mkdir()
+    (run / "checkpoints" / "last.pt").write_bytes(b"weights")
+    try:
+        claim_run(run, {"steps": 9, "data": ["grasps"]})
+        raise AssertionError("a trained run was taken over by other settings")
+    except SystemExit as exc:
+        assert "cached with other settings (steps: 5 -> 9)" in str(exc)
+
+
+def test_a_data_folder_that_is_not_a_dataset_is_named_before_any_stamp(tmp_path):
+    import pytest
+
+    from ohra.errors import DatasetError
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    try:
+        from _study_cache import data_fingerprint
+    finally:
+        sys.path.pop(0)
+    with pytest.raises(DatasetError, match=f"--data {tmp_path / 'nope'}: no dataset there"):
+        data_fingerprint([str(tmp_path / "nope")])

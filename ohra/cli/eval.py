@@ -155,9 +155,9 @@ COUPLING_NOTE_RAD = 1e-3
 
 
 def run(args: argparse.Namespace) -> int:
-    from ohra.hands import get_couplings, get_hand
+    from ohra.hands import get_hand
     from ohra.objects.model import resolve_objects
-    from ohra.sim import GraspEvaluator, SimHand
+    from ohra.sim import GraspEvaluator
 
     if args.workers < 1:
         raise GraspError(f"--workers must be >= 1, got {args.workers}")
