@@ -439,7 +439,7 @@ def test_a_nan_action_is_refused_and_leaves_the_env_as_it_was(env):
     bad[3] = np.nan
     with pytest.raises(RotationActionError, match=r"NaN or infinity at \[3\]"):
         env.step(bad)
-    with pytest.raises(RotationActionError, match=f"expected {n} numbers"):
+    with pytest.raises(RotationActionError, match=rf"expected shape \({n},\)"):
         env.step(np.zeros(5))
     with pytest.raises(RotationActionError, match="starting state index"):
         env.reset(options={"grasp": len(env.grasps.q)})
@@ -447,3 +447,55 @@ def test_a_nan_action_is_refused_and_leaves_the_env_as_it_was(env):
     for _ in range(5):
         _, _, terminated, _, info = env.step(np.zeros(n))
     assert info["termination"] != "broken" and np.all(np.isfinite(env.scene.read().q))
+
+
+@pytest.mark.parametrize("action, said", [
+    (lambda n: np.ones((2, n // 2)), "expected shape"),  # was reshaped to (n,) and taken
+    (lambda n: np.ones((1, n)), "expected shape"),
+    (lambda n: np.ones(n, complex), "real numbers, got ndarray of complex128"),  # the imaginary part was dropped
+    (lambda n: np.ones(n, bool), "real numbers, got ndarray of bool"),
+    (lambda n: ["a"] * n, "real numbers"),
+])
+def test_an_action_of_another_shape_or_kind_is_refused(env, action, said):
+    from ohra.sim.rotation import RotationActionError
+
+    n = env.action_space.shape[0]
+    env.reset(seed=0)
+    with pytest.raises(RotationActionError, match=said):
+        env.step(action(n))
+    obs, *_ = env.step([0.0] * n)  # a list of numbers is fine
+    assert env.observation_space.contains(obs)
+
+
+def test_step_before_reset_and_any_call_after_close_are_named_gymnasium_errors(grasps):
+    import gymnasium
+
+    e = InHandRotateEnv(CFG, grasps=grasps)
+    n = e.action_space.shape[0]
+    with pytest.raises(gymnasium.error.ResetNeeded, match="call reset"):  # was AttributeError: no '_target'
+        e.step(np.zeros(n, np.float32))
+    e.reset(seed=0)
+    e.close()
+    e.close()  # twice is fine
+    for call in (lambda: e.step(np.zeros(n, np.float32)), lambda: e.reset(seed=0)):  # were AttributeErrors on None
+        with pytest.raises(gymnasium.error.ClosedEnvironmentError, match="closed environment"):
+            call()
+
+
+def test_an_empty_object_name_is_not_the_current_folder_and_hidden_folders_are_not_objects(tmp_path):
+    """``object=""`` loaded the current folder, whose first sub-folder was ``.ci``; a folder of objects listed its
+    hidden folders (.git, .ipynb_checkpoints) as objects."""
+    import trimesh
+
+    from ohra.errors import ObjectError
+    from ohra.objects.resolve import resolve_objects
+
+    with pytest.raises(ObjectError, match="unknown rotation object ''"):
+        InHandRotateEnv(CFG, object="")
+    with pytest.raises(ObjectError, match="object spec ''"):
+        resolve_objects([""])
+    (tmp_path / ".hidden").mkdir()
+    (tmp_path / ".hidden" / "x.obj").write_text("v 0 0 0\n")
+    (tmp_path / "box").mkdir()
+    trimesh.creation.box(extents=(0.05, 0.05, 0.05)).export(tmp_path / "box" / "box.obj")
+    assert [o.name for o in resolve_objects(str(tmp_path))] == ["box"]

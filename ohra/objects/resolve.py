@@ -26,7 +26,7 @@ def resolve_objects(spec: list[str] | str | None, scale: float | None = None, bo
         raise ObjectError(f"scale must be a number > 0, got {scale!r}")
     if body not in BODY_CHOICES:
         raise ObjectError(f"body must be one of {', '.join(BODY_CHOICES)}, got {body!r}")
-    specs = [spec] if isinstance(spec, str) else list(spec or ["builtin"])
+    specs = [spec] if isinstance(spec, (str, Path)) else list(spec or ["builtin"])
     sized = [s for s in specs if s == "builtin" or s.startswith(("builtin:", "procedural:"))]
     them = f"{', '.join(sized)} keep{'s' if len(sized) == 1 else ''}"
     if scale is not None and scale != 1.0 and sized:
@@ -37,6 +37,10 @@ def resolve_objects(spec: list[str] | str | None, scale: float | None = None, bo
                       "shapes are simulated as what they are)", ObjectWarning, stacklevel=user_stacklevel())
     out: list[ObjectModel] = []
     for s in specs:
+        if not isinstance(s, (str, Path)) or not str(s).strip():  # Path("") is the current folder
+            raise ObjectError(f"object spec {s!r}: expected builtin, builtin:NAME, procedural:FAMILY:SEED or a mesh/URDF "
+                              "file or folder")
+        s = str(s)
         if s == "builtin":
             out += [ObjectModel.builtin(n) for n in builtin_object_names()]
         elif s.startswith("builtin:"):
@@ -92,8 +96,9 @@ def _from_path(p: Path, scale: float | None, body: str = "auto") -> list[ObjectM
             hint = f" (the {head.lower()} object: {head.lower()}:{rest})"
         raise ObjectError(f"object file or folder not found: {p}{hint}")
     if p.is_dir() and not any(p.glob("*.obj")) and not any(p.glob("*.urdf")):
-        subs = sorted(d for d in p.iterdir() if d.is_dir())
-        files = sorted(f for f in p.iterdir() if f.suffix.lower() in MESH_SUFFIXES)
+        # hidden entries (.git, .ci, .ipynb_checkpoints) are not objects
+        subs = sorted(d for d in p.iterdir() if d.is_dir() and not d.name.startswith("."))
+        files = sorted(f for f in p.iterdir() if f.suffix.lower() in MESH_SUFFIXES and not f.name.startswith("."))
         if not subs and not files:
             raise ObjectError(f"{p}: folder holds no objects")
         return ([ObjectModel.load(d, scale=scale, body=body) for d in subs]

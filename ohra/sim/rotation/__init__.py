@@ -23,7 +23,7 @@ except ImportError as exc:  # pragma: no cover - exercised only without gymnasiu
         f"ohra.sim.rotation needs gymnasium ({exc}); install it with `pip install ohra[rl]`") from None
 
 from ohra.sim.rotation.config import GRASP_NOISE, RewardWeights, RotationConfig, RotationConfigError
-from ohra.sim.rotation.env import InHandRotateEnv, RotationActionError
+from ohra.sim.rotation.env import InHandRotateEnv, RotationActionError, RotationEnvClosed, RotationResetNeeded
 from ohra.sim.rotation.grasps import GraspGenerationError, GraspSet, load_or_generate
 from ohra.sim.rotation.scene import SceneError
 from ohra.sim.rotation.task import JointSpace, Task, resolve
@@ -34,6 +34,7 @@ if ENV_ID not in gymnasium.registry:
     gymnasium.register(id=ENV_ID, entry_point="ohra.sim.rotation.env:InHandRotateEnv")
 
 __all__ = [
-    "ENV_ID", "InHandRotateEnv", "RotationActionError", "RotationConfig", "RewardWeights", "RotationConfigError", "GraspSet",
+    "ENV_ID", "InHandRotateEnv", "RotationActionError", "RotationEnvClosed", "RotationResetNeeded", "RotationConfig",
+    "RewardWeights", "RotationConfigError", "GraspSet",
     "GraspGenerationError", "SceneError", "load_or_generate", "resolve", "Task", "JointSpace", "GRASP_NOISE",
 ]

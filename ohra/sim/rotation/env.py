@@ -36,6 +36,14 @@ class RotationActionError(OhraError, ValueError):
     """An action or reset option the rotation env cannot take (wrong size, NaN or infinity, no such starting state)."""
 
 
+class RotationResetNeeded(OhraError, gym.error.ResetNeeded):
+    """``step`` before the first ``reset`` (``gymnasium.make``'s order check raises its own ResetNeeded)."""
+
+
+class RotationEnvClosed(OhraError, gym.error.ClosedEnvironmentError):
+    """``reset``, ``step`` or ``render`` after ``close``."""
+
+
 class InHandRotateEnv(gym.Env):
     """In-hand rotation about world +z for any canonical hand or a registered hand's original URDF.
 
@@ -49,7 +57,7 @@ class InHandRotateEnv(gym.Env):
             the config's hand name, as in ``gymnasium.make(ENV_ID, hand=..., urdf=...)``).
     """
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 20.0}  # an instance's: its control rate [Hz]
 
     def __init__(self, config: RotationConfig | dict | None = None, render_mode: str | None = None,
                  grasps: GraspSet | None = None, sim_hand: SimHand | None = None, **overrides: Any):
@@ -80,6 +88,7 @@ class InHandRotateEnv(gym.Env):
     # -- Gymnasium API ----------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
         """Start from a cached starting state: ``options={"grasp": i}`` picks one, else ``np_random`` does."""
+        self._require_open("reset")
         super().reset(seed=seed)
         g = self.grasps
         if options and "grasp" in options:
@@ -104,17 +113,25 @@ class InHandRotateEnv(gym.Env):
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:
         cfg = self.cfg
+        self._require_open("step")
+        if not hasattr(self, "_target"):
+            raise RotationResetNeeded("call reset() before step()")
+        n = self.action_space.shape[0]
         try:
-            a = np.asarray(action, dtype=float)
+            raw = np.asarray(action)
+            a = raw.astype(float) if raw.dtype.kind in "iuf" else None  # not bool, complex, strings or objects
         except (TypeError, ValueError):
-            raise RotationActionError(f"action: expected {self.action_space.shape[0]} numbers, got {type(action).__name__}") from None
-        if a.size != self.action_space.shape[0]:
-            raise RotationActionError(f"action: expected {self.action_space.shape[0]} numbers (one per driven joint), got shape {a.shape}")
+            a = None
+        if a is None:
+            raise RotationActionError(f"action: expected {n} real numbers, got {type(action).__name__}"
+                                      + (f" of {raw.dtype}" if isinstance(action, np.ndarray) else "")) from None
+        if a.shape != (n,):  # a (2, 11) or (1, 22) array was reshaped and taken
+            raise RotationActionError(f"action: expected shape ({n},) (one value per driven joint), got shape {a.shape}")
         if not np.all(np.isfinite(a)):
             # clipping keeps NaN: it reached the motors, and PyBullet's joint state stayed NaN for every later episode
             raise RotationActionError(f"action holds NaN or infinity at {np.flatnonzero(~np.isfinite(a.ravel())).tolist()} "
                                       "(a diverged policy?)")
-        a = np.clip(a.reshape(self.action_space.shape), -1.0, 1.0)
+        a = np.clip(a, -1.0, 1.0)
         self._target = np.clip(self._target + cfg.action_scale * a, self._lo, self._hi)
         self.scene.drive(self.space.to_sim(self._target))
         self.scene.step()
@@ -141,6 +158,7 @@ class InHandRotateEnv(gym.Env):
     def render(self) -> np.ndarray | None:
         if self.render_mode != "rgb_array":
             return None
+        self._require_open("render")
         from ohra.sim.rotation.render import render
 
         return render(self.scene)
@@ -149,6 +167,10 @@ class InHandRotateEnv(gym.Env):
         if getattr(self, "scene", None) is not None:
             self.scene.close()
             self.scene = None
+
+    def _require_open(self, call: str) -> None:
+        if getattr(self, "scene", None) is None:
+            raise RotationEnvClosed(f"{call}() on a closed environment: make a new one")
 
     # -- pieces -----------------------------------------------------------------------------------
     def _terms(self, snap, prev, dyaw: float) -> dict[str, float]:

@@ -114,7 +114,7 @@ def resolve_model(spec: str, density: float, size: float | None = None):
     largest extent is ``size`` [m] when given."""
     from ohra.objects.model import resolve_objects
 
-    if not (spec.startswith(("builtin:", "procedural:")) or Path(spec).expanduser().exists()):
+    if not spec.strip() or not (spec.startswith(("builtin:", "procedural:")) or Path(spec).expanduser().exists()):
         raise ObjectError(f"unknown rotation object {spec!r}; expected one of {SIZED}, builtin:NAME, "
                           "procedural:FAMILY:SEED, or a mesh/URDF file or folder that exists")
     if size is not None and spec.startswith(("builtin:", "procedural:")):

@@ -2,7 +2,7 @@
 
 | term            | size | content                                                          | unit    |
 |-----------------|------|------------------------------------------------------------------|---------|
-| joint_pos       | n    | joint positions scaled to [-1, 1] over their limits (0: immovable) | -       |
+| joint_pos       | n    | joint positions, limits at -1 / +1 (past them under contact)    | -       |
 | joint_target    | n    | position targets, scaled the same way                            | -       |
 | object_pos      | 3    | object position minus its start position (world)                 | m       |
 | object_euler    | 3    | object orientation, fixed-axis xyz Euler angles (world)          | rad     |
