@@ -72,7 +72,7 @@ def claim_run(run: Path, key: dict) -> bool:
             raise SystemExit(f"{run}: cached with other settings ({_differences(old, key)}); "
                              "delete it or pass another --runs")
         return (run / "model.pt").exists()
-    if run.exists() and any(run.iterdir()):
+    if _trained(run):  # weights without a key: their settings are unknown (a failed run's lock or config is not a cache)
         raise SystemExit(f"{run}: a run without {KEY_FILE} (made by an older script, settings unknown); "
                          "delete it or pass another --runs")
     run.mkdir(parents=True, exist_ok=True)

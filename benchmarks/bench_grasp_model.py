@@ -1,7 +1,7 @@
 """Grasp-model benchmark: CPU inference time (one grasp, batched), train-step throughput per
 encoder, and (optionally) a trained model's evaluation on held-out objects in PyBullet.
 
-Run: python benchmarks/bench_grasp_model.py [--model RUN] [--data DIR ...] [--eval-objects builtin:capsule ...]
+Run: python benchmarks/bench_grasp_model.py [--model RUN] [--reference-data DIR ...] [--eval-objects builtin:capsule ...]
          [--eval-hands H ...] [-n 100] [--original]        -> benchmarks/results/grasp_model.{json,md}
 
 Timings do not depend on the weights, so without ``--model`` a freshly initialised model of the

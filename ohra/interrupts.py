@@ -77,7 +77,8 @@ class DeferredStop:
 
     def stop(self) -> None:
         """Act on the deferred signal now (call after saving): ``KeyboardInterrupt`` for SIGINT, SIGTERM's
-        previous handler (by default the process ends by the signal). Does nothing when none came."""
+        previous handler (by default the process ends by the signal). Returns when none came, or when the previous
+        handler returned (it chose to go on): the loop then goes on, and the next signal is deferred again."""
         if self.signum is not None:
             self._deliver(self.signum, None)
 
@@ -91,4 +92,7 @@ class DeferredStop:
         else:
             signal.signal(signum, signal.SIG_DFL)
             os.kill(os.getpid(), signum)
-        # a handler that returned (it chose to go on) leaves the loop's decision to the caller
+        # the handler returned: it chose to go on (a scheduler's "bypass" handler, an outer DeferredStop). So does the
+        # loop, with the signals deferred again, until the next one
+        self.signum = None
+        self.__enter__()

@@ -231,6 +231,7 @@ def test_plot_takes_shipped_policies_by_name_and_names_a_folder_without_progress
     (["train", "--envs", "0"], "--envs must be >= 1, got 0"),
     (["train", "--n-steps", "100", "--batch-size", "64"], "--envs x --n-steps = 200 must be a multiple of --batch-size = 64"),
     (["grasps", "--grasps", "0"], "--grasps must be >= 1, got 0"),
+    (["train", "--seed", "-1"], "--seed must be a whole number in [0, 2**32), got -1"),  # was a numpy traceback
     (["train", "--set", "episode_steps=0"], "RotationConfig.episode_steps must be >= 1"),  # set by field name: named so
 ])
 def test_setting_errors_name_the_option_the_user_typed(argv, said, tmp_path, capsys):

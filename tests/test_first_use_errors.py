@@ -342,3 +342,20 @@ def test_odd_shapes_given_to_the_viewer_name_the_call(call, said):
     vis = meshcat.Visualizer.__new__(meshcat.Visualizer)  # no server: the check comes before anything is drawn
     with pytest.raises(OhraError, match=said):
         call(vis)
+
+
+def test_object_specs_may_be_paths_and_anything_else_is_named(tmp_path):
+    import trimesh
+
+    from ohra.objects.resolve import resolve_objects
+
+    trimesh.creation.box(extents=(0.05, 0.05, 0.05)).export(tmp_path / "box.obj")
+    assert [o.name for o in resolve_objects(tmp_path / "box.obj")] == [o.name for o in resolve_objects([tmp_path / "box.obj"])]
+    for bad in ([None], [1], [""]):
+        with pytest.raises(ObjectError, match="object spec"):
+            resolve_objects(bad)
+
+
+def test_original_joints_may_come_from_a_generator():
+    am = ohra.ActionMap({"index_joint1": "j1"}, (n for n in ["j1", "j2"]))
+    assert am.original_joints == ("j1", "j2")

@@ -59,3 +59,21 @@ def test_no_signal_no_stop_and_an_ignored_sigint_stays_ignored():
         assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
     finally:
         signal.signal(signal.SIGINT, inherited)
+
+
+def test_a_previous_handler_that_returns_lets_the_loop_go_on_and_the_next_signal_is_deferred_again():
+    """A scheduler's "bypass" SIGTERM handler returns: the trainer saved and went on, but the next step's check
+    still saw the old request and, its handlers already put back, died by the default action."""
+    seen = []
+    previous = signal.signal(signal.SIGTERM, lambda *_: seen.append("bypassed"))
+    try:
+        with DeferredStop(quiet=True) as stop:
+            os.kill(os.getpid(), signal.SIGTERM)
+            stop.stop()  # the bypass handler returns: go on
+            assert seen == ["bypassed"] and not stop.requested
+            os.kill(os.getpid(), signal.SIGTERM)  # deferred again, not the default end
+            assert stop.requested and seen == ["bypassed"]
+            stop.stop()
+            assert seen == ["bypassed", "bypassed"]
+    finally:
+        signal.signal(signal.SIGTERM, previous)

@@ -321,6 +321,56 @@ def test_ctrl_c_checkpoints_the_last_update_and_the_run_resumes_from_it(raw_obs_
     assert (run / "model.zip").is_file()
 
 
+def test_ctrl_c_in_the_last_update_keeps_the_finished_run_and_still_stops(raw_obs_run, tmp_path, monkeypatch,
+                                                                        terminal_sigint):
+    """The signal came during the last PPO update: the weights hold it, so the run is complete. It was wound back
+    one rollout, and the resume ran a 4th update where an uninterrupted run has 3."""
+    import os
+    import signal
+
+    from stable_baselines3 import PPO
+
+    _, cache, _ = raw_obs_run
+    monkeypatch.setenv("OHRA_CACHE_DIR", str(cache))
+    env_cfg = RotationConfig(grasp_count=2, episode_steps=24)
+    ppo = PPOSettings(total_steps=72, n_envs=1, n_steps=24, batch_size=24, n_epochs=1, net_arch=(16, 16),
+                      checkpoint_every=1000, normalize_obs=False)
+    updates, real_train = [], PPO.train
+
+    def train(self):
+        updates.append(1)
+        if len(updates) == 3:
+            os.kill(os.getpid(), signal.SIGINT)
+        return real_train(self)
+
+    monkeypatch.setattr(PPO, "train", train)
+    run = tmp_path / "run"
+    with pytest.raises(KeyboardInterrupt):
+        train_rotation(env_cfg, ppo, run)
+    assert json.loads((run / "checkpoints" / "last.json").read_text())["timesteps"] == 72 and (run / "model.zip").is_file()
+    train_rotation(env_cfg, ppo, run, resume=True)  # nothing left to train
+    assert len(updates) == 3
+
+
+def test_only_subprocess_env_workers_ignore_ctrl_c(raw_obs_run, monkeypatch, terminal_sigint):
+    """The trainer itself may run in a multiprocessing child (a user's Pool): with one in-process env it set
+    SIGINT ignored there for good, and Ctrl-C could no longer stop it."""
+    import signal
+
+    from ohra.learn.rl.train import _make_env
+
+    _, cache, _ = raw_obs_run
+    monkeypatch.setenv("OHRA_CACHE_DIR", str(cache))
+    import multiprocessing
+
+    monkeypatch.setattr(multiprocessing, "parent_process", lambda: object())  # as in a Pool worker that trains
+    cfg = RotationConfig(grasp_count=2, episode_steps=24).to_dict()
+    _make_env(cfg, 0).close()
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    _make_env(cfg, 0, worker=True).close()
+    assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+
+
 def test_a_run_trained_without_observation_normalisation_exports_and_reads_back_unnormalised(raw_obs_run, tmp_path,
                                                                                              monkeypatch):
     """The export says ``norm_obs=False`` (no pickled None) and its policy acts on raw observations as the

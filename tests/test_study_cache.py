@@ -71,9 +71,17 @@ def test_a_stamp_left_by_a_run_that_never_trained_does_not_block_the_corrected_r
     finally:
         sys.path.pop(0)
 
+    from ohra.io import folder_lock
+
     run = tmp_path / "run"
     assert claim_run(run, {"steps": 5, "data": ["nope"]}) is False  # the mistyped first attempt stamps the run
-    assert claim_run(run, {"steps": 5, "data": ["grasps"]}) is False  # ... which held nothing: the fix goes ahead
+    try:
+        with folder_lock(run, "training run"):  # ... and its training fails, leaving its lock file (and a config)
+            (run / "config.json").write_text("{}")
+            raise RuntimeError("bad setting")
+    except RuntimeError:
+        pass
+    assert claim_run(run, {"steps": 5, "data": ["grasps"]}) is False  # it held no weights: the fix goes ahead
     (run / "checkpoints").mkdir()
     (run / "checkpoints" / "last.pt").write_bytes(b"weights")
     try:

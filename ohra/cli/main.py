@@ -56,7 +56,11 @@ class Parser(argparse.ArgumentParser):
     def parse_known_args(self, args=None, namespace=None):  # type: ignore[override]
         # set before parsing: a subcommand's parser parses into a namespace of its own, copied over this one
         namespace = argparse.Namespace() if namespace is None else namespace
-        namespace._options = {a.dest: max(a.option_strings, key=len) for a in self._actions if a.option_strings}
+        options: dict[str, str] = {}
+        for a in self._actions:  # a destination's first option (--form before its shorthand --extended), long if any
+            if a.option_strings:
+                options.setdefault(a.dest, next((o for o in a.option_strings if o.startswith("--")), a.option_strings[0]))
+        namespace._options = options
         return super().parse_known_args(args, namespace)
 
 

@@ -303,24 +303,25 @@ def train(config: TrainConfig = TrainConfig(), run_dir: str | Path | None = None
         bar = tqdm(range(epoch, cfg.epochs), initial=epoch, total=cfg.epochs, desc="train vae", unit="epoch",
                    disable=not progress, dynamic_ncols=True)
         t_run = time.perf_counter()
-        with DeferredStop("VAE training", at="after the current epoch") as stop:
-            for ep in bar:
-                step, losses = _epoch(model, opt, data, geom, cfg, gens, step, total_steps)
-                history.append({"epoch": ep + 1, "step": step, **losses,
-                                "elapsed_s": elapsed_before + time.perf_counter() - t_run})
-                bar.set_postfix(loss=f"{losses['total']:.4f}", kl=f"{losses['kl']:.2f}")
-                done = ep + 1
-                periodic = ckpt_path is not None and (done % cfg.checkpoint_every == 0 or done == cfg.epochs)
-                if periodic:
-                    atomic_save(_state(model, opt, done, step, gens, history, cfg, std, digest), ckpt_path)
-                if on_epoch is not None:
-                    on_epoch(done, losses)
-                if stop.requested:  # Ctrl-C waits for the epoch's end: a checkpoint there resumes exactly
-                    if ckpt_path is not None and not periodic:
+        try:
+            with DeferredStop("VAE training", at="after the current epoch") as stop:
+                for ep in bar:
+                    step, losses = _epoch(model, opt, data, geom, cfg, gens, step, total_steps)
+                    history.append({"epoch": ep + 1, "step": step, **losses,
+                                    "elapsed_s": elapsed_before + time.perf_counter() - t_run})
+                    bar.set_postfix(loss=f"{losses['total']:.4f}", kl=f"{losses['kl']:.2f}")
+                    done = ep + 1
+                    periodic = ckpt_path is not None and (done % cfg.checkpoint_every == 0 or done == cfg.epochs)
+                    if periodic:
                         atomic_save(_state(model, opt, done, step, gens, history, cfg, std, digest), ckpt_path)
-                    bar.close()
-                    stop.stop()
-        bar.close()
+                    if on_epoch is not None:
+                        on_epoch(done, losses)
+                    if stop.requested:  # Ctrl-C waits for the epoch's end: a checkpoint there resumes exactly
+                        if ckpt_path is not None and not periodic:
+                            atomic_save(_state(model, opt, done, step, gens, history, cfg, std, digest), ckpt_path)
+                        stop.stop()  # a handler that returns (it chose to go on) lets training go on
+        finally:
+            bar.close()
         # the epochs' own time, as train_seconds_total counts it (not the last checkpoint's save after them)
         this_run = float(history[-1]["elapsed_s"]) - elapsed_before if len(history) > done_before else 0.0
         metrics = _final_metrics(model, std, cfg, step, history, this_run)

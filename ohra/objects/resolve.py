@@ -27,6 +27,11 @@ def resolve_objects(spec: list[str] | str | None, scale: float | None = None, bo
     if body not in BODY_CHOICES:
         raise ObjectError(f"body must be one of {', '.join(BODY_CHOICES)}, got {body!r}")
     specs = [spec] if isinstance(spec, (str, Path)) else list(spec or ["builtin"])
+    for s in specs:
+        if not isinstance(s, (str, Path)) or not str(s).strip():  # Path("") is the current folder
+            raise ObjectError(f"object spec {s!r}: expected builtin, builtin:NAME, procedural:FAMILY:SEED or a mesh/URDF "
+                              "file or folder")
+    specs = [str(s) for s in specs]
     sized = [s for s in specs if s == "builtin" or s.startswith(("builtin:", "procedural:"))]
     them = f"{', '.join(sized)} keep{'s' if len(sized) == 1 else ''}"
     if scale is not None and scale != 1.0 and sized:
@@ -37,10 +42,6 @@ def resolve_objects(spec: list[str] | str | None, scale: float | None = None, bo
                       "shapes are simulated as what they are)", ObjectWarning, stacklevel=user_stacklevel())
     out: list[ObjectModel] = []
     for s in specs:
-        if not isinstance(s, (str, Path)) or not str(s).strip():  # Path("") is the current folder
-            raise ObjectError(f"object spec {s!r}: expected builtin, builtin:NAME, procedural:FAMILY:SEED or a mesh/URDF "
-                              "file or folder")
-        s = str(s)
         if s == "builtin":
             out += [ObjectModel.builtin(n) for n in builtin_object_names()]
         elif s.startswith("builtin:"):

@@ -193,9 +193,15 @@ class ActionMap:
         if not isinstance(self.slots, Mapping):
             raise MappingError(f"slots must be a mapping of canonical slot -> original joint (a name, a SlotMap or "
                                f"{{joint, sign, offset}}), got {type(self.slots).__name__} {self.slots!r:.60}")
-        if isinstance(self.original_joints, (str, bytes)) or not all(isinstance(j, str) for j in self.original_joints):
-            raise MappingError(f"original_joints must be a sequence of joint names, got {self.original_joints!r:.80}")
-        self.original_joints = tuple(self.original_joints)
+        joints = self.original_joints
+        if not isinstance(joints, (str, bytes)):
+            try:
+                joints = tuple(joints)  # once: a generator is read here, not emptied by the check
+            except TypeError:
+                raise MappingError(f"original_joints must be a sequence of joint names, got {joints!r:.80}") from None
+        if isinstance(joints, (str, bytes)) or not all(isinstance(j, str) for j in joints):
+            raise MappingError(f"original_joints must be a sequence of joint names, got {joints!r:.80}")
+        self.original_joints = joints
         if len(set(self.original_joints)) != len(self.original_joints):
             dup = [n for n in self.original_joints if self.original_joints.count(n) > 1][0]
             raise MappingError(f"original joint {dup!r} appears twice in the original joint order")

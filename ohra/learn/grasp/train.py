@@ -257,9 +257,11 @@ def _loop(st: _State, spec: RunSpec, ckpt_path: Path | None, progress: bool,
     bar = tqdm(range(st.step, cfg.steps), initial=st.step, total=cfg.steps, desc="train grasp", unit="step",
                disable=not progress, dynamic_ncols=True)
     t_run = time.perf_counter()
-    with DeferredStop("grasp training") as stop:
-        _steps(st, spec, ckpt_path, on_step, bar, stop, elapsed_before, t_run, sums, count)
-    bar.close()
+    try:
+        with DeferredStop("grasp training") as stop:
+            _steps(st, spec, ckpt_path, on_step, bar, stop, elapsed_before, t_run, sums, count)
+    finally:
+        bar.close()
     net.to("cpu")  # the model a run returns and saves samples on the CPU, like every loaded model
     net.eval()
     return time.perf_counter() - t_run
@@ -300,8 +302,7 @@ def _steps(st: _State, spec: RunSpec, ckpt_path: Path | None, on_step, bar, stop
             if ckpt_path is not None and not periodic:
                 atomic_save(_payload(st.model, opt, spec, done, st.history, st.model.meta["data_digest"], (sums, count)),
                             ckpt_path)
-            bar.close()
-            stop.stop()
+            stop.stop()  # a handler that returns (it chose to go on) lets training go on
 
 
 def train_grasp(data: str | Path | Sequence[str | Path], model_cfg: GraspModelConfig = GraspModelConfig(),

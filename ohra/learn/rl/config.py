@@ -79,6 +79,8 @@ class PPOSettings:
         for name in ("total_steps", "n_envs", "n_steps", "batch_size", "n_epochs", "checkpoint_every", "threads", "lstm_hidden"):
             if int(getattr(self, name)) < 1:
                 raise RLConfigError(f"PPOSettings.{name} must be >= 1, got {getattr(self, name)}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or not 0 <= self.seed < 2**32:
+            raise RLConfigError(f"PPOSettings.seed must be a whole number in [0, 2**32), got {self.seed!r}")  # numpy's range
         for name in ("normalize_obs", "normalize_reward", "lstm_critic"):
             if not isinstance(getattr(self, name), bool):
                 raise RLConfigError(f"PPOSettings.{name} must be true or false, got {getattr(self, name)!r}")

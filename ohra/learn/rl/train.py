@@ -25,7 +25,6 @@ from __future__ import annotations
 import csv
 import io
 import json
-import multiprocessing
 import os
 import signal
 import time
@@ -48,13 +47,13 @@ CSV_FIELDS = ("timesteps", "wall_s", "episodes", "ep_reward_mean", "ep_length_me
 RESUMABLE_CHANGES = ("total_steps", "max_minutes", "checkpoint_every")
 
 
-def _make_env(env_cfg: dict, rank: int):
-    """Factory for one subprocess environment (top level: it is pickled to the workers)."""
+def _make_env(env_cfg: dict, rank: int, worker: bool = False):
+    """Factory for one environment (top level: it is pickled to the subprocess workers; ``worker``: it runs in one)."""
     from stable_baselines3.common.monitor import Monitor
 
     from ohra.sim.rotation.env import InHandRotateEnv
 
-    if multiprocessing.parent_process() is not None:
+    if worker:
         # a subprocess env worker: Ctrl-C reaches the whole process group, and the trainer (which saves a checkpoint
         # before it stops) still needs its workers for that
         signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -134,8 +133,10 @@ def _callback(run_dir: Path, ppo: PPOSettings, wall_before: float, stop: Deferre
     class RunCallback(BaseCallback):
         """Per-rollout CSV row, atomic checkpoints, the wall-clock budget, and a stop on Ctrl-C / SIGTERM."""
 
-        def _on_training_start(self) -> None:
-            self.t0 = time.perf_counter()
+        dropped = False  # a stop request ended the current rollout (its steps were not learned from)
+
+        def _on_training_start(self) -> None:  # once per learn() call: a run that went on after a signal calls it again
+            self.t0 = getattr(self, "t0", None) or time.perf_counter()
             self.updated_steps = self.num_timesteps  # the steps every finished PPO update has learned from
             self.ep_r, self.ep_l, self.ep_rot = [], [], []
             self.next_ckpt = (self.num_timesteps // ppo.checkpoint_every + 1) * ppo.checkpoint_every
@@ -151,6 +152,7 @@ def _callback(run_dir: Path, ppo: PPOSettings, wall_before: float, stop: Deferre
                     self.ep_l.append(ep["l"])
                     self.ep_rot.append(ep.get("cumulative_rotation", np.nan))
             if stop is not None and stop.requested:
+                self.dropped = True
                 return False  # the rollout is dropped; the checkpoint keeps the last update (see train_rotation)
             return ppo.max_minutes is None or self.wall() < 60.0 * ppo.max_minutes
 
@@ -281,7 +283,7 @@ def _final_intact(run_dir: Path) -> bool:
 def _vec_env(env_cfg: RotationConfig, ppo: PPOSettings):
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
-    fns = [partial(_make_env, env_cfg.to_dict(), i) for i in range(ppo.n_envs)]
+    fns = [partial(_make_env, env_cfg.to_dict(), i, ppo.n_envs > 1) for i in range(ppo.n_envs)]
     return SubprocVecEnv(fns, start_method="forkserver") if ppo.n_envs > 1 else DummyVecEnv(fns)
 
 
@@ -509,20 +511,26 @@ def train_rotation(env_cfg: RotationConfig, ppo: PPOSettings, run_dir: str | Pat
             if resume:
                 _save_budget(run_dir, ppo)  # a later plain resume continues to this budget
             with stop:
-                try:
-                    model.learn(total_timesteps=remaining, callback=cb, reset_num_timesteps=False, tb_log_name="ppo")
-                except (EOFError, ConnectionError):  # a signal sent to the whole group also ended the env workers
-                    if not stop.requested:
-                        raise
-                if stop.requested:
+                while True:
+                    cb.dropped = False
+                    try:
+                        model.learn(total_timesteps=max(0, ppo.total_steps - model.num_timesteps), callback=cb,
+                                    reset_num_timesteps=False, tb_log_name="ppo")
+                    except (EOFError, ConnectionError):  # a signal sent to the whole group also ended the env workers
+                        if not stop.requested:
+                            raise
+                        cb.dropped = True
+                    if not cb.dropped:  # finished, or out of minutes (a signal in the last update: handled below)
+                        break
                     # the weights are those of the last finished update: count only the steps it learned from, so a
                     # resume collects the dropped rollout again
                     model.num_timesteps = cb.updated_steps
                     save_checkpoint(model, run_dir, cb.wall())
                     truncate_progress(run_dir / "progress.csv", int(model.num_timesteps))
-                    stop.stop()
-            save_checkpoint(model, run_dir, cb.wall())
-            save_final(model, run_dir)
+                    stop.stop()  # KeyboardInterrupt, or SIGTERM's own end; a handler that returns lets training go on
+                save_checkpoint(model, run_dir, cb.wall())
+                save_final(model, run_dir)
+                stop.stop()  # a signal during the last update: the run is complete and saved, then it ends as asked
         finally:
             _close_quietly(venv)
         return run_dir / "model.zip"
