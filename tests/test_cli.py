@@ -217,6 +217,8 @@ def test_a_setting_error_names_the_option_the_user_typed(capsys):
     """``ohra train grasp --batch-size 0`` said ``batch_size must be >= 1``: the library's field, not the option."""
     assert main(["train", "grasp", "--data", "nowhere", "--batch-size", "0", "-o", "run"]) == 2
     assert capsys.readouterr().err == "ohra: error: --batch-size must be >= 1, got 0\n"
+    assert main(["synth", "--hand", "leap_3303", "--robust-trials", "-1", "--quiet"]) == 2  # RobustnessSettings.trials
+    assert capsys.readouterr().err.startswith("ohra: error: --robust-trials must be >= 0")
     options = {"batch_size": "--batch-size", "n": "-n"}
     assert cli_main.option_names("GraspTrainConfig.batch_size must be >= 1", options) == "--batch-size must be >= 1"
     assert cli_main.option_names("n must be a positive integer", options) == "-n must be a positive integer"

@@ -88,6 +88,8 @@ def run(args: argparse.Namespace) -> int:
         raise OhraError(f"--workers must be >= 1, got {args.workers}")
     if args.grasps_per_object < 1:
         raise OhraError(f"--grasps-per-object must be >= 1, got {args.grasps_per_object}")
+    if args.robust_trials is not None and args.robust_trials < 0:
+        raise OhraError(f"--robust-trials must be >= 0 (0: no robustness trials), got {args.robust_trials}")
     if args.cap is not None and args.cap < 1:
         raise OhraError(f"--cap must be >= 1 (leave it out to try every start), got {args.cap}")
     out = Path(args.out)
