@@ -219,6 +219,9 @@ def test_a_setting_error_names_the_option_the_user_typed(capsys):
     assert capsys.readouterr().err == "ohra: error: --batch-size must be >= 1, got 0\n"
     assert main(["synth", "--hand", "leap_3303", "--robust-trials", "-1", "--quiet"]) == 2  # RobustnessSettings.trials
     assert capsys.readouterr().err.startswith("ohra: error: --robust-trials must be >= 0")
+    recipe = Path(__file__).resolve().parents[1] / "recipes" / "leap_small.yaml"
+    assert main(["data", "build", str(recipe), "--seed", "-1", "--quiet"]) == 2  # it blamed the recipe file
+    assert capsys.readouterr().err == "ohra: error: --seed must be an integer >= 0, got -1\n"
     options = {"batch_size": "--batch-size", "n": "-n"}
     assert cli_main.option_names("GraspTrainConfig.batch_size must be >= 1", options) == "--batch-size must be >= 1"
     assert cli_main.option_names("n must be a positive integer", options) == "-n must be a positive integer"

@@ -87,6 +87,12 @@ def test_a_hand_file_is_found_beside_the_recipe_like_an_object_file(tmp_path, mo
     ({"hands": ["leap_3333"], "objects": ["builtin"], "split": {"test_fraction": 0.5, "seed": "abc"}}, "split.seed must be"),
     ({"hands": ["leap_3333"], "objects": ["builtin"], "split": ["box"]}, "'split' is a mapping"),
     ({"hands": ["leap_3333"], "objects": ["builtin"], "split": {"test": [1, 2]}}, "split.test must be an object name"),
+    # stop 57's recipe sweep: a traceback, a silent default, and a message blaming the pattern
+    ({"hands": ["leap_3333"], "objects": ["builtin"], "robustness": 2}, "'robustness' is a mapping of RobustnessSettings"),
+    ({"hands": ["leap_3333"], "objects": ["builtin"], "robustness": False}, r"\{trials: 0\}: no robustness trials\), got False"),
+    ({"hands": [{"pattern": "leap_*", "digit_sum": 99}], "objects": ["builtin"]}, r"digit sum lies in 0..12"),
+    ({"hands": [{"pattern": "leap_*", "digit_sum": [-1, 4]}], "objects": ["builtin"]}, r"digit sum lies in 0..12"),
+    ({"hands": [{"pattern": "shadow*", "digit_sum": 11}], "objects": ["builtin"]}, "applies to LEAP variants only"),
 ])
 def test_bad_recipes_name_the_problem(recipe, message):
     with pytest.raises(RecipeError, match=message):
@@ -254,3 +260,13 @@ def test_a_yaml_syntax_error_names_its_line(tmp_path):
     path.write_text("hands: [leap_3333]\nobjects: [builtin\ncap: 2\n")
     with pytest.raises(RecipeError, match="not valid YAML at line 3"):
         Recipe.load(path)
+
+
+def test_a_key_given_twice_in_a_recipe_file_is_named(tmp_path):
+    """PyYAML keeps the last of two equal keys silently: `grasps_per_pair: 1` then `: 2` built with 2."""
+    f = tmp_path / "r.yaml"
+    f.write_text("hands: [leap_3333]\nobjects: [builtin:sphere]\ngrasps_per_pair: 1\ngrasps_per_pair: 2\n")
+    with pytest.raises(RecipeError, match=r"r.yaml: duplicate key 'grasps_per_pair' \(line 4; first on line 3\)"):
+        Recipe.load(f)
+    f.write_text("hands: [{pattern: 'leap_*', digit_sum: 11}]\nobjects: [builtin:sphere]\n")  # nested mappings still load
+    assert Recipe.load(f).hands == [{"pattern": "leap_*", "digit_sum": 11}]

@@ -12,6 +12,8 @@ import sys
 from pathlib import Path
 from typing import Any, Sequence
 
+from ohra.errors import OhraError
+
 
 def register(sub: Any) -> None:
     from ohra.cli.synth import add_backend_options
@@ -50,6 +52,8 @@ def _build(args: argparse.Namespace) -> int:
     from ohra.data.build import build
     from ohra.data.recipe import Recipe
 
+    if args.seed is not None and args.seed < 0:  # before the recipe: the command line's mistake, not the file's
+        raise OhraError(f"--seed must be an integer >= 0, got {args.seed}")
     recipe = Recipe.load(args.recipe)
     if args.seed is not None:
         recipe = recipe.with_seed(args.seed)

@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from ohra.errors import OhraError
+from ohra.errors import OhraError, SpecError
 from ohra.objects.model import BODY_CHOICES
 
 RECIPE_KEYS = ("name", "seed", "hands", "objects", "grasps_per_pair", "cap", "split", "protocol", "robustness", "filter")
@@ -111,6 +111,9 @@ class Recipe:
             raise RecipeError(f"{where}: 'cap' must be an integer >= 1 or null, got {d['cap']!r}")
         if "filter" in d and not isinstance(d["filter"], bool):
             raise RecipeError(f"{where}: 'filter' must be true or false, got {d['filter']!r}")
+        if d.get("robustness") is not None and not isinstance(d["robustness"], dict):  # `false` read as "the defaults"
+            raise RecipeError(f"{where}: 'robustness' is a mapping of RobustnessSettings fields, e.g. {{trials: 2}} "
+                              f"({{trials: 0}}: no robustness trials), got {d['robustness']!r}")
         for i, h in enumerate(d["hands"]):
             _check_entry(h, HAND_KEYS, f"{where}: hands[{i}]")
         for i, o in enumerate(d["objects"]):
@@ -138,8 +141,12 @@ class Recipe:
             raise RecipeError(f"{path} is a folder; give the recipe's YAML file")
         if not path.is_file():
             raise RecipeError(f"recipe not found: {path}")
+        from ohra.original.spec_yaml import UniqueKeyLoader
+
         try:
-            d = yaml.safe_load(path.read_text())
+            d = yaml.load(path.read_text(), Loader=UniqueKeyLoader)
+        except SpecError as exc:  # a key given twice
+            raise RecipeError(f"{path}: {exc}") from None
         except UnicodeDecodeError:
             raise RecipeError(f"{path}: not a text file (a recipe is YAML)") from None
         except yaml.YAMLError as exc:
@@ -330,7 +337,13 @@ def _check_entry(e: Any, kinds: dict[str, tuple[str, ...]], where: str) -> None:
     if "body" in e and e["body"] not in BODY_CHOICES:
         raise RecipeError(f"{where}: 'body' must be one of {', '.join(BODY_CHOICES)}, got {e['body']!r}")
     if "digit_sum" in e:
-        _range(e["digit_sum"], where + ".digit_sum")
+        lo, hi = _range(e["digit_sum"], where + ".digit_sum")
+        if lo < 0 or hi > 12:  # four digits 0-3
+            raise RecipeError(f"{where}.digit_sum: a LEAP variant's digit sum lies in 0..12 (leap_ABCD, digits 0-3), "
+                              f"got {e['digit_sum']!r}")
+        if not str(e.get("pattern", "")).startswith("leap_"):
+            raise RecipeError(f"{where}.digit_sum: applies to LEAP variants only (pattern 'leap_*'), got pattern "
+                              f"{e.get('pattern')!r}")
 
 
 def _check_split(sp: Any, where: str) -> None:

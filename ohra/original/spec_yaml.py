@@ -19,8 +19,9 @@ from ohra.original.spec import _KEY_RE, FORMS, FormSpec, HandSpec, Override
 
 
 # -- YAML loading with duplicate-key detection -----------------------------------------------------
-class _UniqueKeyLoader(yaml.SafeLoader):
-    pass
+class UniqueKeyLoader(yaml.SafeLoader):
+    """YAML's safe loader refusing a key given twice in one mapping (PyYAML keeps the last one silently): a
+    :class:`SpecError` naming the key and both lines. Hand specs and dataset recipes load through it."""
 
 
 def _construct_mapping(loader: yaml.SafeLoader, node: yaml.MappingNode, deep: bool = False) -> dict:
@@ -33,7 +34,7 @@ def _construct_mapping(loader: yaml.SafeLoader, node: yaml.MappingNode, deep: bo
     return yaml.SafeLoader.construct_mapping(loader, node, deep=deep)
 
 
-_UniqueKeyLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
+UniqueKeyLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
 
 
 def _number(v: Any, where: str) -> float:
@@ -262,7 +263,7 @@ def _declared_couplings(raw: Any, forms: dict[str, FormSpec], source: str) -> tu
 def read_yaml(text: str, where: str) -> Any:
     """Parse YAML text; a syntax error or duplicate key is a one-line :class:`SpecError` with the line."""
     try:
-        return yaml.load(text, Loader=_UniqueKeyLoader)
+        return yaml.load(text, Loader=UniqueKeyLoader)
     except SpecError as exc:
         raise SpecError(f"{where}: {exc}") from None
     except yaml.YAMLError as exc:
