@@ -121,7 +121,16 @@ def test_a_recipe_builds_resumes_and_summarises(tmp_path):
     assert again["hands"]["leap_2200"]["shards"]["box"]["timing"] == shards["box"]["timing"]  # kept, not recomputed
     s = summary(tmp_path / "ds")
     assert s["total"]["pairs"] == 3 and s["split"] == {"train": 2, "test": 1}
-    assert "leap_2200" in format_summary(s)
+    assert "leap_2200" in format_summary(s) and "incomplete" not in format_summary(s)
+    # an interrupted build (a pair's shard not yet written) said nothing of it: it looked like a small finished one
+    import json
+
+    m = json.loads((tmp_path / "ds" / "manifest.json").read_text())
+    del m["hands"]["leap_2200"]["shards"]["box-5"]
+    cut = tmp_path / "cut"
+    cut.mkdir()
+    (cut / "manifest.json").write_text(json.dumps(m))
+    assert "incomplete: leap_2200 2 of 3 objects (the same build with --resume finishes it)" in format_summary(summary(cut))
     assert len(GraspDataset(tmp_path / "ds", split="test").pairs) == 1
     assert len(GraspDataset(tmp_path / "ds", split="train").pairs) == 2
     train = GraspDataset(tmp_path / "ds", split="train")

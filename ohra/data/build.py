@@ -82,6 +82,7 @@ def summary(path: str | Path) -> dict:
 def _summarise(path: Path, man: dict) -> dict:
     split = man.get("split") or {}
     test = set(split.get("test", []))
+    planned = len(split.get("train", [])) + len(test)  # a recipe build makes every (hand, object) pair
     rows = []
     for hand, entry in man["hands"].items():
         sh = entry.get("shards", {})
@@ -92,6 +93,7 @@ def _summarise(path: Path, man: dict) -> dict:
         row["core_s"] = sum(s.get("timing", {}).get("total_s", 0.0) for s in sh.values())
         row["cpu_s"] = sum(s.get("timing", {}).get("cpu_s", 0.0) for s in sh.values())
         row["no_convergence"] = sorted(k for k, s in sh.items() if s.get("diagnosis"))
+        row["planned"] = planned or None  # None: not a recipe build, no plan to compare with
         rows.append(row)
     total = {k: sum(r[k] for r in rows) for k in _COUNTS}
     return {"path": str(path), "format": man.get("format"), "ohra_version": man.get("ohra_version"),
@@ -164,4 +166,7 @@ def format_summary(s: dict) -> str:
                      f"{rate:>9s} {r['grasps_test']:9d} {per_h:>11s} {per_cpu:>10s}")
         if r["no_convergence"]:
             lines.append(f"  nothing converged on: {', '.join(r['no_convergence'])}")
+    unfinished = [f"{r['hand']} {r['pairs']} of {r['planned']}" for r in s["rows"] if r.get("planned") and r["pairs"] < r["planned"]]
+    if unfinished:  # an interrupted build looked like a small finished one
+        lines.append(f"incomplete: {'; '.join(unfinished)} objects (the same build with --resume finishes it)")
     return "\n".join(lines)
