@@ -87,20 +87,13 @@ def _trained(run: Path) -> bool:
 
 def _busy(run: Path) -> bool:
     """Whether another process holds ``run``'s folder lock (it is training there, maybe not checkpointed yet)."""
-    import fcntl
+    from ohra.io import folder_lock
 
-    from ohra.io import LOCK_NAME
-
-    lock = run / LOCK_NAME
-    if not lock.exists():
-        return False
-    with open(lock) as fh:
-        try:
-            fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            return True
-        fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
-    return False
+    try:
+        with folder_lock(run, "training run"):
+            return False
+    except FolderInUseError:
+        return True
 
 
 def when_free(get: Callable[[], T], poll_s: float = 30.0) -> T:

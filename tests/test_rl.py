@@ -285,8 +285,17 @@ def raw_obs_run(tmp_path_factory):
     return root / "run", root / "cache", root / "export"
 
 
-def test_ctrl_c_checkpoints_the_last_update_and_the_run_resumes_from_it(raw_obs_run, tmp_path, monkeypatch,
-                                                                       terminal_sigint):
+@pytest.fixture
+def interruptible(raw_obs_run, monkeypatch, terminal_sigint):
+    """A three-update run (72 steps of one env) with no periodic checkpoint before its end, on raw_obs_run's cached
+    starting states, and Python's own Ctrl-C handler."""
+    monkeypatch.setenv("OHRA_CACHE_DIR", str(raw_obs_run[1]))
+    return (RotationConfig(grasp_count=2, episode_steps=24),
+            PPOSettings(total_steps=72, n_envs=1, n_steps=24, batch_size=24, n_epochs=1, net_arch=(16, 16),
+                        checkpoint_every=1000, normalize_obs=False))
+
+
+def test_ctrl_c_checkpoints_the_last_update_and_the_run_resumes_from_it(interruptible, tmp_path, monkeypatch):
     """Ctrl-C in the second rollout, long before the first periodic checkpoint: the run stops at once (the
     rollout is dropped), saves the weights of its one finished update counted as 24 steps, and resumes."""
     import os
@@ -294,11 +303,7 @@ def test_ctrl_c_checkpoints_the_last_update_and_the_run_resumes_from_it(raw_obs_
 
     from ohra.sim.rotation.env import InHandRotateEnv
 
-    _, cache, _ = raw_obs_run
-    monkeypatch.setenv("OHRA_CACHE_DIR", str(cache))
-    env_cfg = RotationConfig(grasp_count=2, episode_steps=24)
-    ppo = PPOSettings(total_steps=72, n_envs=1, n_steps=24, batch_size=24, n_epochs=1, net_arch=(16, 16),
-                      checkpoint_every=1000, normalize_obs=False)
+    env_cfg, ppo = interruptible
     calls, real_step = [], InHandRotateEnv.step
 
     def step(self, action):
@@ -321,8 +326,7 @@ def test_ctrl_c_checkpoints_the_last_update_and_the_run_resumes_from_it(raw_obs_
     assert (run / "model.zip").is_file()
 
 
-def test_ctrl_c_in_the_last_update_keeps_the_finished_run_and_still_stops(raw_obs_run, tmp_path, monkeypatch,
-                                                                        terminal_sigint):
+def test_ctrl_c_in_the_last_update_keeps_the_finished_run_and_still_stops(interruptible, tmp_path, monkeypatch):
     """The signal came during the last PPO update: the weights hold it, so the run is complete. It was wound back
     one rollout, and the resume ran a 4th update where an uninterrupted run has 3."""
     import os
@@ -330,11 +334,7 @@ def test_ctrl_c_in_the_last_update_keeps_the_finished_run_and_still_stops(raw_ob
 
     from stable_baselines3 import PPO
 
-    _, cache, _ = raw_obs_run
-    monkeypatch.setenv("OHRA_CACHE_DIR", str(cache))
-    env_cfg = RotationConfig(grasp_count=2, episode_steps=24)
-    ppo = PPOSettings(total_steps=72, n_envs=1, n_steps=24, batch_size=24, n_epochs=1, net_arch=(16, 16),
-                      checkpoint_every=1000, normalize_obs=False)
+    env_cfg, ppo = interruptible
     updates, real_train = [], PPO.train
 
     def train(self):

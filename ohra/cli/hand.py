@@ -111,10 +111,12 @@ def _form(args: argparse.Namespace) -> str:
     return args.form or "base"
 
 
-def _natural_form(args: argparse.Namespace) -> str | None:
-    """``--form`` (or ``--extended``), else None: the hand's own form (base for a registered hand that has one; a LEAP variant's or
-    an extended params JSON's extended form), as ``info`` and ``render`` take it."""
-    return args.form
+def _params(ref, form: str | None):
+    """The params of the resolved hand ``ref`` in ``form`` (``--form``; None: its own): a base hand asked for in its
+    extended form is converted."""
+    from ohra.canonical.params import BaseParams
+
+    return ref.params.to_extended() if form == "extended" and isinstance(ref.params, BaseParams) else ref.params
 
 
 def _jobs(names: list[str]) -> list[tuple[str, str | None]]:
@@ -155,7 +157,6 @@ def _cmd_list(args: argparse.Namespace) -> int:
 
 
 def _cmd_render(args: argparse.Namespace) -> int:
-    from ohra.canonical.params import BaseParams
     from ohra.canonical.urdfgen import render, write
     from ohra.hands.resolve import resolve_hand
 
@@ -164,7 +165,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
 
         check_suffix(check_output(args.output), ".urdf", "-o")
     ref = resolve_hand(args.hand, args.form)  # the hand's name becomes the robot's
-    params = ref.params.to_extended() if args.form == "extended" and isinstance(ref.params, BaseParams) else ref.params
+    params = _params(ref, args.form)
     if args.output:
         path = write(params, args.output, robot_name=ref.name)
         wrote(path)
@@ -176,11 +177,11 @@ def _cmd_render(args: argparse.Namespace) -> int:
 def _cmd_mirror(args: argparse.Namespace) -> int:
     from ohra.canonical.couplings import params_json
     from ohra.canonical.mirror import mirror_couplings, mirror_params
-    from ohra.canonical.params import JOINT_NAMES, BaseParams
+    from ohra.canonical.params import JOINT_NAMES
     from ohra.hands.resolve import resolve_hand
 
     ref = resolve_hand(args.hand, args.form)
-    params = ref.params.to_extended() if args.form == "extended" and isinstance(ref.params, BaseParams) else ref.params
+    params = _params(ref, args.form)
     if args.output:
         from ohra.io import check_output, check_suffix
 
@@ -205,11 +206,11 @@ def _cmd_mirror(args: argparse.Namespace) -> int:
 def _cmd_info(args: argparse.Namespace) -> int:
     from ohra.canonical.couplings import describe
     from ohra.canonical.kinematics import HandModel
-    from ohra.canonical.params import FINGERS, JOINT_NAMES, BaseParams
+    from ohra.canonical.params import FINGERS, JOINT_NAMES
     from ohra.hands.resolve import resolve_hand
 
     ref = resolve_hand(args.hand, args.form)  # a spec YAML: its name and couplings
-    params = ref.params.to_extended() if args.form == "extended" and isinstance(ref.params, BaseParams) else ref.params
+    params = _params(ref, args.form)
     hm = HandModel.from_params(params)
     tips = hm.fingertips(np.zeros(22) if not args.neutral else hm.neutral())
     info = {
@@ -331,7 +332,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         # surface column) are measured on the geometry that is there
         warnings.simplefilter("ignore")
         keep_mesh_warnings()
-        ref = resolve_hand(args.hand, _natural_form(args))
+        ref = resolve_hand(args.hand, args.form)
         rep = compare(ref, ref.form, samples=args.samples, surface=not args.no_surface)
     print(json.dumps(rep.to_dict(), indent=2) if args.json else rep.table(surface_hint="--no-surface skipped it"))
     if args.html:
@@ -354,7 +355,7 @@ def _cmd_show(args: argparse.Namespace) -> int:  # pragma: no cover - starts a s
             raise OhraError(f"--q: expected 22 numbers separated by commas or spaces, got {args.q!r}") from None
     from ohra.hands.resolve import resolve_hand
 
-    ref = resolve_hand(args.hand, _natural_form(args))  # a bad name fails here, before a meshcat server starts
+    ref = resolve_hand(args.hand, args.form)  # a bad name fails here, before a meshcat server starts
     if args.output:
         from ohra.io import check_output, check_suffix
 

@@ -167,7 +167,9 @@ def execute(args: argparse.Namespace) -> int:
             add_hands_path(folder)
         return int(args.func(args) or 0)
     except OhraError as exc:
-        print(f"ohra: error: {option_names(str(exc), getattr(args, '_options', {}))}", file=sys.stderr)
+        # a command whose options are not named as the library's fields renames them itself (``messages``)
+        message = getattr(args, "messages", lambda m: m)(str(exc))
+        print(f"ohra: error: {option_names(message, getattr(args, '_options', {}))}", file=sys.stderr)
         return EXIT_USAGE
     except (FileNotFoundError, IsADirectoryError, NotADirectoryError, PermissionError) as exc:
         print(f"ohra: error: {exc.strerror or exc}: {exc.filename}", file=sys.stderr)

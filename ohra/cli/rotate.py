@@ -110,7 +110,7 @@ def _train_args(p: argparse.ArgumentParser) -> None:
                    "(a fine-tune): options given here change them, e.g. --set 'weights={\"fall\": -25}'; "
                    "--steps and --minutes count the new run only")
     p.add_argument("--tensorboard", action="store_true", help="also log to OUTPUT/tensorboard (tensorboard --logdir OUTPUT)")
-    p.set_defaults(func=_named_by_flags(_cmd_train))
+    p.set_defaults(func=_cmd_train, messages=flag_names)
 
 
 FLAGS = {"RotationConfig.grasp_count": "--grasps", "RotationConfig.object_size": "--object-size",
@@ -134,23 +134,6 @@ def flag_names(message: str) -> str:
     return message
 
 
-def _named_by_flags(command):
-    """``command`` whose setting errors name the command's options instead of the library's fields."""
-    from functools import wraps
-
-    from ohra.learn.rl.config import RLConfigError
-    from ohra.sim.rotation.config import RotationConfigError
-
-    @wraps(command)
-    def run(args: argparse.Namespace) -> int:
-        try:
-            return command(args)
-        except (RLConfigError, RotationConfigError) as exc:
-            raise type(exc)(flag_names(str(exc))) from None
-
-    return run
-
-
 def register(sub: Any) -> None:
     from ohra.cli.main import subcommand_group
 
@@ -160,7 +143,7 @@ def register(sub: Any) -> None:
 
     p = rs.add_parser("grasps", help="generate (or load) the cached starting states and print where they are")
     _env_args(p)
-    p.set_defaults(func=_named_by_flags(_cmd_grasps))
+    p.set_defaults(func=_cmd_grasps, messages=flag_names)
 
     _train_args(rs.add_parser("train", help=TRAIN_HELP))
     # the same command under the train group, beside ``ohra train vae`` and ``ohra train grasp``
@@ -180,7 +163,7 @@ def register(sub: Any) -> None:
                    help="run the policy on the hand's other URDF through the canonical joint space (a policy "
                         "trained with space canonical); writes OUT/eval_on_URDF.json and OUT/episode_on_URDF/; the first "
                         "use generates that URDF's starting states (minutes; cached)")
-    p.set_defaults(func=_named_by_flags(_cmd_eval))
+    p.set_defaults(func=_cmd_eval, messages=flag_names)
 
     p = rs.add_parser("plot", help="reward curves, mean +- std over seeds: LABEL=RUN[,RUN...] per group")
     p.add_argument("groups", nargs="+", metavar="LABEL=RUNS",

@@ -312,13 +312,16 @@ def train(config: TrainConfig = TrainConfig(), run_dir: str | Path | None = None
                     bar.set_postfix(loss=f"{losses['total']:.4f}", kl=f"{losses['kl']:.2f}")
                     done = ep + 1
                     periodic = ckpt_path is not None and (done % cfg.checkpoint_every == 0 or done == cfg.epochs)
-                    if periodic:
+                    def checkpoint() -> None:
                         atomic_save(_state(model, opt, done, step, gens, history, cfg, std, digest), ckpt_path)
+
+                    if periodic:
+                        checkpoint()
                     if on_epoch is not None:
                         on_epoch(done, losses)
                     if stop.requested:  # Ctrl-C waits for the epoch's end: a checkpoint there resumes exactly
                         if ckpt_path is not None and not periodic:
-                            atomic_save(_state(model, opt, done, step, gens, history, cfg, std, digest), ckpt_path)
+                            checkpoint()
                         stop.stop()  # a handler that returns (it chose to go on) lets training go on
         finally:
             bar.close()

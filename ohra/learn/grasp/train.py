@@ -293,15 +293,17 @@ def _steps(st: _State, spec: RunSpec, ckpt_path: Path | None, on_step, bar, stop
             bar.set_postfix(diff=f"{entry['diffusion']:.4f}", joints=f"{entry['joints']:.4f}")
             sums, count = {k: 0.0 for k in terms_logged}, 0
         st.step = done
+        def checkpoint() -> None:
+            atomic_save(_payload(st.model, opt, spec, done, st.history, st.model.meta["data_digest"], (sums, count)), ckpt_path)
+
         periodic = ckpt_path is not None and (done % cfg.checkpoint_every == 0 or done == cfg.steps)
         if periodic:
-            atomic_save(_payload(st.model, opt, spec, done, st.history, st.model.meta["data_digest"], (sums, count)), ckpt_path)
+            checkpoint()
         if on_step is not None:
             on_step(done, vals)
         if stop.requested:  # batches are seeded by step, so a checkpoint at any step resumes exactly
             if ckpt_path is not None and not periodic:
-                atomic_save(_payload(st.model, opt, spec, done, st.history, st.model.meta["data_digest"], (sums, count)),
-                            ckpt_path)
+                checkpoint()
             stop.stop()  # a handler that returns (it chose to go on) lets training go on
 
 
