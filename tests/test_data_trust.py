@@ -79,6 +79,28 @@ def test_resume_with_other_settings_is_refused_and_overwrite_leaves_no_orphans(t
     assert on_disk == listed and len(listed) == 1
 
 
+def test_a_folder_of_other_files_is_refused_but_an_interrupted_first_run_is_continued(tmp_path):
+    """Without a manifest, only hidden entries and the run's own hand folders (shards of a first run killed before
+    its manifest was written) may be there; anything else would be mixed into the dataset."""
+    notes = tmp_path / "notes"
+    notes.mkdir()
+    (notes / "thesis.tex").write_text("mine")
+    with pytest.raises(DatasetError, match=r"not empty and holds no grasp dataset \(no manifest.json; found thesis.tex\)"):
+        synthesize(HAND, [ObjectModel.builtin("box")], notes, FAST, overwrite=True, progress=False)
+    assert sorted(p.name for p in notes.iterdir() if p.name != ".ohra.lock") == ["thesis.tex"]
+    other_hand = tmp_path / "other"
+    (other_hand / "leap_3333").mkdir(parents=True)
+    with pytest.raises(DatasetError, match="found leap_3333/"):
+        synthesize(HAND, [ObjectModel.builtin("box")], other_hand, FAST, progress=False)
+    first = tmp_path / "first"
+    (first / "leap_2200").mkdir(parents=True)
+    (first / ".ohra.lock").write_text("")
+    man = synthesize(HAND, [ObjectModel.builtin("box")], first, FAST, progress=False)
+    assert man["hands"]["leap_2200"]["counts"]["candidates"] == 1
+    (notes / "thesis.tex").unlink()
+    synthesize(HAND, [ObjectModel.builtin("box")], first, FAST, resume=True, progress=False)  # has a manifest now
+
+
 def test_a_corrupt_manifest_is_one_line_and_exit_2(tmp_path):
     (tmp_path / "manifest.json").write_text('{"hands": {"leap_2200": ')
     proc = _cli("--hand", "leap_2200", "--objects", "builtin:box", "--out", str(tmp_path), "--resume", "--no-filter",

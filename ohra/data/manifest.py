@@ -11,6 +11,9 @@ Rules (what ``--resume`` and a repeated run may assume):
   sha256 the manifest records and was made from the same object (mesh and body hash). A truncated
   or edited shard is recomputed.
 - A manifest that is not valid JSON is an error naming the file, never silently replaced.
+- A directory without a manifest is built into only if it holds nothing but hidden entries and folders
+  named after the run's hands (an interrupted first run's shards): files of anything else would be mixed
+  into the dataset and, with ``overwrite``, sit beside shards that get deleted (``DatasetError``).
 - Objects are keyed by name; objects sharing a name (``a/mug.stl`` and ``b/mug.stl``) get the
   name plus their mesh hash prefix, so each has its own manifest entry.
 
@@ -90,6 +93,19 @@ def remove_listed_shards(root: Path, manifest: dict) -> int:
                     f.unlink()
                     n += 1
     return n
+
+
+def check_unrelated(root: Path, hand_names) -> None:
+    """Refuse ``root`` when it has no manifest and holds files that are not this run's (module rules)."""
+    if (root / "manifest.json").exists() or not root.is_dir():
+        return
+    names = set(hand_names)
+    foreign = sorted(p.name + ("/" if p.is_dir() else "") for p in root.iterdir()
+                     if not p.name.startswith(".") and not (p.is_dir() and p.name in names))
+    if foreign:
+        shown = ", ".join(foreign[:4]) + (f" and {len(foreign) - 4} more" if len(foreign) > 4 else "")
+        raise DatasetError(f"{root} is not empty and holds no grasp dataset (no manifest.json; found {shown}); "
+                           "write the dataset to a new or empty directory")
 
 
 def open_manifest(root: Path, settings: dict, digest: str, overwrite: bool, header: dict) -> dict:

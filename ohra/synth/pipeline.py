@@ -34,7 +34,8 @@ from ohra.canonical.kinematics import HandModel
 from ohra.canonical.params import BaseParams, ExtendedParams, Params
 from ohra.data.backends import check_backend, run_tasks
 from ohra.data.dataset import atomic_write_bytes, npz_bytes, shard_name
-from ohra.data.manifest import ManifestWriter, hand_entry, object_keys, open_manifest, rekey_shards, shard_complete
+from ohra.data.manifest import (ManifestWriter, check_unrelated, hand_entry, object_keys, open_manifest, rekey_shards,
+                                shard_complete)
 from ohra.errors import ObjectError, OhraError, is_finite_real, is_whole, require_seed
 from ohra.io import folder_lock
 from ohra.synth import MIN_GRASP_FINGERS
@@ -301,7 +302,7 @@ def synthesize(hands: list[tuple], objects: list[ObjectModel], out: str | Path, 
 
     Raises:
         OhraError: bad hands, objects outside the graspable size range, a manifest that is
-            corrupt or was written with other settings.
+            corrupt or was written with other settings, an ``out`` that holds other files and no manifest.
         FolderInUseError: another process is building into ``out``.
     """
     if not isinstance(settings, SynthSettings):
@@ -327,6 +328,7 @@ def synthesize(hands: list[tuple], objects: list[ObjectModel], out: str | Path, 
     keys = object_keys(objects)
     descs = [o.describe() for o in objects]  # settles each body once, before workers start
     with folder_lock(out, "dataset"):  # two builds of one folder would overwrite each other's manifest
+        check_unrelated(out, [h[0] for h in hands])
         manifest = open_manifest(out, settings.to_dict(), settings.digest(), overwrite, {"ohra_version": __version__})
         manifest.update(header or {})
         entries, hand_settings = {}, {}
