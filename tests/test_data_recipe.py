@@ -11,7 +11,7 @@ import pytest
 from ohra.data.build import build, format_summary, summary
 from ohra.data.dataset import GraspDataset
 from ohra.data.recipe import Recipe, RecipeError
-from ohra.errors import DatasetError
+from ohra.errors import DatasetError, HandNotFoundError, ObjectError
 
 TINY = """
 name: tiny
@@ -98,6 +98,21 @@ def test_bad_recipes_name_the_problem(recipe, message):
     with pytest.raises(RecipeError, match=message):
         r = Recipe.from_dict(recipe, "r.yaml")
         r.resolve_hands(), r.resolve_objects(), r.synth_settings()
+
+
+@pytest.mark.parametrize("recipe,error,message", [
+    ({"hands": ["leap_3333", "allegro_hand_lft"], "objects": ["builtin:box"]}, HandNotFoundError,
+     r"^r.yaml: hands\[1\]: unknown hand 'allegro_hand_lft'"),
+    ({"hands": ["leap_3333"], "objects": ["builtin:box", "no_such_mug.obj"]}, ObjectError,
+     r"^r.yaml: objects\[1\]: object file or folder not found: .*no_such_mug.obj"),
+    ({"hands": ["leap_3333"], "objects": [{"procedural": "blob"}]}, ObjectError, r"^r.yaml: objects\[0\]: unknown procedural family 'blob'"),
+])
+def test_errors_from_a_recipe_entry_name_the_entry_and_keep_their_type(recipe, error, message):
+    """An unknown hand or a missing mesh is raised by the registry or the object loader; the recipe line it came from
+    is put in front, and the error's type is kept so a caller catching HandNotFoundError still does."""
+    r = Recipe.from_dict(recipe, "r.yaml")
+    with pytest.raises(error, match=message):
+        r.resolve_hands(), r.resolve_objects()
 
 
 def test_the_seeded_split_is_stable_and_disjoint():

@@ -34,6 +34,8 @@ from __future__ import annotations
 
 import fnmatch
 import glob
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
@@ -194,7 +196,10 @@ class Recipe:
         out: dict[str, tuple] = {}
         first: dict[str, int] = {}
         for i, h in enumerate(self.hands):
-            for entry in self._hand(h, f"{self.source or '<recipe>'}: hands[{i}]"):
+            where = f"{self.source or '<recipe>'}: hands[{i}]"
+            with _at(where):
+                entries = self._hand(h, where)
+            for entry in entries:
                 name = entry[0]
                 if name in out:
                     if params_hash(out[name][1]) != params_hash(entry[1]):
@@ -237,24 +242,27 @@ class Recipe:
 
     def resolve_objects(self) -> list:
         """Every object, in recipe order."""
-        from ohra.objects.procedural import procedural_objects
-        from ohra.objects.resolve import resolve_objects
-
         out = []
         for i, o in enumerate(self.objects):
             where = f"{self.source or '<recipe>'}: objects[{i}]"
-            if isinstance(o, str):
-                out += resolve_objects([o if o.startswith(("builtin", "procedural:")) else str(self._path(o))])
-            elif isinstance(o, dict) and "procedural" in o:
-                out += procedural_objects(o["procedural"], int(o.get("count", 1)), int(o.get("seed", 0)))
-            elif isinstance(o, dict) and ("path" in o or "glob" in o):
-                paths = [self._path(o["path"])] if "path" in o else sorted(Path(p) for p in glob.glob(str(self._path(o["glob"]))))
-                if not paths:
-                    raise RecipeError(f"{where}: glob {o['glob']!r} matches nothing")
-                out += resolve_objects([str(p) for p in paths], scale=o.get("scale"), body=o.get("body", "auto"))
-            else:
-                raise RecipeError(f"{where}: an object is a spec string or a mapping with 'path', 'glob' or 'procedural'")
+            with _at(where):
+                out += self._object(o, where)
         return out
+
+    def _object(self, o: Any, where: str) -> list:
+        from ohra.objects.procedural import procedural_objects
+        from ohra.objects.resolve import resolve_objects
+
+        if isinstance(o, str):
+            return resolve_objects([o if o.startswith(("builtin", "procedural:")) else str(self._path(o))])
+        if isinstance(o, dict) and "procedural" in o:
+            return procedural_objects(o["procedural"], int(o.get("count", 1)), int(o.get("seed", 0)))
+        if isinstance(o, dict) and ("path" in o or "glob" in o):
+            paths = [self._path(o["path"])] if "path" in o else sorted(Path(p) for p in glob.glob(str(self._path(o["glob"]))))
+            if not paths:
+                raise RecipeError(f"{where}: glob {o['glob']!r} matches nothing")
+            return resolve_objects([str(p) for p in paths], scale=o.get("scale"), body=o.get("body", "auto"))
+        raise RecipeError(f"{where}: an object is a spec string or a mapping with 'path', 'glob' or 'procedural'")
 
     def synth_settings(self):
         """The :class:`~ohra.synth.pipeline.SynthSettings` of this recipe."""
@@ -375,6 +383,23 @@ def _range(v: Any, where: str) -> tuple[int, int]:
             raise RecipeError(f"{where}: [min, max] with min > max: {v!r}")
         return v[0], v[1]
     raise RecipeError(f"{where}: expected an integer or [min, max], got {v!r}")
+
+
+@contextmanager
+def _at(where: str) -> Iterator[None]:
+    """Prefix an ohra error raised while resolving one recipe entry with that entry's place (``file: hands[2]``),
+    keeping its type: an unknown hand name or a missing mesh is otherwise named without the recipe line it came
+    from."""
+    try:
+        yield
+    except OhraError as exc:
+        if str(exc).startswith(where):
+            raise
+        try:
+            new = type(exc)(f"{where}: {exc}")
+        except TypeError:  # an error class with its own constructor
+            new = RecipeError(f"{where}: {exc}")
+        raise new from exc
 
 
 def _hand_from_spec(path: Path, form: str, where: str) -> tuple[str, Any]:
