@@ -214,3 +214,36 @@ def test_a_hand_missing_many_meshes_warns_once(hands_dir):
     missing = [w for w in caught if issubclass(w.category, MissingMeshWarning)]
     assert len(orig.missing_meshes) > 1 and len(missing) == 1
     assert f"{len(orig.missing_meshes)} mesh file(s) not found" in str(missing[0].message)
+
+
+@pytest.mark.parametrize("swap, first", [(("FFJ", "MFJ"), "index"), (("MFJ", "RFJ"), "middle"), (("FFJ", "RFJ"), "index")])
+def test_fingers_mapped_to_the_wrong_canonical_finger_are_named(hands_dir, tmp_path, swap, first):
+    """Shadow's index joints mapped to the middle slots and the other way round passes every frame and sign check
+    and fits the URDF as well as the right spec; only the fingers' order across the palm (index nearest the thumb,
+    little farthest) tells it, and a hand with other finger identities would reach the VAE and the grasp model."""
+    text = registry.spec_path("shadow_hand_right").read_text().replace("shadow_hand/", f"{hands_dir}/shadow_hand/")
+    a, b = swap
+    text = text.replace(f": {a}", ": @").replace(f": {b}", f": {a}").replace(": @", f": {b}")
+    spec = tmp_path / "swapped.yaml"
+    spec.write_text(text)
+    with pytest.raises(SpecError, match=rf"forms.base: the fingers are out of order across the palm: {first} \(base y = "):
+        _quiet_parse(spec, "base", fit_params=False)
+
+
+def test_the_finger_order_allows_a_cupping_finger_a_few_millimetres_inside_its_neighbour():
+    """DG-5F's little finger sits 2.5 mm inside its ring finger (its cupping joint comes first); 10 mm is the line."""
+    from types import SimpleNamespace
+
+    from ohra.original import checks
+
+    def measured(ring_y: float, little_y: float):
+        base = {"thumb": 0.019, "index": 0.027, "middle": 0.0025, "ring": ring_y, "little": little_y}
+        fingers = {f: SimpleNamespace(slots=[f"{f}_joint1"], p={f"{f}_joint1": np.array([0.0, y, 0.05])}) for f, y in base.items()}
+        return SimpleNamespace(fingers=fingers)
+
+    spec = SimpleNamespace(form=lambda form: SimpleNamespace(slots={f"{f}_joint1": SimpleNamespace(name=f"{f}_j1") for f in
+                                                                  ("thumb", "index", "middle", "ring", "little")}))
+    checks._check_finger_order(measured(-0.022, -0.0195), spec, "dg5f.yaml: forms.base")
+    checks._check_finger_order(measured(-0.022, -0.0125), spec, "dg5f.yaml: forms.base")  # 9.5 mm inside
+    with pytest.raises(SpecError, match=r"ring \(base y = -22.0 mm, joint 'ring_j1'\) lies 10.5 mm farther .* than little"):
+        checks._check_finger_order(measured(-0.022, -0.0115), spec, "dg5f.yaml: forms.base")

@@ -30,6 +30,9 @@ from ohra.errors import SpecError
 from ohra.original.measure import Measurement
 from ohra.original.spec import HandSpec
 
+ORDER_TOLERANCE = 0.010  # m: a finger base this far on the wrong side of a later finger's is out of order (the
+# registered hands keep 17-46 mm between neighbours; DG-5F's cupping little finger sits 2.5 mm inside its ring finger)
+THUMB_SIDE_MIN = 0.005  # m: a thumb base nearer the palm's x-z plane than this does not tell which side it is on
 MIN_MID = 0.05  # rad: a flexion range whose middle is this close to 0 says nothing about its sign
 CURL_COS = float(np.cos(np.radians(45.0)))  # a finger curling more than 45 deg away from +x (in the x-y plane): frame turned
 TILT_COS = float(np.cos(np.radians(45.0)))  # most fingers more than 45 deg off +z: palm_origin tilted (roll / pitch)
@@ -200,10 +203,39 @@ def _check_palm_frame(m: Measurement, spec: HandSpec, form: str) -> list[str]:
         raise SpecError(f"{where}: positive flexion curls every finger ({', '.join(opening)}) toward -x of the palm frame: "
                         "either the palm normal +x points to the back of the hand (rotate palm_origin by pi about z, rpy "
                         "yaw + 3.1416) or every flexion sign is reversed")
+    _check_finger_order(m, spec, where)
     if named and thumb and named != thumb:
         return [f"check: the thumb sits on the {thumb}-hand side (y {'>' if thumb == 'right' else '<'} 0) of the palm "
                 f"frame although the hand is named {named}"]
     return []
+
+
+def _check_finger_order(m: Measurement, spec: HandSpec, where: str) -> None:
+    """Raise when the fingers' bases are not ordered index, middle, ring, little away from the thumb side of the
+    palm (+y for a thumb on +y): a spec that maps a URDF finger to the wrong canonical finger passes every
+    other check and fits its URDF as well as the right spec, but hands the VAE and the grasp model a hand whose
+    fingers have other identities."""
+    if "thumb" not in m.fingers or not m.fingers["thumb"].slots:
+        return
+    th = m.fingers["thumb"]
+    y_thumb = float(th.p[th.slots[0]][1])
+    if abs(y_thumb) < THUMB_SIDE_MIN:  # Barrett, Dex3: the thumb opposes the fingers on the centre line
+        return
+    side = 1.0 if y_thumb > 0 else -1.0
+    ys = {f: float(fm.p[fm.slots[0]][1]) for f in FINGERS[1:] if (fm := m.fingers.get(f)) is not None and fm.slots}
+    order = [f for f in FINGERS[1:] if f in ys]
+    bad = [(a, b) for i, a in enumerate(order) for b in order[i + 1:] if side * (ys[a] - ys[b]) < -ORDER_TOLERANCE]
+    if not bad:
+        return
+    spec_form = spec.form(where.rsplit(".", 1)[-1])
+    a, b = bad[0]
+    first = {f: spec_form.slots[m.fingers[f].slots[0]].name for f in ys}
+    raise SpecError(
+        f"{where}: the fingers are out of order across the palm: {a} (base y = {1e3 * ys[a]:+.1f} mm, joint "
+        f"{first[a]!r}) lies {abs(1e3 * (ys[a] - ys[b])):.1f} mm farther from the thumb side ({'+' if side > 0 else '-'}y) "
+        f"than {b} (y = {1e3 * ys[b]:+.1f} mm, joint {first[b]!r}); index, middle, ring and little go away from the "
+        f"thumb in that order ({', '.join(f'{f} {1e3 * ys[f]:+.1f} mm' for f in order)}): check which URDF finger each "
+        "canonical finger's joints name")
 
 
 __all__ = ["check_palm_frame"]
