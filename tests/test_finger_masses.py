@@ -111,10 +111,36 @@ def test_original_finger_masses_of_a_hand_given_by_its_spec_file(hands_dir):
     assert by_spec[1] > 0.8
 
 
-def test_grasp_eval_with_original_masses_needs_a_registered_hand():
+def test_grasp_eval_replays_a_hand_given_by_its_spec_file_on_its_original_urdf(hands_dir):
+    """`ohra grasp eval --original --hands my_hand.yaml` answered "needs a registered hand's original URDF" although
+    `ohra eval --original` takes a spec; the pair is simulated on the spec's original URDF."""
+    import warnings
+
+    from ohra.hands.registry import spec_path
+    from ohra.learn.grasp.evaluate import evaluate_model
+    from ohra.learn.grasp.model import load_grasp_model
+    from ohra.sim import GraspEvaluator, SimHand
+
+    spec = str(spec_path("barrett_hand"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rep = evaluate_model(load_grasp_model(), [spec], ["builtin:box"], n=6, original=True, allow_seen=True, progress=False)
+        pair = rep.pairs[0]
+        with GraspEvaluator(SimHand.original_of(spec, "base"), "builtin:box") as ev:
+            on_original = ev.evaluate(pair.grasps, progress=False).success
+        with GraspEvaluator(SimHand.from_params(get_hand(spec), name="b"), "builtin:box") as ev:
+            on_canonical = ev.evaluate(pair.grasps, progress=False).success
+    assert pair.original and rep.meta["original"]
+    np.testing.assert_array_equal(pair.success, on_original)
+    assert (on_original != on_canonical).any()  # the two URDFs tell these grasps apart: the check above means something
+
+
+def test_grasp_eval_with_original_masses_names_a_hand_without_an_original():
     from ohra.learn.grasp.evaluate import evaluate_model
 
-    with pytest.raises(GraspError, match="not a registered hand"):
-        evaluate_model(object(), ["/nowhere/hand.json"], ["builtin:box"], n=1, inertials="original", allow_seen=True)
+    with pytest.raises(GraspError, match=r"needs the hand's original URDF: give the hand by name, spec YAML or params JSON"):
+        evaluate_model(object(), [get_hand("barrett_hand")], ["builtin:box"], n=1, inertials="original", allow_seen=True)
+    with pytest.raises(GraspError, match=r"inertials='original' \(--inertials original\): leap_3303 is a LEAP variant"):
+        evaluate_model(object(), ["leap_3303"], ["builtin:box"], n=1, inertials="original", allow_seen=True)
     with pytest.raises(GraspError, match="inertials must be one of"):
         evaluate_model(object(), ["barrett_hand"], ["builtin:box"], n=1, inertials="steel")

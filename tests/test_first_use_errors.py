@@ -89,9 +89,9 @@ def test_evaluate_model_takes_one_hand_by_itself():
     """A lone name is one hand, not a sequence of one-letter hands (the check fails on the path, not on '/')."""
     from ohra.learn.grasp.evaluate import evaluate_model
 
-    with pytest.raises(GraspError, match=r"'/nowhere/hand.json' is not a registered hand"):
+    with pytest.raises(HandNotFoundError, match=r"params file not found: /nowhere/hand.json"):
         evaluate_model(object(), "/nowhere/hand.json", "builtin:box", n=1, inertials="original", allow_seen=True)
-    with pytest.raises(GraspError, match=r"'leap_2211' is a LEAP variant, a canonical hand with no original URDF"):
+    with pytest.raises(GraspError, match=r"--original\): leap_2211 is a LEAP variant, a canonical hand with no original URDF"):
         evaluate_model(object(), "leap_2211", "builtin:box", n=1, original=True, allow_seen=True)
 
 

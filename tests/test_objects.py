@@ -37,6 +37,26 @@ def test_repaired_ycb_can_has_volume_and_consistent_sdf_signs(objects_dir):
     assert o.signed_distance(o.center_mass[None])[0] < 0
 
 
+def test_an_open_box_closed_by_repair_is_said_and_recorded_but_a_merely_unwelded_mesh_is_not(objects_dir):
+    """A box without its lid came out of repair watertight, so nothing downstream said that the open box is grasped as
+    a solid one; YCB meshes are unwelded, not open (merging vertices closes them): no note for them."""
+    box = trimesh.creation.box(extents=(0.06, 0.06, 0.08))
+    top = np.flatnonzero(box.triangles_center[:, 2] > 0.039)
+    lidless = trimesh.Trimesh(box.vertices, np.delete(box.faces, top, axis=0), process=False)
+    with pytest.warns(ObjectWarning, match=r"'cup': the mesh was open; repair closed its holes with 2 face\(s\), 13.6 % of the "
+                                           r"surface, so it is grasped and simulated as that closed solid \(volume 288 cm\^3\)"):
+        o = ObjectModel(lidless, name="cup")
+    rep = o.describe()["repair"]
+    assert rep["filled_faces"] == 2 and rep["removed_faces"] == 0 and rep["filled_area_fraction"] == pytest.approx(36 / 264)
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ObjectWarning)
+        can = ObjectModel(trimesh.load(objects_dir / "ycb" / "MasterChefCan" / "textured_simple_reoriented.obj", force="mesh"),
+                          name="can")
+    assert not can.repair_report.watertight_before and can.repair_report.filled_faces == 0
+
+
 def test_sdf_of_a_sphere_is_accurate():
     o = ObjectModel.builtin("sphere")
     pts = np.array([[0, 0, 0], [0.05, 0, 0], [0, 0.02, 0], [0, 0, -0.08]])

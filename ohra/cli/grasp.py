@@ -93,7 +93,7 @@ def register(sub: Any) -> None:
     p.add_argument("--original", action="store_true", help="replay on the hands' original URDFs through the action map")
     p.add_argument("--inertials", choices=("capsule", "original"), default="capsule",
                    help="finger masses of the canonical hand: the template's 1000 kg/m^3 capsules (default) or the "
-                        "original URDF's (registered hands; geometry stays canonical)")
+                        "original URDF's (a registered hand, spec YAML or params JSON beside its spec; geometry stays canonical)")
     p.add_argument("--collisions", choices=("own", "canonical"), default="own",
                    help="with --original: the original URDF's collision shapes (default) or the canonical capsules on "
                         "its links (the hybrid hand: tells the link shapes' effect from the rest of the URDF's)")

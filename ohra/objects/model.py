@@ -142,6 +142,10 @@ def _urdf_mesh(path: Path):
     return vis_path, scale, T_vis, cols, extra
 
 
+# holes whose fill is at least this share of the repaired surface are said (a scan's pinholes are not)
+FILLED_AREA_NOTE = 1e-3
+
+
 class ObjectModel:
     """A rigid object: its surface mesh (as loaded and repaired) and the :class:`~ohra.objects.body.Body`
     it is grasped and simulated as (signed distance, convex pieces, mass properties; see there).
@@ -183,6 +187,13 @@ class ObjectModel:
             self.repair_report = RepairReport(0, 0, bool(mesh.is_watertight), bool(mesh.is_watertight), True)
         if len(self.mesh.faces) == 0:
             raise ObjectError(f"object {name!r}: mesh is empty after repair")
+        rr = self.repair_report
+        if rr.filled_faces and rr.filled_area_fraction >= FILLED_AREA_NOTE:
+            # an open cup or box is closed into a solid one here, with a watertight mesh and no later note
+            warnings.warn(f"object {name!r}: the mesh was open; repair closed its holes with {rr.filled_faces} face(s), "
+                          f"{100 * rr.filled_area_fraction:.1f} % of the surface, so it is grasped and simulated as that "
+                          f"closed solid (volume {1e6 * abs(float(self.mesh.volume)):.4g} cm^3)", ObjectWarning,
+                          stacklevel=user_stacklevel())
         check_solid(self.mesh, name)
         self.name = name
         self.density = float(density)

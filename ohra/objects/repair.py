@@ -13,11 +13,13 @@ class RepairReport:
     """What :func:`repair_mesh` did and what it means."""
 
     merged_vertices: int
-    removed_faces: int
+    removed_faces: int  # degenerate or duplicate faces dropped
     watertight_before: bool
     watertight: bool
     winding_consistent: bool
     note: str = ""
+    filled_faces: int = 0  # faces added to close holes
+    filled_area_fraction: float = 0.0  # their area over the repaired mesh's
 
 
 def repair_mesh(mesh: trimesh.Trimesh) -> tuple[trimesh.Trimesh, RepairReport]:
@@ -35,18 +37,24 @@ def _repair(mesh: trimesh.Trimesh) -> tuple[trimesh.Trimesh, RepairReport]:
     m.update_faces(m.nondegenerate_faces())
     m.update_faces(m.unique_faces())
     m.remove_unreferenced_vertices()
+    removed = nf - len(m.faces)
+    nf_open = len(m.faces)
     if not m.is_watertight:
         trimesh.repair.fill_holes(m)
+    filled = len(m.faces) - nf_open
     trimesh.repair.fix_winding(m)
     trimesh.repair.fix_normals(m)
     if merged is not None and not m.is_watertight:
         # dropping degenerate or duplicate faces opened a closed surface: keep the merged one
         m = merged
         trimesh.repair.fix_normals(m)
+        removed, filled = nf - len(m.faces), 0
     if m.is_watertight and m.volume < 0:
         m.invert()
     note = ""
     if not m.is_watertight:
         note = ("still not watertight after repair: the object is grasped and simulated as its convex "
                 "body (hull or decomposition), whose volume and mass properties are reported")
-    return m, RepairReport(nv - len(m.vertices), nf - len(m.faces), was, bool(m.is_watertight), bool(m.is_winding_consistent), note)
+    area = float(m.area_faces[len(m.faces) - filled:].sum() / max(m.area, 1e-30)) if filled > 0 else 0.0
+    return m, RepairReport(nv - len(m.vertices), removed, was, bool(m.is_watertight), bool(m.is_winding_consistent), note,
+                           filled, area)

@@ -38,7 +38,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ohra.errors import DatasetError, GraspError, ParamsError, require_seed
+from ohra.errors import DatasetError, GraspError, HandNotFoundError, ParamsError, require_seed
 from ohra.learn.grasp.condition import HandLike, hand_key, resolve_hand
 from ohra.learn.grasp.model import GraspModel, ObjectLike, resolve_object
 from ohra.learn.grasp.refine import RefineSettings, as_refine_settings
@@ -327,7 +327,7 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
     """
     from ohra.hands.registry import registered_hands
     from ohra.sim import GraspEvaluator, SimHand
-    from ohra.sim.hands import original_finger_masses
+    from ohra.canonical.params import ExtendedParams
 
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
         raise GraspError(f"n must be a positive integer, got {n!r}")
@@ -356,18 +356,21 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
     # every hand is checked before the first simulation: a hand the model cannot condition on (a LEAP
     # variant for a VAE-conditioned model) or without an original URDF fails now, not after minutes of
     # evaluating the hands before it
-    resolved = []
+    resolved, originals = [], {}
+    what = "original=True (--original)" if original else "inertials='original' (--inertials original)"
     for hand in hands:
-        if (original or inertials == "original") and not (isinstance(hand, str) and hand in registered_hands()):
-            what = "original=True (--original)" if original else "inertials='original' (--inertials original)"
-            from ohra.hands.leap.variants import is_variant
-
-            why = ("a LEAP variant, a canonical hand with no original URDF (the original LEAP hand is leap_hand_right)"
-                   if isinstance(hand, str) and is_variant(hand) else
-                   "not a registered hand (a spec of your own registers with ohra --hands-path DIR or $OHRA_HANDS_PATH)")
-            raise GraspError(f"{what} needs a registered hand's original URDF: give the hand by name; "
-                             f"{hand if isinstance(hand, str) else type(hand).__name__!r} is {why}")
+        if (original or inertials == "original") and not isinstance(hand, (str, Path)):
+            raise GraspError(f"{what} needs the hand's original URDF: give the hand by name, spec YAML or params JSON "
+                             f"beside its spec, not as {type(hand).__name__}")
         params = resolve_hand(hand)
+        if original or inertials == "original":
+            # a registered name, a spec YAML or a params JSON beside its spec, as ohra eval --original takes them
+            registered = isinstance(hand, str) and hand in registered_hands()
+            form = None if registered else ("extended" if isinstance(params, ExtendedParams) else "base")
+            try:
+                originals[hand_label(hand, params)] = SimHand.original_of(str(hand), form, purpose=what)
+            except HandNotFoundError as exc:  # a LEAP variant, a params JSON without its spec
+                raise GraspError(str(exc)) from None
         told = params if condition_hand is None else resolve_hand(condition_hand)  # the hand the model is told
         try:
             model.condition.vector(told)
@@ -398,7 +401,7 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
         if original and collisions == "canonical":  # one fit per hand, shared by its objects
             from ohra.sim.hybrid import with_canonical_collisions
 
-            hybrid, _ = with_canonical_collisions(SimHand.registered_original(name), SimHand.from_params(params, name=str(name)))
+            hybrid, _ = with_canonical_collisions(originals[name], SimHand.from_params(params, name=str(name)))
         for obj in objs:
             s = pair_seed(seed, seeded_by, obj.mesh_hash)
             if resume is not None:
@@ -419,10 +422,9 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
                 sim_hand = hybrid
             else:
                 # a coupled hand (Inspire) drives its coupled joints with their drivers, as ohra eval and synthesis do
-                sim_hand = (SimHand.registered_original(name) if original
-                            else SimHand.from_params(params, name=str(name), couplings=couplings))
+                sim_hand = originals[name] if original else SimHand.from_params(params, name=str(name), couplings=couplings)
             if inertials == "original" and not original:
-                sim_hand = sim_hand.with_finger_masses(original_finger_masses(name))
+                sim_hand = sim_hand.with_finger_masses(originals[name].finger_masses)
             t0 = time.perf_counter()
             with GraspEvaluator(sim_hand, obj, protocol) as ev, warnings.catch_warnings():
                 warnings.simplefilter("ignore", UserWarning)
