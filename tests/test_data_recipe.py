@@ -277,6 +277,28 @@ def test_two_different_hands_under_one_name_are_refused_and_the_same_hand_twice_
     same = Recipe.from_dict({"hands": [str(tmp_path / "h1/grip.json"), str(tmp_path / "h3/grip.json")],
                              "objects": ["builtin"]}).resolve_hands()
     assert [n for n, _ in same] == ["grip"]
+    named = Recipe.from_dict({"hands": [str(tmp_path / "h1/grip.json"), {"params": str(tmp_path / "h2/grip.json"), "name": "grip_big"}],
+                              "objects": ["builtin"]}).resolve_hands()
+    assert [n for n, _ in named] == ["grip", "grip_big"] and named[1][1].palm_radius == pytest.approx(p.palm_radius * 1.2)
+
+
+def test_both_forms_of_one_spec_are_two_hands_when_one_is_given_a_name(hands_dir):
+    """The base and extended forms of one spec were refused as two hands under the spec's name; `name:` tells them apart."""
+    from ohra.canonical.params import BaseParams, ExtendedParams
+    from ohra.hands.registry import spec_path
+
+    spec = str(spec_path("barrett_hand"))
+    both = [{"spec": spec, "form": "base"}, {"spec": spec}]
+    with pytest.raises(RecipeError, match=r"hands\[0\] and hands\[1\] are two different hands named 'barrett_hand'.*"
+                                          r"name: barrett_hand_2"):
+        Recipe.from_dict({"hands": both, "objects": ["builtin"]}).resolve_hands()
+    both[1]["name"] = "barrett_ext"
+    hands = Recipe.from_dict({"hands": both, "objects": ["builtin"]}).resolve_hands()
+    assert [n for n, _ in hands] == ["barrett_hand", "barrett_ext"]
+    assert isinstance(hands[0][1], BaseParams) and isinstance(hands[1][1], ExtendedParams)
+    for bad in ("", "a/b", 3, ".."):
+        with pytest.raises(RecipeError, match=r"hands\[0\]: 'name' is the hand's folder name"):
+            Recipe.from_dict({"hands": [{"spec": spec, "name": bad}], "objects": ["builtin"]})
 
 
 def test_a_yaml_syntax_error_names_its_line(tmp_path):

@@ -10,6 +10,8 @@ A recipe is a YAML mapping (plain values only; unknown keys are errors naming th
       - {params: my_hand.json}       # a params file (or just my_hand.json), named my_hand
       - {spec: my_hand.yaml, form: base}           # a hand spec, parsed (and fitted) on load; form defaults to
                                                    # extended (a bare my_hand.yaml too), unlike synth --hand (base)
+      - {spec: my_hand.yaml, name: my_hand_ext}    # name: the hand's name in the dataset (default: the spec's
+                                                   # name, a params file's stem), e.g. both forms of one spec
     objects:
       - builtin                      # all built-ins, or builtin:NAME
       - {path: meshes/mug.obj}       # a folder, a mesh or an object URDF
@@ -204,8 +206,8 @@ class Recipe:
                 if name in out:
                     if params_hash(out[name][1]) != params_hash(entry[1]):
                         raise RecipeError(f"{self.source or '<recipe>'}: hands[{first[name]}] and hands[{i}] are two "
-                                          f"different hands named {name!r} (a dataset keys its hands by name): rename "
-                                          "one (its file, or the spec's name)")
+                                          f"different hands named {name!r} (a dataset keys its hands by name): give one its own "
+                                          f"name, e.g. {{spec: ..., name: {name}_2}}")
                     continue
                 out[name], first[name] = entry, i
         return out
@@ -227,9 +229,10 @@ class Recipe:
             from ohra.canonical.couplings import read_couplings
 
             p = self._path(h["params"])
-            return [(p.stem, get_hand(str(p)), read_couplings(p))]
+            return [(h.get("name", p.stem), get_hand(str(p)), read_couplings(p))]
         if "spec" in h:
-            return [_hand_from_spec(self._path(h["spec"]), h.get("form", "extended"), where)]
+            name, params, couplings = _hand_from_spec(self._path(h["spec"]), h.get("form", "extended"), where)
+            return [(h.get("name", name), params, couplings)]
         names = [n for n in list_hands(include_variants=True) if fnmatch.fnmatchcase(n, h["pattern"])]
         if "digit_sum" in h:
             lo, hi = _range(h["digit_sum"], where + ".digit_sum")
@@ -318,7 +321,7 @@ class Recipe:
         return {"train": [k for k in keys if k not in test], "test": [k for k in keys if k in test], **given}
 
 
-HAND_KEYS = {"pattern": ("pattern", "digit_sum"), "params": ("params",), "spec": ("spec", "form")}
+HAND_KEYS = {"pattern": ("pattern", "digit_sum"), "params": ("params", "name"), "spec": ("spec", "form", "name")}
 OBJECT_KEYS = {"procedural": ("procedural", "count", "seed"), "path": ("path", "scale", "body"), "glob": ("glob", "scale", "body")}
 
 
@@ -337,6 +340,10 @@ def _check_entry(e: Any, kinds: dict[str, tuple[str, ...]], where: str) -> None:
     for k in ("pattern", "params", "spec", "path", "glob", "procedural"):
         if k in e and not isinstance(e[k], str):
             raise RecipeError(f"{where}: '{k}' must be a string, got {e[k]!r}")
+    if "name" in e and (not isinstance(e["name"], str) or not e["name"].strip() or any(c in e["name"] for c in "/\\")
+                        or e["name"] in (".", "..")):
+        raise RecipeError(f"{where}: 'name' is the hand's folder name in the dataset (a non-empty string without '/'), "
+                          f"got {e['name']!r}")
     if "form" in e and e["form"] not in ("base", "extended"):
         raise RecipeError(f"{where}: 'form' must be base or extended, got {e['form']!r}")
     if "scale" in e and e["scale"] is not None and (isinstance(e["scale"], bool) or not isinstance(e["scale"], (int, float))
