@@ -402,6 +402,28 @@ def test_generating_starting_states_shows_progress_on_a_terminal_only(monkeypatc
     assert sys.stderr.getvalue() == ""
 
 
+def test_a_long_or_short_generation_is_forecast_once_and_a_quick_one_is_not(monkeypatch):
+    """A hand keeping 4 % of its perturbed grasps on its original URDF (DG-5F) took ~1.5 h to end short of its 1,000
+    states with no word off a terminal; after 50 attempts one sentence says where it ends and when."""
+    from ohra.sim.rotation import grasps
+
+    short = grasps.forecast(2, 50, 14.0, 50, 1000, 20000)
+    assert short.startswith("2 of 50 perturbed grasps kept so far (4 %, 0.28 s each)")
+    assert "limit of 20000 attempts with about 800 of 1000 starting states, in about 93 more minutes" in short
+    long = grasps.forecast(20, 50, 14.0, 50, 1000, 20000)
+    assert long.endswith("the 1000 starting states take about 11 more minutes (cached for later uses)")
+    assert grasps.forecast(20, 50, 12.5, 50, 1000, 20000) is not None  # 2,450 attempts at 0.25 s: 10.2 min, said
+    assert grasps.forecast(20, 50, 12.0, 50, 1000, 20000) is None  # 9.8 min: not said
+    # a continued generation: its earlier attempts count for the rate, this run's for the time per attempt
+    assert "about 1000 of 1000" not in grasps.forecast(400, 10000, 50.0, 50, 1000, 20000)
+    # generate() says it once, after FORECAST_AFTER attempts of its own
+    monkeypatch.setattr(grasps, "FORECAST_AFTER", 2)
+    monkeypatch.setattr(grasps, "FORECAST_SECONDS", 0.0)
+    with pytest.warns(UserWarning, match=r"leap_hand_right:canonical with cube, starting states \(first use\): \d+ of 2 perturbed") as rec:
+        generate(resolve(RotationConfig(grasp_count=4)))
+    assert sum("starting states (first use)" in str(w.message) for w in rec) == 1
+
+
 def test_start_pose_noise_follows_the_hand_not_the_folders_its_file_lies_in():
     """LEAP hands take the reference's +-0.25 rad, others Shadow's 0.1: an Allegro params file in a folder
     named for LEAP is not a LEAP hand (it got 0.25 and other starting states when the path was matched)."""

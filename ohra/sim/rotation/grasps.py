@@ -30,6 +30,7 @@ import json
 import math
 import re
 import sys
+import time
 import warnings
 import zipfile
 from collections import Counter
@@ -261,6 +262,31 @@ def _keep(scene: RotationScene, start: np.ndarray, before, rejected: Counter | N
 
 
 PARTIAL_EVERY = 25  # kept states between two saves of an unfinished generation
+FORECAST_AFTER = 50  # attempts of this run before the one forecast of how long and how many (a hand that keeps
+# few perturbed grasps on its original URDF can take over an hour with no word but a bar on a terminal)
+FORECAST_SECONDS = 600.0  # a generation forecast to take longer than this is said
+
+
+def forecast(kept: int, attempts: int, seconds: float, run_attempts: int, count: int, max_attempts: int) -> str | None:
+    """A sentence forecasting where a generation ends (kept states, minutes), or None when it ends within
+    :data:`FORECAST_SECONDS` with every state. ``attempts`` / ``kept`` count the whole generation (a continued one's
+    included), ``seconds`` the ``run_attempts`` made by this process."""
+    if run_attempts <= 0 or attempts <= 0:
+        return None
+    per_attempt = seconds / run_attempts
+    left = max_attempts - attempts
+    need = math.inf if kept == 0 else (count - kept) * attempts / kept
+    more = min(need, left)
+    ends = count if need <= left else kept + int(left * kept / attempts)
+    eta = more * per_attempt
+    if ends >= count and eta <= FORECAST_SECONDS:
+        return None
+    rate = f"{kept} of {attempts} perturbed grasps kept so far ({100 * kept / attempts:.0f} %, {per_attempt:.2f} s each)"
+    if ends >= count:
+        return f"{rate}: the {count} starting states take about {eta / 60:.0f} more minutes (cached for later uses)"
+    return (f"{rate}: at that rate the generation stops at its limit of {max_attempts} attempts with about {ends} of "
+            f"{count} starting states, in about {eta / 60:.0f} more minutes (cached for later uses); fewer states "
+            "(grasp_count) end it sooner")
 
 
 def generate(task: Task, progress: bool | None = False, partial: Path | None = None) -> GraspSet:
@@ -288,7 +314,14 @@ def generate(task: Task, progress: bool | None = False, partial: Path | None = N
             attempts = _resume_partial(partial, key, hold, rng, (Q, T, P, O), rejected)
         bar = _bar(cfg.grasp_count, f"grasps {hand.name}", progress)
         bar.update(len(Q))
+        t0, first = time.perf_counter(), attempts
         while len(Q) < cfg.grasp_count and attempts < MAX_ATTEMPTS_PER_GRASP * cfg.grasp_count:
+            if attempts - first == FORECAST_AFTER:
+                note = forecast(len(Q), attempts, time.perf_counter() - t0, attempts - first, cfg.grasp_count,
+                                MAX_ATTEMPTS_PER_GRASP * cfg.grasp_count)
+                if note:
+                    warnings.warn(f"{hand.name} with {task.obj.name}, starting states (first use): {note}",
+                                  stacklevel=user_stacklevel())
             attempts += 1
             q = np.clip(hold + rng.uniform(-r, r, size=hold.shape), hand.lower, hand.upper)
             quat = _quat_mul(yaw_quat(float(rng.uniform(-math.pi, math.pi))), rest)
