@@ -245,6 +245,37 @@ def test_show_no_wait_saves_a_page_that_outlives_the_command_and_says_when_there
     assert "127.0.0.1" not in out.out and "-o PAGE.html saves a page that stays" in out.err
 
 
+def test_show_says_which_joints_of_q_the_hand_cannot_take(monkeypatch, capsys):
+    """`--q` of 3 rad everywhere was drawn past every limit, absent joints included, with no word."""
+    import io
+
+    from ohra import viz
+    from ohra.cli.hand import limits_note
+
+    class Vis:
+        def url(self):
+            return "http://127.0.0.1:7000/static/"
+
+    monkeypatch.setattr(viz, "new_visualizer", Vis)
+    monkeypatch.setattr(viz, "show_hand", lambda *a, **k: None)
+    monkeypatch.setattr("sys.stdin", io.StringIO(""))
+    p = get_hand("leap_3303")
+    lo, up = np.asarray(p.joint_lowers), np.asarray(p.joint_uppers)
+    inside = np.where(p.present_joints, 0.5 * (lo + up), 0.0)
+    assert limits_note(p, inside) == "" and limits_note(p, np.clip(inside, lo, up)) == ""
+    q = inside.copy()
+    q[JOINT_INDEX["index_joint2"]] = up[JOINT_INDEX["index_joint2"]] + 0.01
+    assert limits_note(p, q) == (f"1 joint(s) outside the hand's limits, drawn as given: index_joint2 "
+                                 f"{q[JOINT_INDEX['index_joint2']]:g} (limits {lo[JOINT_INDEX['index_joint2']]:.3g} to "
+                                 f"{up[JOINT_INDEX['index_joint2']]:.3g})")
+    q = inside.copy()
+    q[JOINT_INDEX["middle_joint1"]] = 0.2  # leap_3303 has no middle finger
+    assert limits_note(p, q) == "the hand has no middle_joint1 (its joints with both limits 0), drawn as given"
+    assert cli.main(["hand", "show", "leap_3303", "--q", ",".join(["3.0"] * 22)]) == 0
+    err = capsys.readouterr().err
+    assert "ohra: note: --q: 12 joint(s) outside the hand's limits" in err and "the hand has no thumb_joint3" in err
+
+
 # -- the Inspire hand (../shared) ------------------------------------------------------------------
 @pytest.mark.assets
 @pytest.mark.parametrize("form, target", [("extended", 2.0), ("base", 8.0)])

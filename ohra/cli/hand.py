@@ -343,6 +343,25 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     return 0
 
 
+def limits_note(params, q: np.ndarray) -> str:
+    """'' or a sentence naming the joints of ``q`` (22,) outside the hand's limits, and nonzero absent joints:
+    the viewer draws them as given (a pose the hand cannot take), as a note for stderr."""
+    from ohra.canonical.params import JOINT_NAMES
+
+    lo, up = np.asarray(params.joint_lowers, float), np.asarray(params.joint_uppers, float)
+    present = np.asarray(params.present_joints)
+    out = [i for i in range(22) if present[i] and not lo[i] - 1e-9 <= q[i] <= up[i] + 1e-9]
+    absent = [i for i in range(22) if not present[i] and q[i] != 0.0]
+    parts = []
+    if out:
+        parts.append(f"{len(out)} joint(s) outside the hand's limits, drawn as given: " + ", ".join(
+            f"{JOINT_NAMES[i]} {q[i]:g} (limits {lo[i]:.3g} to {up[i]:.3g})" for i in out[:4]) + (" ..." if len(out) > 4 else ""))
+    if absent:
+        parts.append(f"the hand has no {', '.join(JOINT_NAMES[i] for i in absent[:4])}{' ...' if len(absent) > 4 else ''}"
+                     " (its joints with both limits 0), drawn as given")
+    return "; ".join(parts)
+
+
 def _cmd_show(args: argparse.Namespace) -> int:  # pragma: no cover - starts a server
     from ohra import viz
     from ohra.errors import OhraError
@@ -356,6 +375,10 @@ def _cmd_show(args: argparse.Namespace) -> int:  # pragma: no cover - starts a s
     from ohra.hands.resolve import resolve_hand
 
     ref = resolve_hand(args.hand, args.form)  # a bad name fails here, before a meshcat server starts
+    if q is not None and q.shape == (22,):
+        note = limits_note(ref.params, q)
+        if note:
+            print(f"ohra: note: --q: {note}", file=sys.stderr)
     if args.output:
         from ohra.io import check_output, check_suffix
 
