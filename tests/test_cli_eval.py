@@ -215,6 +215,14 @@ def test_a_dataset_shard_evaluated_on_another_hand_or_object_says_so(tmp_path, c
     assert f"{shard} holds grasps of box (mesh " in err and "evaluating them on --object builtin:sphere" in err
     assert main(["eval", shard, "--hand", "leap_2220", "--object", "builtin:box", "--quiet"]) == 0
     assert f"{shard} was synthesised for leap_3303; evaluating it on --hand leap_2220" in capsys.readouterr().err
+    # another hand in another form: both are said (only the hand was)
+    from ohra.hands import get_hand
+
+    form = "extended" if "finger_radii" in get_hand("leap_3303").to_dict() else "base"
+    other = "base" if form == "extended" else "extended"
+    assert main(["eval", shard, "--hand", "allegro_hand_left", "--form", other, "--object", "builtin:box", "--quiet"]) == 0
+    assert (f"{shard} was synthesised for the {form} form of leap_3303; evaluating it on --hand allegro_hand_left ({other} "
+            "form)") in capsys.readouterr().err
 
 
 def test_grasps_sampled_on_a_millimetre_mesh_are_evaluated_at_the_scale_they_were_sampled_at(setup, capsys):

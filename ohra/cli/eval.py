@@ -179,7 +179,10 @@ def run(args: argparse.Namespace) -> int:
 
         told = resolve_hand(args.hand, args.form)  # a file may hold the same hand under another reference
         if told.name != made["hand"]:
-            print(f"ohra: note: {args.grasps} was {made.get('made', 'sampled')} for {made['hand']}; evaluating it on --hand {args.hand}",
+            made_for, given = made["hand"], f"--hand {args.hand}"
+            if made.get("form") and told.form != made["form"]:  # another hand, and another form too
+                made_for, given = f"the {made['form']} form of {made_for}", f"{given} ({told.form} form)"
+            print(f"ohra: note: {args.grasps} was {made.get('made', 'sampled')} for {made_for}; evaluating it on {given}",
                   file=sys.stderr)
         elif made.get("form") and told.form != made["form"]:
             from ohra.hands import list_hands
