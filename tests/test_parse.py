@@ -243,7 +243,7 @@ def test_the_finger_order_allows_a_cupping_finger_a_few_millimetres_inside_its_n
 
     spec = SimpleNamespace(form=lambda form: SimpleNamespace(slots={f"{f}_joint1": SimpleNamespace(name=f"{f}_j1") for f in
                                                                   ("thumb", "index", "middle", "ring", "little")}))
-    checks._check_finger_order(measured(-0.022, -0.0195), spec, "dg5f.yaml: forms.base")
-    checks._check_finger_order(measured(-0.022, -0.0125), spec, "dg5f.yaml: forms.base")  # 9.5 mm inside
+    checks._check_finger_order(measured(-0.022, -0.0195), spec, "base", "dg5f.yaml: forms.base")
+    checks._check_finger_order(measured(-0.022, -0.0125), spec, "base", "dg5f.yaml: forms.base")  # 9.5 mm inside
     with pytest.raises(SpecError, match=r"ring \(base y = -22.0 mm, joint 'ring_j1'\) lies 10.5 mm farther .* than little"):
-        checks._check_finger_order(measured(-0.022, -0.0115), spec, "dg5f.yaml: forms.base")
+        checks._check_finger_order(measured(-0.022, -0.0115), spec, "base", "dg5f.yaml: forms.base")

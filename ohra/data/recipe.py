@@ -206,8 +206,8 @@ class Recipe:
                 if name in out:
                     if params_hash(out[name][1]) != params_hash(entry[1]):
                         raise RecipeError(f"{self.source or '<recipe>'}: hands[{first[name]}] and hands[{i}] are two "
-                                          f"different hands named {name!r} (a dataset keys its hands by name): give one its own "
-                                          f"name, e.g. {{spec: ..., name: {name}_2}}")
+                                          f"different hands named {name!r} (a dataset keys its hands by name): give one "
+                                          f"its own name in its spec or params entry, e.g. name: {name}_2")
                     continue
                 out[name], first[name] = entry, i
         return out
@@ -409,7 +409,7 @@ def _at(where: str) -> Iterator[None]:
         raise new from exc
 
 
-def _hand_from_spec(path: Path, form: str, where: str) -> tuple[str, Any]:
+def _hand_from_spec(path: Path, form: str, where: str) -> tuple[str, Any, Any]:
     from ohra.original.parse import parse
     from ohra.original.spec import load_spec
 

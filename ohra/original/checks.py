@@ -203,14 +203,14 @@ def _check_palm_frame(m: Measurement, spec: HandSpec, form: str) -> list[str]:
         raise SpecError(f"{where}: positive flexion curls every finger ({', '.join(opening)}) toward -x of the palm frame: "
                         "either the palm normal +x points to the back of the hand (rotate palm_origin by pi about z, rpy "
                         "yaw + 3.1416) or every flexion sign is reversed")
-    _check_finger_order(m, spec, where)
+    _check_finger_order(m, spec, form, where)
     if named and thumb and named != thumb:
         return [f"check: the thumb sits on the {thumb}-hand side (y {'>' if thumb == 'right' else '<'} 0) of the palm "
                 f"frame although the hand is named {named}"]
     return []
 
 
-def _check_finger_order(m: Measurement, spec: HandSpec, where: str) -> None:
+def _check_finger_order(m: Measurement, spec: HandSpec, form: str, where: str) -> None:
     """Raise when the fingers' bases are not ordered index, middle, ring, little away from the thumb side of the
     palm (+y for a thumb on +y): a spec that maps a URDF finger to the wrong canonical finger passes every
     other check and fits its URDF as well as the right spec, but hands the VAE and the grasp model a hand whose
@@ -227,7 +227,7 @@ def _check_finger_order(m: Measurement, spec: HandSpec, where: str) -> None:
     bad = [(a, b) for i, a in enumerate(order) for b in order[i + 1:] if side * (ys[a] - ys[b]) < -ORDER_TOLERANCE]
     if not bad:
         return
-    spec_form = spec.form(where.rsplit(".", 1)[-1])
+    spec_form = spec.form(form)
     a, b = bad[0]
     first = {f: spec_form.slots[m.fingers[f].slots[0]].name for f in ys}
     raise SpecError(
