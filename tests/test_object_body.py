@@ -107,6 +107,34 @@ def test_several_pieces_give_estimated_mass_properties_of_their_union():
     assert np.allclose(mp.inertia_per_density, exact.inertia_per_density, rtol=0.02)
 
 
+def test_mass_properties_estimated_on_a_grid_are_said_and_exact_ones_are_not(tmp_path):
+    """Issue 12 asks that what was estimated be said on stderr and in the manifest: a closed L-shaped mesh with its two
+    overlapping pieces beside it was estimated on a grid and said so only in the manifest."""
+    a = trimesh.creation.box(extents=(0.04, 0.10, 0.04))
+    b = trimesh.creation.box(extents=(0.04, 0.04, 0.08))
+    b.apply_translation((0.0, 0.03, 0.04))
+    # the same L as one closed surface: its (y, z) outline extruded along x, the caps fanned from the inner corner
+    yz = np.array([(0.01, 0.02), (-0.05, 0.02), (-0.05, -0.02), (0.05, -0.02), (0.05, 0.08), (0.01, 0.08)])
+    verts = np.array([(x, y, z) for x in (-0.02, 0.02) for y, z in yz])
+    n = len(yz)
+    caps = [(0, i, i + 1) for i in range(1, n - 1)]
+    faces = caps + [(n + k, n + j, n + i) for i, j, k in caps]
+    faces += [f for i in range(n) for f in ((i, (i + 1) % n + n, (i + 1) % n), (i, i + n, (i + 1) % n + n))]
+    l_shape = trimesh.Trimesh(verts, faces)
+    trimesh.repair.fix_normals(l_shape)
+    assert l_shape.is_watertight and l_shape.volume == pytest.approx(0.04 * 0.10 * 0.04 + 0.04 * 0.04 * 0.06, rel=1e-6)
+    l_shape.export(tmp_path / "textured_simple.obj")
+    trimesh.util.concatenate([a, b]).export(tmp_path / "collision_vhacd.obj")
+    obj = ObjectModel.load(tmp_path)
+    with pytest.warns(ObjectWarning, match=r"mass, centre of mass and inertia of its body \(provided:collision_vhacd.obj\) "
+                                           r"are estimated on a grid, \d+ cells of [\d.]+ mm over the union of 2 convex pieces"):
+        assert obj.body.kind == "provided:collision_vhacd.obj"
+    assert obj.describe()["mass_properties"]["estimated"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ObjectWarning)
+        ObjectModel(trimesh.creation.box(extents=(0.04, 0.05, 0.06)), "box").body  # one convex piece: exact, no note
+
+
 def test_primitive_mass_properties_match_a_fine_mesh():
     for prim, mesh in [({"type": "capsule", "size": (0.02, 0.05), "pos": (0, 0, 0)}, trimesh.creation.capsule(height=0.05, radius=0.02, count=[64, 64])),
                        ({"type": "cylinder", "size": (0.02, 0.05), "pos": (0, 0, 0)}, trimesh.creation.cylinder(radius=0.02, height=0.05, sections=256))]:
@@ -169,7 +197,8 @@ def test_a_mesh_that_is_already_convex_pieces_is_its_own_body(tmp_path):
                                       trimesh.creation.box((0.04, 0.04, 0.04)).apply_translation((0.041, 0, 0))])
     cubes.export(tmp_path / "two_cubes.obj")  # 1 mm apart: pieces of one object
     with warnings.catch_warnings():
-        warnings.simplefilter("error", ObjectWarning)  # exact: nothing to say
+        warnings.simplefilter("error", ObjectWarning)  # nothing to say but the grid estimate of the union's mass
+        warnings.filterwarnings("ignore", r".*estimated on a grid", ObjectWarning)
         obj = ObjectModel.load(tmp_path / "two_cubes.obj")
         assert obj.body.kind == "provided:two_cubes.obj pieces" and len(obj.body.pieces) == 2
     assert obj.volume == pytest.approx(2 * 0.04 ** 3, rel=0.03)  # a grid estimate over the union of pieces
@@ -220,7 +249,8 @@ def test_a_mesh_of_overlapping_convex_pieces_matches_its_own_body(tmp_path):
     b = trimesh.creation.box((0.04, 0.04, 0.04)).apply_translation((0.02, 0, 0.02))  # a quarter inside the first: an L
     trimesh.util.concatenate([a, b]).export(tmp_path / "vhacd_like.obj")
     with warnings.catch_warnings():
-        warnings.simplefilter("error", ObjectWarning)  # exact: nothing to say (tolerance, volume, separate parts)
+        warnings.simplefilter("error", ObjectWarning)  # exact: nothing to say (tolerance, volume, separate parts) but
+        warnings.filterwarnings("ignore", r".*estimated on a grid", ObjectWarning)  # the grid estimate of the mass
         obj = ObjectModel.load(tmp_path / "vhacd_like.obj")
         assert obj.body.kind == "provided:vhacd_like.obj pieces"
     assert obj.fidelity.p95 < 1e-3 and obj.volume == pytest.approx(2 * 0.04 ** 3 - 0.02 * 0.04 * 0.02, rel=0.03)

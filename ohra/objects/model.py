@@ -400,6 +400,12 @@ class ObjectModel:
             warnings.warn(f"object {self.name!r}: the mesh is open (not watertight after repair); it is taken as the closed "
                           f"body {best.kind} ({len(best.pieces)} piece(s)): volume {1e6 * best.mass_properties.volume:.4g} cm^3, "
                           f"mass properties {best.mass_properties.method}", ObjectWarning, stacklevel=user_stacklevel())
+        elif best.mass_properties.estimated:
+            # overlapping pieces have no closed-form mass properties (the open-mesh note above already says so)
+            mp = best.mass_properties
+            warnings.warn(f"object {self.name!r}: the mass, centre of mass and inertia of its body ({best.kind}) are "
+                          f"estimated on a grid, {mp.method.split(': ', 1)[-1]} (volume {1e6 * mp.volume:.4g} cm^3)",
+                          ObjectWarning, stacklevel=user_stacklevel())
         if not fid.within_tolerance:
             tol = f"{1e3 * BODY_TOLERANCE_M:.0f} mm"
             inside = [(f, b) for f, b in scored if f.within_tolerance]
