@@ -521,3 +521,15 @@ def test_an_empty_object_name_is_not_the_current_folder_and_hidden_folders_are_n
     (tmp_path / "box").mkdir()
     trimesh.creation.box(extents=(0.05, 0.05, 0.05)).export(tmp_path / "box" / "box.obj")
     assert [o.name for o in resolve_objects(str(tmp_path))] == ["box"]
+
+
+def test_a_number_of_starting_states_given_as_grasps_is_named_before_any_reset(grasps):
+    """`gym.make(..., grasps=20)` was taken, then the first reset died in an AttributeError ('int' object has no
+    attribute 'q'); the count is grasp_count."""
+    import gymnasium as gym
+
+    with pytest.raises(RotationConfigError, match=r"grasps: expected starting states \(a GraspSet\) or None, got int; the "
+                                                  r"number of starting states is grasp_count"):
+        gym.make("ohra/InHandRotate-v0", grasps=20)
+    with pytest.raises(RotationConfigError, match=r"render_mode must be None or one of \['rgb_array'\], got 'human'"):
+        InHandRotateEnv(CFG, grasps=grasps, render_mode="human")

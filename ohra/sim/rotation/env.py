@@ -26,7 +26,7 @@ from ohra.errors import OhraError
 from ohra.sim.hands import SimHand
 from ohra.sim.rotation import observations as obs_terms
 from ohra.sim.rotation import rewards, termination
-from ohra.sim.rotation.config import RotationConfig
+from ohra.sim.rotation.config import RotationConfig, RotationConfigError
 from ohra.sim.rotation.grasps import GraspSet, load_or_generate
 from ohra.sim.rotation.scene import RotationScene
 from ohra.sim.rotation.task import resolve
@@ -65,7 +65,10 @@ class InHandRotateEnv(gym.Env):
             config = RotationConfig.from_dict(config)
         cfg = (config or RotationConfig()).with_overrides(**overrides) if overrides else (config or RotationConfig())
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
+            raise RotationConfigError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
+        if grasps is not None and not isinstance(grasps, GraspSet):  # an int here failed at the first reset
+            raise RotationConfigError(f"grasps: expected starting states (a GraspSet) or None, got {type(grasps).__name__}"
+                                      + ("; the number of starting states is grasp_count" if isinstance(grasps, int) else ""))
         self.cfg, self.render_mode = cfg, render_mode
         self.metadata = {**self.metadata, "render_fps": cfg.control_hz}
         self.task = resolve(cfg, sim_hand)
