@@ -278,6 +278,21 @@ def test_a_ray_address_where_nothing_answers_fails_in_seconds_not_at_rays_timeou
     probe_address("auto")  # left to Ray
 
 
+def test_an_unreachable_ray_address_is_refused_before_the_progress_bar_is_drawn(tmp_path):
+    """The error line came after the bar's first frame (`pairs:   0%|...ohra: error: --address ...` on a terminal)."""
+    pytest.importorskip("ray", reason="the ray extra is not installed")
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    proc = subprocess.run([sys.executable, "-m", "ohra.synth", "--hand", "leap_2200", "--objects", "builtin:box", "--backend",
+                           "ray", "--address", f"127.0.0.1:{port}", "-o", str(tmp_path / "d")], capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 2 and proc.stderr.startswith(f"ohra: error: --address 127.0.0.1:{port}: no Ray cluster reachable")
+    assert len(_error_lines(proc)) == 1 and "pairs" not in proc.stderr and not (tmp_path / "d").exists()
+
+
 def test_a_ray_address_without_a_cluster_is_one_line(monkeypatch):
     """``--address auto`` with no cluster running was Ray's ConnectionError traceback, exit 1."""
     ray = pytest.importorskip("ray", reason="the ray extra is not installed")

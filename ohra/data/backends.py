@@ -25,14 +25,16 @@ BACKENDS = ("process", "ray")
 
 
 def check_backend(backend: str, address: str | None = None) -> None:
-    """Refuse an unknown backend, ``address`` without Ray, or the Ray backend without Ray installed: before a
-    job creates its output folder, not after."""
+    """Refuse an unknown backend, ``address`` without Ray, the Ray backend without Ray installed, or an address where
+    nothing answers (:func:`probe_address`): before a job creates its output folder or draws its bar, not after."""
     if backend not in BACKENDS:
         raise OhraError(f"unknown backend {backend!r}; expected one of {', '.join(BACKENDS)}")
     if backend != "ray" and address:
         raise OhraError("--address is for the ray backend; add --backend ray")
     if backend == "ray" and importlib.util.find_spec("ray") is None:
         raise OhraError('the ray backend needs Ray: pip install -e ".[ray]"')
+    if backend == "ray" and address:
+        probe_address(address)  # here, before a progress bar is drawn: its first frame preceded the one-line error
 
 
 def run_tasks(fn: Callable, tasks: list, backend: str = "process", workers: int = 1,
