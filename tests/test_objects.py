@@ -57,6 +57,18 @@ def test_an_open_box_closed_by_repair_is_said_and_recorded_but_a_merely_unwelded
     assert not can.repair_report.watertight_before and can.repair_report.filled_faces == 0
 
 
+def test_a_part_saved_inside_out_is_turned_outward_with_the_others():
+    """Three separate parts, one with every face wound inward: repair oriented the mesh as one body, the inverted part's
+    volume counted negative (104 of 132 cm^3) and the manifest said winding_consistent with no note."""
+    box = trimesh.creation.box(extents=(0.04, 0.04, 0.04))
+    ball = trimesh.creation.icosphere(subdivisions=2, radius=0.02).apply_translation((0.07, 0.0, 0.0))
+    can = trimesh.creation.cylinder(radius=0.015, height=0.05).apply_translation((0.0, 0.07, 0.0))
+    inverted = trimesh.Trimesh(ball.vertices, ball.faces[:, ::-1], process=False)
+    truth = box.volume + ball.volume + can.volume
+    o = ObjectModel(trimesh.util.concatenate([box, inverted, can]), "parts")
+    assert o.repair_report.watertight and abs(float(o.mesh.volume)) == pytest.approx(truth, rel=1e-6)
+
+
 def test_sdf_of_a_sphere_is_accurate():
     o = ObjectModel.builtin("sphere")
     pts = np.array([[0, 0, 0], [0.05, 0, 0], [0, 0.02, 0], [0, 0, -0.08]])

@@ -43,11 +43,11 @@ def _repair(mesh: trimesh.Trimesh) -> tuple[trimesh.Trimesh, RepairReport]:
         trimesh.repair.fill_holes(m)
     filled = len(m.faces) - nf_open
     trimesh.repair.fix_winding(m)
-    trimesh.repair.fix_normals(m)
+    trimesh.repair.fix_normals(m, multibody=True)  # each separate part outward (one inside-out part: a negative volume)
     if merged is not None and not m.is_watertight:
         # dropping degenerate or duplicate faces opened a closed surface: keep the merged one
         m = merged
-        trimesh.repair.fix_normals(m)
+        trimesh.repair.fix_normals(m, multibody=True)
         removed, filled = nf - len(m.faces), 0
     if m.is_watertight and m.volume < 0:
         m.invert()
