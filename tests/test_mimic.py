@@ -274,6 +274,9 @@ def test_show_says_which_joints_of_q_the_hand_cannot_take(monkeypatch, capsys):
     assert cli.main(["hand", "show", "leap_3303", "--q", ",".join(["3.0"] * 22)]) == 0
     err = capsys.readouterr().err
     assert "ohra: note: --q: 12 joint(s) outside the hand's limits" in err and "the hand has no thumb_joint3" in err
+    assert cli.main(["hand", "show", "leap_3303", "--q", ",".join(["nan"] + ["0"] * 21)]) == 2
+    err = capsys.readouterr().err
+    assert err == "ohra: error: --q: expected finite numbers, got nan at index 0\n"
 
 
 # -- the Inspire hand (../shared) ------------------------------------------------------------------

@@ -372,6 +372,9 @@ def _cmd_show(args: argparse.Namespace) -> int:  # pragma: no cover - starts a s
             q = np.array([float(x) for x in args.q.replace(",", " ").split()])
         except ValueError:
             raise OhraError(f"--q: expected 22 numbers separated by commas or spaces, got {args.q!r}") from None
+        if not np.isfinite(q).all():  # before the limits note, which would list a NaN as outside its limits
+            raise OhraError(f"--q: expected finite numbers, got {', '.join(f'{v:g}' for v in q[~np.isfinite(q)][:4])} at "
+                            f"index {', '.join(str(i) for i in np.flatnonzero(~np.isfinite(q))[:4])}")
     from ohra.hands.resolve import resolve_hand
 
     ref = resolve_hand(args.hand, args.form)  # a bad name fails here, before a meshcat server starts
