@@ -247,3 +247,23 @@ def test_the_finger_order_allows_a_cupping_finger_a_few_millimetres_inside_its_n
     checks._check_finger_order(measured(-0.022, -0.0125), spec, "base", "dg5f.yaml: forms.base")  # 9.5 mm inside
     with pytest.raises(SpecError, match=r"ring \(base y = -22.0 mm, joint 'ring_j1'\) lies 10.5 mm farther .* than little"):
         checks._check_finger_order(measured(-0.022, -0.0115), spec, "base", "dg5f.yaml: forms.base")
+
+
+def test_a_wrong_offset_is_named_beside_the_palm_frame_it_looks_like(hands_dir, tmp_path):
+    """An offset written as the angle at which the joint is straight (not its negative) bends the fingers at canonical
+    zero: the error blamed the palm frame or the signs only, and following it went round in circles. The offsets on
+    the fingers it names are listed with the rule; a spec without offsets gets no such clause."""
+    text = registry.spec_path("shadow_hand_right").read_text().replace("shadow_hand/", f"{hands_dir}/shadow_hand/")
+    plain = text
+    for f in ("FF", "MF", "RF", "LF"):
+        text = text.replace(f": {f}J3\n", f": {{joint: {f}J3, offset: 2.0}}\n")
+    spec = tmp_path / "bent.yaml"
+    spec.write_text(text)
+    with pytest.raises(SpecError, match=r"point toward -z of the palm frame: palm_origin is rotated .*; unless the offsets "
+                                        r"are wrong \(index_joint2 \(joint 'FFJ3', sign \+1, offset \+2\), .*offset = -sign \* a"):
+        _quiet_parse(spec, "base", fit_params=False)
+    turned = tmp_path / "turned.yaml"  # the same error from a palm frame turned by pi about y: no offsets to name
+    turned.write_text(plain.replace("rpy: [0.0, 0.0, 0.0]", "rpy: [0.0, 3.14159, 0.0]"))
+    with pytest.raises(SpecError, match="point toward -z") as exc:
+        _quiet_parse(turned, "base", fit_params=False)
+    assert "offsets" not in str(exc.value)

@@ -99,13 +99,27 @@ def arm_hint(m: Measurement, spec: HandSpec) -> str:
             "hand's own root link with root_link: and give palm_origin in its frame")
 
 
+def _offset_hint(m: Measurement, spec: HandSpec, form: str, fingers: list[str]) -> str:
+    """'' or a clause naming the nonzero offsets on ``fingers``' slots: a wrong offset bends a finger at canonical zero
+    or shifts its range, which the frame and sign rules read as a turned palm frame or reversed signs (an offset
+    written as the angle at which the joint is straight, not its negative, sent users round between those two)."""
+    fs = spec.form(form)
+    with_offset = [(s, fs.slots[s]) for f in fingers for s in m.fingers[f].slots if abs(fs.slots[s].offset) > 0.0]
+    if not with_offset:
+        return ""
+    shown = ", ".join(f"{s} (joint {sm.name!r}, sign {sm.sign:+g}, offset {sm.offset:+g})" for s, sm in with_offset[:4])
+    return (f"; unless the offsets are wrong ({shown}{' ...' if len(with_offset) > 4 else ''}): q_canon = sign * q_orig + "
+            "offset and canonical zero is a straight finger, so a joint straight at original angle a takes offset = "
+            "-sign * a")
+
+
 def _check_palm_frame(m: Measurement, spec: HandSpec, form: str) -> list[str]:
     fingers = [f for f in FINGERS[1:] if f in m.fingers]
     where = f"{spec.source}: forms.{form}"
     back = [f for f in fingers if float(m.fingers[f].z[2]) < 0]
     if fingers and len(back) > len(fingers) / 2:
         raise SpecError(f"{where}: the fingers ({', '.join(back)}) point toward -z of the palm frame: palm_origin "
-                        f"is rotated (z must point from the wrist toward the fingertips)")
+                        f"is rotated (z must point from the wrist toward the fingertips){_offset_hint(m, spec, form, back)}")
     tilted = [f for f in fingers if f not in back and float(m.fingers[f].z[2]) < TILT_COS]
     if fingers and len(tilted) > len(fingers) / 2:
         # between "along +z" and "toward -z": a roll or pitch in palm_origin; the parse went through with fingertip
@@ -115,7 +129,7 @@ def _check_palm_frame(m: Measurement, spec: HandSpec, form: str) -> list[str]:
         toward = ", ".join(f"{'+' if d[k] > 0 else '-'}{'xy'[k]}" for k in (0, 1) if abs(d[k]) > 0.25 * np.linalg.norm(d[:2]))
         raise SpecError(f"{where}: the fingers ({', '.join(tilted)}) point {off:.0f} deg away from +z of the palm frame "
                         f"(toward {toward}): palm_origin is tilted (its roll or pitch); +z must point from the wrist along "
-                        "the fingers")
+                        f"the fingers{_offset_hint(m, spec, form, tilted)}")
     ahead = [(f, float(m.fingers[f].p[m.fingers[f].slots[0]][2])) for f in fingers if m.fingers[f].slots]
     below = [(f, z) for f, z in ahead if z < 0]
     if ahead and len(below) > len(ahead) / 2:
@@ -165,7 +179,7 @@ def _check_palm_frame(m: Measurement, spec: HandSpec, form: str) -> list[str]:
     if neg and len(neg) > len(mids) / 2:
         raise SpecError(f"{where}: finger{'s' if len(neg) > 1 else ''} {', '.join(neg)} flex{'' if len(neg) > 1 else 'es'} "
                         f"toward negative canonical angles: the signs of {'their' if len(neg) > 1 else 'its'} flexion joints "
-                        "are reversed (canonical flexion is positive, toward the palm normal +x)")
+                        f"are reversed (canonical flexion is positive, toward the palm normal +x){_offset_hint(m, spec, form, neg)}")
     # the rules above need most fingers to agree; one finger (of two, three, four) whose flexion signs were all
     # flipped together passes them, and the per-slot axis checks too (its own flexion axis flips with its signs),
     # while the fit reproduces the original exactly with positive angles opening that finger
@@ -188,7 +202,7 @@ def _check_palm_frame(m: Measurement, spec: HandSpec, form: str) -> list[str]:
         raise SpecError(f"{where}: finger{'s' if len(neg) > 1 else ''} {', '.join(neg)} flex{'' if len(neg) > 1 else 'es'} "
                         f"toward negative canonical angles while {', '.join(pos)} {verb(pos, 'flex')} toward positive ones: the signs of "
                         f"{'their' if len(neg) > 1 else 'its'} flexion joints are reversed ({named_slots(neg)}); flip each "
-                        "of those signs (canonical flexion is positive, toward the palm normal +x)")
+                        f"of those signs (canonical flexion is positive, toward the palm normal +x){_offset_hint(m, spec, form, neg)}")
     # what is left to check finger by finger: positive flexion must curl the tip toward +x (this also covers fingers
     # whose range is symmetric, e.g. D'Claw's, which say nothing through their range's sign)
     flexing = [f for f in fingers if _flexion_slots(m, f)]
@@ -199,10 +213,10 @@ def _check_palm_frame(m: Measurement, spec: HandSpec, form: str) -> list[str]:
             raise SpecError(f"{where}: positive flexion curls finger{'s' if len(opening) > 1 else ''} {', '.join(opening)} "
                             f"toward -x of the palm frame (the back of the hand) while {', '.join(closing)} {verb(closing, 'curl')} toward +x: "
                             f"the signs of {'their' if len(opening) > 1 else 'its'} flexion joints are reversed "
-                            f"({named_slots(opening)}); flip each of those signs")
+                            f"({named_slots(opening)}); flip each of those signs{_offset_hint(m, spec, form, opening)}")
         raise SpecError(f"{where}: positive flexion curls every finger ({', '.join(opening)}) toward -x of the palm frame: "
                         "either the palm normal +x points to the back of the hand (rotate palm_origin by pi about z, rpy "
-                        "yaw + 3.1416) or every flexion sign is reversed")
+                        f"yaw + 3.1416) or every flexion sign is reversed{_offset_hint(m, spec, form, opening)}")
     _check_finger_order(m, spec, form, where)
     if named and thumb and named != thumb:
         return [f"check: the thumb sits on the {thumb}-hand side (y {'>' if thumb == 'right' else '<'} 0) of the palm "
