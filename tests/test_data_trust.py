@@ -313,3 +313,23 @@ def test_a_ray_address_without_a_cluster_is_one_line(monkeypatch):
         port = s.getsockname()[1]
     with pytest.raises(OhraError, match=rf"127.0.0.1:{port}: no Ray cluster reachable \(connection refused at"):
         list(backends._ray(abs, [1], 1, f"127.0.0.1:{port}"))
+
+
+def test_converged_grasps_left_unsimulated_for_sinking_too_deep_are_counted_and_said(tmp_path, capsys):
+    """A 1 cm pen: 3 of 10 converged grasps sank more than 1 mm into it and were dropped before the simulation, with no
+    word in the summary line or in `ohra data info` (only the shard's arrays knew)."""
+    from ohra.cli.synth import print_summary
+    from ohra.data.build import format_summary, summary
+
+    man = synthesize(HAND, [ObjectModel.builtin("box")], tmp_path, SynthSettings(grasps_per_object=2, filter=False),
+                     progress=False)
+    shard = man["hands"]["leap_2200"]["shards"]["box"]
+    with np.load(tmp_path / shard["file"]) as d:
+        assert shard["n_prefiltered"] == int(d["prefiltered"].sum())
+    man["hands"]["leap_2200"]["counts"]["prefiltered"] = 3  # as the pen's pair recorded it
+    print_summary(man, tmp_path)
+    assert "converged (3 sunk more than 1 mm into the object, not simulated)" in capsys.readouterr().out
+    m = json.loads((tmp_path / "manifest.json").read_text())
+    m["hands"]["leap_2200"]["shards"]["box"]["n_prefiltered"] = 3
+    (tmp_path / "manifest.json").write_text(json.dumps(m))
+    assert "  3 converged sank too deep into the object to simulate (max_penetration_m)" in format_summary(summary(tmp_path))

@@ -115,6 +115,7 @@ def print_summary(man: dict, out: Path, filtered: bool = True, only: list[str] |
     """One line per hand (candidates, converged, kept, pass rate) and one per pair where nothing converged;
     ``only``: the hands this run synthesised (the folder may hold others from earlier runs, named in one line)."""
     trials = int(man.get("settings", {}).get("robustness", {}).get("trials", 1))
+    max_pen = man.get("settings", {}).get("max_penetration_m")
     others = [n for n in man["hands"] if only is not None and n not in only]
     for name, entry in man["hands"].items():
         if name in others:
@@ -124,8 +125,10 @@ def print_summary(man: dict, out: Path, filtered: bool = True, only: list[str] |
             rate = c["grasps"] / max(c["solved"], 1)
             robust = (f"{c['grasps']} also passed the robustness trials" if trials > 0 else
                       "no robustness trials (--robust-trials 0)")
-            print(f"{name}: {c['candidates']} solves, {c['solved']} converged, {c.get('sim_passed', c['grasps'])} passed the filter, "
-                  f"{robust} (kept {rate:.0%} of converged) -> {out.resolve()}")
+            deep = (f" ({c['prefiltered']} sunk more than {1e3 * max_pen:g} mm into the object, not simulated)"
+                    if c.get("prefiltered") and max_pen is not None else "")
+            print(f"{name}: {c['candidates']} solves, {c['solved']} converged{deep}, {c.get('sim_passed', c['grasps'])} passed the "
+                  f"filter, {robust} (kept {rate:.0%} of converged) -> {out.resolve()}")
         else:
             print(f"{name}: {c['candidates']} solves, {c['solved']} converged, {c['grasps']} kept without the filter "
                   f"(not simulated) -> {out.resolve()}")

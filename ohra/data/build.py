@@ -71,7 +71,7 @@ def _select(resolved: list[tuple], names: list[str] | None, r: Recipe) -> list[t
     return [h for h in resolved if h[0] in set(names)]
 
 
-_COUNTS = ("pairs", "candidates", "solved", "sim_passed", "grasps", "grasps_test", "core_s", "cpu_s")
+_COUNTS = ("pairs", "candidates", "solved", "prefiltered", "sim_passed", "grasps", "grasps_test", "core_s", "cpu_s")
 
 
 def summary(path: str | Path) -> dict:
@@ -87,7 +87,7 @@ def _summarise(path: Path, man: dict) -> dict:
     for hand, entry in man["hands"].items():
         sh = entry.get("shards", {})
         row = {"hand": hand, "pairs": len(sh)}
-        for k in ("candidates", "solved", "sim_passed", "grasps"):
+        for k in ("candidates", "solved", "prefiltered", "sim_passed", "grasps"):  # prefiltered: 0 in shards made before it was recorded
             row[k] = sum(s.get(f"n_{k}", 0) for s in sh.values())
         row["grasps_test"] = sum(s.get("n_grasps", 0) for key, s in sh.items() if key in test)
         row["core_s"] = sum(s.get("timing", {}).get("total_s", 0.0) for s in sh.values())
@@ -164,6 +164,8 @@ def format_summary(s: dict) -> str:
         per_cpu = f"{r['grasps'] / (r['cpu_s'] / 3600):.0f}" if r.get("cpu_s", 0) > 0 else "-"
         lines.append(f"{r['hand']:22s} {r['pairs']:5d} {r['candidates']:7d} {r['solved']:9d} {r['sim_passed']:8d} {r['grasps']:6d} "
                      f"{rate:>9s} {r['grasps_test']:9d} {per_h:>11s} {per_cpu:>10s}")
+        if r.get("prefiltered") and r["hand"] != "total":
+            lines.append(f"  {r['prefiltered']} converged sank too deep into the object to simulate (max_penetration_m)")
         if r["no_convergence"]:
             lines.append(f"  nothing converged on: {', '.join(r['no_convergence'])}")
     unfinished = [f"{r['hand']} {r['pairs']} of {r['planned']}" for r in s["rows"] if r.get("planned") and r["pairs"] < r["planned"]]

@@ -262,7 +262,8 @@ def shard_task(task: tuple) -> dict:
     info = {
         "file": f"{name}/{shard_name(obj.name, obj.mesh_hash)}", "object": obj.describe(),
         "n_candidates": int(len(arrays["raw"])), "n_solved": int(arrays["solver_success"].sum()),
-        "n_sim_passed": int(arrays["sim_success"].sum()), "n_grasps": int(len(arrays["grasps"])), "timing": timing,
+        "n_sim_passed": int(arrays["sim_success"].sum()), "n_grasps": int(len(arrays["grasps"])),
+        "n_prefiltered": int(arrays["prefiltered"].sum()), "timing": timing,
         "sha256": hashlib.sha256(data).hexdigest()[:16],
     }
     if diagnosis:
@@ -372,7 +373,8 @@ def _finish(manifest: dict, writer: ManifestWriter) -> None:
     for entry in manifest["hands"].values():
         sh = entry["shards"].values()
         entry["counts"] = {k: sum(s.get(f"n_{k2}", 0) for s in sh) for k, k2 in
-                           (("candidates", "candidates"), ("solved", "solved"), ("sim_passed", "sim_passed"), ("grasps", "grasps"))}
+                           (("candidates", "candidates"), ("solved", "solved"), ("prefiltered", "prefiltered"),
+                            ("sim_passed", "sim_passed"), ("grasps", "grasps"))}
         core_s += sum(s["timing"]["total_s"] for s in sh)
     manifest["core_hours"] = core_s / 3600.0  # one core per shard task: the sum of shard wall times
     writer.write(manifest)
