@@ -267,3 +267,37 @@ def test_a_wrong_offset_is_named_beside_the_palm_frame_it_looks_like(hands_dir, 
     with pytest.raises(SpecError, match="point toward -z") as exc:
         _quiet_parse(turned, "base", fit_params=False)
     assert "offsets" not in str(exc.value)
+
+
+def test_a_vendor_xacro_with_find_and_args_loads_without_ros(tmp_path):
+    """A ROS description package's .xacro: `$(find pkg)` needed ament_index_python and an `$(arg ...)` could not be
+    given, so both were one-line errors with no way on. `$(find pkg)` now resolves by folder name, as package://
+    mesh paths do, and a spec's xacro_args gives the args."""
+    pkg = tmp_path / "toy_description"
+    (pkg / "urdf").mkdir(parents=True)
+    body = GOOD_URDF.replace("TIP", TIP_OK).split("\n", 2)[2].rsplit("</robot>", 1)[0]
+    (pkg / "urdf" / "toy_parts.xacro").write_text(f'<robot xmlns:xacro="http://www.ros.org/wiki/xacro">{body}</robot>')
+    driver = tmp_path / "toy_driver" / "urdf"
+    driver.mkdir(parents=True)
+    (driver / "toy.urdf.xacro").write_text(
+        '<?xml version="1.0"?>\n<robot name="toy" xmlns:xacro="http://www.ros.org/wiki/xacro">\n'
+        '  <xacro:include filename="$(find toy_description)/urdf/toy_parts.xacro"/>\n'
+        '  <link name="ip_$(arg robot_ip)"/><joint name="fixed_ip" type="fixed"><parent link="palm"/><child link="ip_$(arg robot_ip)"/></joint>\n'
+        "</robot>\n")
+    spec = tmp_path / "toy.yaml"
+    spec.write_text(SPEC.format(urdf=driver / "toy.urdf.xacro"))
+    with pytest.raises(ParseError, match=r"Undefined substitution argument robot_ip \(a spec passes <xacro:arg> values with "
+                                         r"xacro_args: \{name: value\}\)"):
+        parse(spec, "base", fit_params=False)
+    spec.write_text(SPEC.format(urdf=driver / "toy.urdf.xacro") + "xacro_args: {robot_ip: 10.0.0.2}\n")
+    res = parse(spec, "base", fit_params=False)
+    flat = parse(_toy(tmp_path, GOOD_URDF.replace("TIP", TIP_OK)), "base", fit_params=False)
+    np.testing.assert_allclose(res.params.to_vector(), flat.params.to_vector())
+    from ohra.original.urdf import find_package
+
+    assert find_package("toy_description", driver) == pkg
+    with pytest.raises(ParseError, match=r"\$\(find elsewhere\): no folder named 'elsewhere' at or above"):
+        find_package("elsewhere", driver)
+    with pytest.raises(SpecError, match=r"'xacro_args' maps a .xacro URDF's <xacro:arg> names to values"):
+        spec.write_text(SPEC.format(urdf=driver / "toy.urdf.xacro") + "xacro_args: [robot_ip]\n")
+        parse(spec, "base", fit_params=False)

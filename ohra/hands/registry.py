@@ -232,7 +232,7 @@ def load_original(name: str, hands_root: str | Path | None = None):
         raise AssetsNotFoundError(
             f"original URDF of {name!r} not found (tried {tried}); set OHRA_HANDS_ROOT to the folder holding the hand assets"
         )
-    return load_urdf(path, root_link=sp.root_link)
+    return load_urdf(path, root_link=sp.root_link, xacro_args=sp.xacro_args)
 
 
 def generate(name: str, form: str, write: bool = True):

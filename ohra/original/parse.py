@@ -140,7 +140,7 @@ def load_original_for(spec: HandSpec, hands_root: str | Path | None = None) -> O
 
         tried = ", ".join(str(c) for c in spec.urdf_candidates(hands_root))
         raise AssetsNotFoundError(f"{spec.source}: original URDF {spec.urdf!r} not found (tried {tried}; set OHRA_HANDS_ROOT)")
-    hand = load_urdf(path, root_link=spec.root_link)
+    hand = load_urdf(path, root_link=spec.root_link, xacro_args=spec.xacro_args)
     spec.check_joints(hand)
     return hand
 

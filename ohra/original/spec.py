@@ -7,6 +7,8 @@ A spec is a small YAML file (the registered hands' specs live in ``ohra/hands/sp
                                               # hand-assets root (ohra.paths.hands_root()) or absolute
     root_link: forearm                        # optional: the hand's own root in a URDF that holds an arm
                                               #   (only it and its subtree are loaded; default: the URDF's root)
+    xacro_args: {prefix: ""}                  # optional: <xacro:arg> values for a .xacro URDF ($(find pkg) is
+                                              #   resolved by folder name, as package:// mesh paths are)
     palm_origin:                              # canonical palm frame in the original root frame
       xyz: [0.01, 0.0, 0.247]                 #   metres
       rpy: [0.0, 0.0, 0.0]                    #   fixed-axis x-y-z radians (also: a flat list of 6)
@@ -99,6 +101,7 @@ class HandSpec:
     couplings: tuple[Coupling, ...] = ()  # declared in the spec (canonical slots)
     base_dir: Path | None = None  # folder of the spec file (relative urdf paths are tried here first)
     root_link: str | None = None  # the hand's own root link in a URDF that holds more (an arm); None: the URDF's root
+    xacro_args: dict[str, str] = field(default_factory=dict)  # <xacro:arg> values of a .xacro URDF
 
     # -- paths -----------------------------------------------------------------------------------
     def urdf_candidates(self, root: str | Path | None = None) -> list[Path]:

@@ -205,7 +205,7 @@ def spec_from_dict(d: Any, source: str = "<spec>", default_name: str = "hand", b
     """Build and validate a :class:`HandSpec` from a parsed YAML mapping."""
     if not isinstance(d, Mapping):
         raise SpecError(f"{source}: expected a mapping at the top level")
-    known = {"name", "urdf", "root_link", "palm_origin", "joints", "forms", "overrides", "fit", "notes", "couplings"}
+    known = {"name", "urdf", "root_link", "xacro_args", "palm_origin", "joints", "forms", "overrides", "fit", "notes", "couplings"}
     unknown = sorted(set(d) - known)
     if unknown:
         raise SpecError(f"{source}: unknown key(s) {unknown}; expected some of {sorted(known)}")
@@ -221,6 +221,11 @@ def spec_from_dict(d: Any, source: str = "<spec>", default_name: str = "hand", b
     if root_link is not None and (not isinstance(root_link, str) or not root_link):
         raise SpecError(f"{source}: 'root_link' must be a link name (the hand's own root in a URDF that holds an arm), "
                         f"got {root_link!r}")
+    xacro_args = d.get("xacro_args") or {}
+    if not isinstance(xacro_args, Mapping) or not all(isinstance(k, str) and isinstance(v, (str, int, float)) and
+                                                      not isinstance(v, bool) for k, v in xacro_args.items()):
+        raise SpecError(f"{source}: 'xacro_args' maps a .xacro URDF's <xacro:arg> names to values (strings or numbers), "
+                        f"got {xacro_args!r}")
     palm = _palm_origin(d["palm_origin"], f"{source}: palm_origin")
     shared = _slots(d["joints"], f"{source}: joints", allow_null=False)
     forms_raw = d.get("forms", {"base": {}, "extended": {}})
@@ -234,7 +239,8 @@ def spec_from_dict(d: Any, source: str = "<spec>", default_name: str = "hand", b
     samples, seed = _fit_settings(d.get("fit"), source)
     couplings = _declared_couplings(d.get("couplings"), forms, source)
     return HandSpec(name, d["urdf"], palm, forms, overrides, samples, seed, source, str(d.get("notes", "") or ""),
-                    couplings=couplings, base_dir=base_dir, root_link=root_link)
+                    couplings=couplings, base_dir=base_dir, root_link=root_link,
+                    xacro_args={str(k): str(v) for k, v in xacro_args.items()})
 
 
 def _declared_couplings(raw: Any, forms: dict[str, FormSpec], source: str) -> tuple[Coupling, ...]:

@@ -20,6 +20,7 @@ from __future__ import annotations
 import difflib
 import warnings
 import xml.etree.ElementTree as ET
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -30,18 +31,47 @@ from ohra.original.hand import KNOWN_TYPES, MOVABLE_TYPES, Geometry, Joint, Miss
 
 
 # -- loading -------------------------------------------------------------------------------------
-def read_urdf_text(path: Path) -> str:
-    """URDF text of ``path``; ``.xacro`` files are expanded with the xacro package."""
+def read_urdf_text(path: Path, xacro_args: Mapping[str, str] | None = None) -> str:
+    """URDF text of ``path``; ``.xacro`` files are expanded with the xacro package, with ``xacro_args`` as their
+    ``<xacro:arg>`` values and ``$(find pkg)`` resolved without ROS (:func:`find_package`)."""
     if not path.is_file():
         raise ParseError(f"original URDF not found: {path}")
     if path.suffix == ".xacro":
         try:
             import xacro
+            import xacro.substitution_args as subst
+        except ImportError:
+            raise ParseError(f"{path}: a .xacro URDF needs the xacro package (pip install xacro)") from None
+        ros_find = subst._eval_find
 
-            return xacro.process_file(str(path)).toxml()
+        def find(pkg: str) -> str:
+            try:
+                return ros_find(pkg)  # a ROS installation that knows the package
+            except Exception:  # no ament_index_python, or the package is not installed: look beside the file
+                return str(find_package(pkg, path.parent))
+
+        subst._eval_find = find
+        try:
+            return xacro.process_file(str(path), mappings={str(k): str(v) for k, v in (xacro_args or {}).items()}).toxml()
         except Exception as exc:
-            raise ParseError(f"{path}: xacro expansion failed: {exc}") from None
+            hint = (" (a spec passes <xacro:arg> values with xacro_args: {name: value})"
+                    if "substitution argument" in str(exc) or "arg" in type(exc).__name__.lower() else "")
+            raise ParseError(f"{path}: xacro expansion failed: {exc}{hint}") from None
+        finally:
+            subst._eval_find = ros_find
     return path.read_text(errors="replace")
+
+
+def find_package(pkg: str, start: Path) -> Path:
+    """The folder of ROS package ``pkg`` for ``$(find pkg)`` without ROS: the nearest folder named ``pkg`` at or above
+    ``start``, or a child named ``pkg`` of one of them (the layout ``package://`` mesh paths are resolved in)."""
+    for d in (start, *start.parents):
+        if d.name == pkg:
+            return d
+        if (d / pkg).is_dir():
+            return d / pkg
+    raise ParseError(f"$(find {pkg}): no folder named {pkg!r} at or above {start} (the package's folder holds the .xacro "
+                     "or lies beside one of its parent folders)")
 
 
 def _floats(text: str | None, n: int, default: float, where: str) -> np.ndarray:
@@ -90,11 +120,12 @@ def resolve_mesh_path(filename: str, urdf_dir: Path) -> Path:
     return p if p.is_absolute() else (urdf_dir / p).resolve()
 
 
-def _read_source(source: str | Path, base_dir: str | Path | None) -> tuple[Path | None, str, str, Path]:
+def _read_source(source: str | Path, base_dir: str | Path | None,
+                 xacro_args: Mapping[str, str] | None = None) -> tuple[Path | None, str, str, Path]:
     """(path or None, XML text, where-label for messages, folder that relative meshes resolve against)."""
     if isinstance(source, Path) or (isinstance(source, str) and not source.lstrip().startswith("<")):
         path = Path(source).expanduser().resolve()
-        return path, read_urdf_text(path), str(path), path.parent
+        return path, read_urdf_text(path, xacro_args), str(path), path.parent
     return None, str(source), "<urdf text>", Path(base_dir) if base_dir is not None else Path.cwd()
 
 
@@ -260,17 +291,19 @@ def _cut_below(root_elem: ET.Element, root_link: str, where: str) -> None:
             root_elem.remove(e)
 
 
-def load_urdf(source: str | Path, base_dir: str | Path | None = None, root_link: str | None = None) -> OriginalHand:
+def load_urdf(source: str | Path, base_dir: str | Path | None = None, root_link: str | None = None,
+              xacro_args: Mapping[str, str] | None = None) -> OriginalHand:
     """Load and validate an original hand URDF (path, or XML text with ``base_dir`` for meshes).
 
     ``root_link``: the hand's own root in a URDF that holds more (a hand on an arm); only that link
-    and its subtree are loaded, so link poses are in its frame.
+    and its subtree are loaded, so link poses are in its frame. ``xacro_args``: ``<xacro:arg>`` values of a
+    ``.xacro`` file (:func:`read_urdf_text`).
 
     Raises:
         ParseError: the text is not a valid single-tree ``<robot>`` (message names file and element),
             or ``root_link`` is not one of its links.
     """
-    path, text, where, urdf_dir = _read_source(source, base_dir)
+    path, text, where, urdf_dir = _read_source(source, base_dir, xacro_args)
     try:
         root_elem = ET.fromstring(text)
     except ET.ParseError as exc:
@@ -339,4 +372,4 @@ def _collect_geometry(root_elem: ET.Element, urdf_dir: Path, where: str) -> tupl
     return geoms, missing
 
 
-__all__ = ["OriginalHand", "Joint", "Geometry", "MissingMeshWarning", "load_urdf", "read_urdf_text", "resolve_mesh_path"]
+__all__ = ["OriginalHand", "Joint", "Geometry", "MissingMeshWarning", "find_package", "load_urdf", "read_urdf_text", "resolve_mesh_path"]
