@@ -55,6 +55,19 @@ def test_an_open_box_closed_by_repair_is_said_and_recorded_but_a_merely_unwelded
         can = ObjectModel(trimesh.load(objects_dir / "ycb" / "MasterChefCan" / "textured_simple_reoriented.obj", force="mesh"),
                           name="can")
     assert not can.repair_report.watertight_before and can.repair_report.filled_faces == 0
+    # a hole filled while a bigger one stays open: the mesh is still open, and only that is said
+    cyl = trimesh.creation.cylinder(radius=0.03, height=0.08, sections=24)
+    keep = cyl.triangles_center[:, 2] < 0.039  # no lid
+    side = np.flatnonzero(keep & (np.abs(cyl.triangles_center[:, 2]) < 0.03))[:1]  # and one side triangle missing
+    keep[side] = False
+    cup = trimesh.Trimesh(cyl.vertices, cyl.faces[keep], process=False)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        o = ObjectModel(cup, name="cup2")
+        o.body
+    texts = [str(w.message) for w in caught]
+    assert o.repair_report.filled_faces >= 1 and not o.repair_report.watertight
+    assert any("mesh is open" in t for t in texts) and not any("repair closed its holes" in t for t in texts), texts
 
 
 def test_a_part_saved_inside_out_is_turned_outward_with_the_others():
@@ -67,6 +80,12 @@ def test_a_part_saved_inside_out_is_turned_outward_with_the_others():
     truth = box.volume + ball.volume + can.volume
     o = ObjectModel(trimesh.util.concatenate([box, inverted, can]), "parts")
     assert o.repair_report.watertight and abs(float(o.mesh.volume)) == pytest.approx(truth, rel=1e-6)
+    # an inward-facing part inside another is a cavity's wall, not a part saved inside out: it keeps its faces
+    outer = trimesh.creation.icosphere(subdivisions=3, radius=0.05)
+    wall = trimesh.creation.icosphere(subdivisions=3, radius=0.04)
+    hollow = ObjectModel(trimesh.util.concatenate([outer, trimesh.Trimesh(wall.vertices, wall.faces[:, ::-1], process=False)]),
+                         "hollow")
+    assert float(hollow.mesh.volume) == pytest.approx(outer.volume - wall.volume, rel=1e-6)
 
 
 def test_sdf_of_a_sphere_is_accurate():

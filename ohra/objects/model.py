@@ -188,7 +188,7 @@ class ObjectModel:
         if len(self.mesh.faces) == 0:
             raise ObjectError(f"object {name!r}: mesh is empty after repair")
         rr = self.repair_report
-        if rr.filled_faces and rr.filled_area_fraction >= FILLED_AREA_NOTE:
+        if rr.filled_faces and rr.filled_area_fraction >= FILLED_AREA_NOTE and rr.watertight:  # else the open-mesh note
             # an open cup or box is closed into a solid one here, with a watertight mesh and no later note
             warnings.warn(f"object {name!r}: the mesh was open; repair closed its holes with {rr.filled_faces} face(s), "
                           f"{100 * rr.filled_area_fraction:.1f} % of the surface, so it is grasped and simulated as that "

@@ -28,6 +28,31 @@ def repair_mesh(mesh: trimesh.Trimesh) -> tuple[trimesh.Trimesh, RepairReport]:
         return _repair(mesh)
 
 
+def _turn_stray_parts_outward(m: trimesh.Trimesh) -> None:
+    """Flip, in place, each closed part that faces inward and lies inside no other part (a part saved inside out:
+    its volume counted negative). An inward part inside another is a cavity's wall and keeps its faces; a mesh with
+    no such stray part is left as it was, face order included (its hash does not change)."""
+    if m.body_count < 2:
+        return
+    groups = trimesh.graph.connected_components(m.face_adjacency, nodes=np.arange(len(m.faces)))
+    if len(groups) < 2:
+        return
+    parts = [m.submesh([g], append=True) for g in groups]
+    closed = [p.is_watertight for p in parts]
+    flip = []
+    for i, (g, p) in enumerate(zip(groups, parts)):
+        if not closed[i] or p.volume >= 0:
+            continue
+        probe = p.vertices[:1]
+        if not any(j != i and closed[j] and parts[j].volume > 0 and parts[j].contains(probe)[0] for j in range(len(parts))):
+            flip.append(g)
+    if flip:
+        faces = m.faces.copy()
+        for g in flip:
+            faces[g] = faces[g][:, ::-1]
+        m.faces = faces
+
+
 def _repair(mesh: trimesh.Trimesh) -> tuple[trimesh.Trimesh, RepairReport]:
     m = mesh.copy()
     was = bool(m.is_watertight)
@@ -43,14 +68,15 @@ def _repair(mesh: trimesh.Trimesh) -> tuple[trimesh.Trimesh, RepairReport]:
         trimesh.repair.fill_holes(m)
     filled = len(m.faces) - nf_open
     trimesh.repair.fix_winding(m)
-    trimesh.repair.fix_normals(m, multibody=True)  # each separate part outward (one inside-out part: a negative volume)
+    trimesh.repair.fix_normals(m)
     if merged is not None and not m.is_watertight:
         # dropping degenerate or duplicate faces opened a closed surface: keep the merged one
         m = merged
-        trimesh.repair.fix_normals(m, multibody=True)
+        trimesh.repair.fix_normals(m)
         removed, filled = nf - len(m.faces), 0
     if m.is_watertight and m.volume < 0:
         m.invert()
+    _turn_stray_parts_outward(m)
     note = ""
     if not m.is_watertight:
         note = ("still not watertight after repair: the object is grasped and simulated as its convex "
