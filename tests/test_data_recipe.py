@@ -296,7 +296,7 @@ def test_both_forms_of_one_spec_are_two_hands_when_one_is_given_a_name(hands_dir
     hands = Recipe.from_dict({"hands": both, "objects": ["builtin"]}).resolve_hands()
     assert [n for n, _ in hands] == ["barrett_hand", "barrett_ext"]
     assert isinstance(hands[0][1], BaseParams) and isinstance(hands[1][1], ExtendedParams)
-    for bad in ("", "a/b", 3, ".."):
+    for bad in ("", "a/b", 3, "..", ".hidden", "manifest.json", "-x", "a b"):
         with pytest.raises(RecipeError, match=r"hands\[0\]: 'name' is the hand's folder name"):
             Recipe.from_dict({"hands": [{"spec": spec, "name": bad}], "objects": ["builtin"]})
 

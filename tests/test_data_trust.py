@@ -324,8 +324,11 @@ def test_converged_grasps_left_unsimulated_for_sinking_too_deep_are_counted_and_
     man = synthesize(HAND, [ObjectModel.builtin("box")], tmp_path, SynthSettings(grasps_per_object=2, filter=False),
                      progress=False)
     shard = man["hands"]["leap_2200"]["shards"]["box"]
-    with np.load(tmp_path / shard["file"]) as d:
-        assert shard["n_prefiltered"] == int(d["prefiltered"].sum())
+    assert shard["n_prefiltered"] == 0  # no filter: nothing is left unsimulated for sinking in (all kept unsimulated)
+    filtered = synthesize(HAND, [ObjectModel.builtin("box")], tmp_path / "f", SynthSettings(grasps_per_object=2,
+                          max_penetration_m=0.0), progress=False)["hands"]["leap_2200"]["shards"]["box"]
+    with np.load(tmp_path / "f" / filtered["file"]) as d:
+        assert filtered["n_prefiltered"] == int(d["prefiltered"].sum()) >= 1  # max_penetration_m 0: any sunk finger
     man["hands"]["leap_2200"]["counts"]["prefiltered"] = 3  # as the pen's pair recorded it
     print_summary(man, tmp_path)
     assert "converged (3 sunk more than 1 mm into the object, not simulated)" in capsys.readouterr().out

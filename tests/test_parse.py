@@ -244,6 +244,10 @@ def test_the_finger_order_allows_a_cupping_finger_a_few_millimetres_inside_its_n
     spec = SimpleNamespace(form=lambda form: SimpleNamespace(slots={f"{f}_joint1": SimpleNamespace(name=f"{f}_j1") for f in
                                                                   ("thumb", "index", "middle", "ring", "little")}))
     checks._check_finger_order(measured(-0.022, -0.0195), spec, "base", "dg5f.yaml: forms.base")
+    shifted = measured(-0.022, -0.0195)  # a palm origin 27 mm off the fingers' centre line moves every y alike
+    for fm in shifted.fingers.values():
+        fm.p = {k: v - np.array([0.0, 0.027, 0.0]) for k, v in fm.p.items()}
+    checks._check_finger_order(shifted, spec, "base", "dg5f.yaml: forms.base")
     checks._check_finger_order(measured(-0.022, -0.0125), spec, "base", "dg5f.yaml: forms.base")  # 9.5 mm inside
     with pytest.raises(SpecError, match=r"ring \(base y = -22.0 mm, joint 'ring_j1'\) lies 10.5 mm farther .* than little"):
         checks._check_finger_order(measured(-0.022, -0.0115), spec, "base", "dg5f.yaml: forms.base")
@@ -298,6 +302,36 @@ def test_a_vendor_xacro_with_find_and_args_loads_without_ros(tmp_path):
     assert find_package("toy_description", driver) == pkg
     with pytest.raises(ParseError, match=r"\$\(find elsewhere\): no folder named 'elsewhere' at or above"):
         find_package("elsewhere", driver)
+    from ohra.original.spec import load_spec
+
+    spec.write_text(SPEC.format(urdf=driver / "toy.urdf.xacro") + "xacro_args: {robot_ip: 10.0.0.2, use_mock: false, n: 3}\n")
+    assert load_spec(spec).xacro_args == {"robot_ip": "10.0.0.2", "use_mock": "false", "n": "3"}  # xacro's own spelling
     with pytest.raises(SpecError, match=r"'xacro_args' maps a .xacro URDF's <xacro:arg> names to values"):
         spec.write_text(SPEC.format(urdf=driver / "toy.urdf.xacro") + "xacro_args: [robot_ip]\n")
         parse(spec, "base", fit_params=False)
+
+
+def test_xacro_expansions_in_threads_each_find_their_own_package(tmp_path):
+    """The `$(find)` fallback is set on xacro's module for the length of one expansion: two threads interleaving left
+    one's resolver in place, so a later `$(find pkg)` resolved into the other hand's folders."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    import xacro.substitution_args as subst
+
+    from ohra.original.urdf import read_urdf_text
+
+    files = []
+    for name in ("a", "b"):
+        root = tmp_path / name
+        (root / f"{name}_description").mkdir(parents=True)
+        (root / f"{name}_description" / "part.xacro").write_text(
+            f'<robot xmlns:xacro="http://www.ros.org/wiki/xacro"><link name="{name}_link"/></robot>')
+        f = root / "driver.urdf.xacro"
+        f.write_text(f'<robot name="{name}" xmlns:xacro="http://www.ros.org/wiki/xacro">'
+                     f'<xacro:include filename="$(find {name}_description)/part.xacro"/></robot>')
+        files.append((name, f))
+    before = subst._eval_find
+    with ThreadPoolExecutor(4) as pool:
+        out = list(pool.map(lambda nf: (nf[0], read_urdf_text(nf[1])), files * 12))
+    assert all(f'"{name}_link"' in text and ("b_link" if name == "a" else "a_link") not in text for name, text in out)
+    assert subst._eval_find is before

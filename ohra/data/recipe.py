@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import fnmatch
 import glob
+import re
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field, fields, replace
@@ -340,10 +341,10 @@ def _check_entry(e: Any, kinds: dict[str, tuple[str, ...]], where: str) -> None:
     for k in ("pattern", "params", "spec", "path", "glob", "procedural"):
         if k in e and not isinstance(e[k], str):
             raise RecipeError(f"{where}: '{k}' must be a string, got {e[k]!r}")
-    if "name" in e and (not isinstance(e["name"], str) or not e["name"].strip() or any(c in e["name"] for c in "/\\")
-                        or e["name"] in (".", "..")):
-        raise RecipeError(f"{where}: 'name' is the hand's folder name in the dataset (a non-empty string without '/'), "
-                          f"got {e['name']!r}")
+    if "name" in e and (not isinstance(e["name"], str) or not re.fullmatch(r"[A-Za-z0-9_][A-Za-z0-9_.-]*", e["name"])
+                        or e["name"] == "manifest.json"):
+        raise RecipeError(f"{where}: 'name' is the hand's folder name in the dataset (letters, digits, '_', '.', '-', not "
+                          f"starting with '.' or '-'), got {e['name']!r}")
     if "form" in e and e["form"] not in ("base", "extended"):
         raise RecipeError(f"{where}: 'form' must be base or extended, got {e['form']!r}")
     if "scale" in e and e["scale"] is not None and (isinstance(e["scale"], bool) or not isinstance(e["scale"], (int, float))

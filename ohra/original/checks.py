@@ -32,7 +32,7 @@ from ohra.original.spec import HandSpec
 
 ORDER_TOLERANCE = 0.010  # m: a finger base this far on the wrong side of a later finger's is out of order (the
 # registered hands keep 17-46 mm between neighbours; DG-5F's cupping little finger sits 2.5 mm inside its ring finger)
-THUMB_SIDE_MIN = 0.005  # m: a thumb base nearer the palm's x-z plane than this does not tell which side it is on
+THUMB_SIDE_MIN = 0.005  # m: a thumb base nearer the fingers' mean y than this does not tell which side it is on
 MIN_MID = 0.05  # rad: a flexion range whose middle is this close to 0 says nothing about its sign
 CURL_COS = float(np.cos(np.radians(45.0)))  # a finger curling more than 45 deg away from +x (in the x-y plane): frame turned
 TILT_COS = float(np.cos(np.radians(45.0)))  # most fingers more than 45 deg off +z: palm_origin tilted (roll / pitch)
@@ -232,11 +232,14 @@ def _check_finger_order(m: Measurement, spec: HandSpec, form: str, where: str) -
     if "thumb" not in m.fingers or not m.fingers["thumb"].slots:
         return
     th = m.fingers["thumb"]
-    y_thumb = float(th.p[th.slots[0]][1])
-    if abs(y_thumb) < THUMB_SIDE_MIN:  # Barrett, Dex3: the thumb opposes the fingers on the centre line
+    ys = {f: float(fm.p[fm.slots[0]][1]) for f in FINGERS[1:] if (fm := m.fingers.get(f)) is not None and fm.slots}
+    if len(ys) < 2:
+        return
+    # the thumb's side of the fingers, not of the palm origin: an origin set off the hand's centre line moves every y
+    y_thumb = float(th.p[th.slots[0]][1]) - float(np.mean(list(ys.values())))
+    if abs(y_thumb) < THUMB_SIDE_MIN:  # Barrett, Dex3: the thumb opposes the fingers on their centre line
         return
     side = 1.0 if y_thumb > 0 else -1.0
-    ys = {f: float(fm.p[fm.slots[0]][1]) for f in FINGERS[1:] if (fm := m.fingers.get(f)) is not None and fm.slots}
     order = [f for f in FINGERS[1:] if f in ys]
     bad = [(a, b) for i, a in enumerate(order) for b in order[i + 1:] if side * (ys[a] - ys[b]) < -ORDER_TOLERANCE]
     if not bad:

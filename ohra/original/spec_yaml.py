@@ -222,10 +222,10 @@ def spec_from_dict(d: Any, source: str = "<spec>", default_name: str = "hand", b
         raise SpecError(f"{source}: 'root_link' must be a link name (the hand's own root in a URDF that holds an arm), "
                         f"got {root_link!r}")
     xacro_args = d.get("xacro_args") or {}
-    if not isinstance(xacro_args, Mapping) or not all(isinstance(k, str) and isinstance(v, (str, int, float)) and
-                                                      not isinstance(v, bool) for k, v in xacro_args.items()):
-        raise SpecError(f"{source}: 'xacro_args' maps a .xacro URDF's <xacro:arg> names to values (strings or numbers), "
-                        f"got {xacro_args!r}")
+    if not isinstance(xacro_args, Mapping) or not all(isinstance(k, str) and isinstance(v, (str, int, float))
+                                                      for k, v in xacro_args.items()):
+        raise SpecError(f"{source}: 'xacro_args' maps a .xacro URDF's <xacro:arg> names to values (strings, numbers or "
+                        f"true/false), got {xacro_args!r}")
     palm = _palm_origin(d["palm_origin"], f"{source}: palm_origin")
     shared = _slots(d["joints"], f"{source}: joints", allow_null=False)
     forms_raw = d.get("forms", {"base": {}, "extended": {}})
@@ -240,7 +240,7 @@ def spec_from_dict(d: Any, source: str = "<spec>", default_name: str = "hand", b
     couplings = _declared_couplings(d.get("couplings"), forms, source)
     return HandSpec(name, d["urdf"], palm, forms, overrides, samples, seed, source, str(d.get("notes", "") or ""),
                     couplings=couplings, base_dir=base_dir, root_link=root_link,
-                    xacro_args={str(k): str(v) for k, v in xacro_args.items()})
+                    xacro_args={str(k): (str(v).lower() if isinstance(v, bool) else str(v)) for k, v in xacro_args.items()})
 
 
 def _declared_couplings(raw: Any, forms: dict[str, FormSpec], source: str) -> tuple[Coupling, ...]:

@@ -18,6 +18,7 @@ The model itself (:class:`OriginalHand`: frames, kinematics, geometry) lives in
 from __future__ import annotations
 
 import difflib
+import threading
 import warnings
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping
@@ -42,24 +43,33 @@ def read_urdf_text(path: Path, xacro_args: Mapping[str, str] | None = None) -> s
             import xacro.substitution_args as subst
         except ImportError:
             raise ParseError(f"{path}: a .xacro URDF needs the xacro package (pip install xacro)") from None
-        ros_find = subst._eval_find
-
-        def find(pkg: str) -> str:
-            try:
-                return ros_find(pkg)  # a ROS installation that knows the package
-            except Exception:  # no ament_index_python, or the package is not installed: look beside the file
-                return str(find_package(pkg, path.parent))
-
-        subst._eval_find = find
-        try:
-            return xacro.process_file(str(path), mappings={str(k): str(v) for k, v in (xacro_args or {}).items()}).toxml()
-        except Exception as exc:
-            hint = (" (a spec passes <xacro:arg> values with xacro_args: {name: value})"
-                    if "substitution argument" in str(exc) or "arg" in type(exc).__name__.lower() else "")
-            raise ParseError(f"{path}: xacro expansion failed: {exc}{hint}") from None
-        finally:
-            subst._eval_find = ros_find
+        with _XACRO_LOCK:  # the resolver is a module global of xacro: one expansion at a time sets and restores it
+            return _expand_xacro(xacro, subst, path, xacro_args)
     return path.read_text(errors="replace")
+
+
+_XACRO_LOCK = threading.Lock()
+
+
+def _expand_xacro(xacro, subst, path: Path, xacro_args: Mapping[str, str] | None) -> str:
+    """``path`` expanded by xacro with ``$(find pkg)`` falling back to :func:`find_package` (call under the lock)."""
+    ros_find = subst._eval_find
+
+    def find(pkg: str) -> str:
+        try:
+            return ros_find(pkg)  # a ROS installation that knows the package
+        except Exception:  # no ament_index_python, or the package is not installed: look beside the file
+            return str(find_package(pkg, path.parent))
+
+    subst._eval_find = find
+    try:
+        return xacro.process_file(str(path), mappings={str(k): str(v) for k, v in (xacro_args or {}).items()}).toxml()
+    except Exception as exc:
+        hint = (" (a spec passes <xacro:arg> values with xacro_args: {name: value})"
+                if "substitution argument" in str(exc) or "arg" in type(exc).__name__.lower() else "")
+        raise ParseError(f"{path}: xacro expansion failed: {exc}{hint}") from None
+    finally:
+        subst._eval_find = ros_find
 
 
 def find_package(pkg: str, start: Path) -> Path:

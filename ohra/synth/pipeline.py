@@ -263,7 +263,8 @@ def shard_task(task: tuple) -> dict:
         "file": f"{name}/{shard_name(obj.name, obj.mesh_hash)}", "object": obj.describe(),
         "n_candidates": int(len(arrays["raw"])), "n_solved": int(arrays["solver_success"].sum()),
         "n_sim_passed": int(arrays["sim_success"].sum()), "n_grasps": int(len(arrays["grasps"])),
-        "n_prefiltered": int(arrays["prefiltered"].sum()), "timing": timing,
+        # without the filter a prefiltered grasp is kept unsimulated like any other: only a filtered run drops it
+        "n_prefiltered": int(arrays["prefiltered"].sum()) if settings.filter else 0, "timing": timing,
         "sha256": hashlib.sha256(data).hexdigest()[:16],
     }
     if diagnosis:
