@@ -271,8 +271,9 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
 
     Args:
         model: the grasp model.
-        hands: hands as :meth:`GraspModel.sample` takes them (or one such hand); registered names only with
-            ``original=True`` or ``inertials="original"``.
+        hands: hands as :meth:`GraspModel.sample` takes them (or one such hand); with ``original=True`` or
+            ``inertials="original"`` a hand with an original URDF: a registered name, a spec YAML, or a params JSON
+            beside its spec.
         objects: objects as :func:`~ohra.learn.grasp.model.resolve_object` takes them (or one such object);
             unseen in training.
         n: grasps per pair, >= 1, each with its own uniformly random wrist rotation.
@@ -316,7 +317,8 @@ def evaluate_model(model: GraspModel, hands: Sequence[HandLike], objects: Sequen
         GraspError: ``n`` not a positive integer; ``seed`` not a whole number >= 0; ``protocol`` neither a
             Protocol nor a preset name; a hand or object given twice; no hands or no objects; an unknown ``inertials`` or
             ``collisions``; ``collisions="canonical"`` without ``original``; ``original`` or
-            ``inertials="original"`` with a hand that is not a registered name; ``workers`` not an
+            ``inertials="original"`` with a hand that has no original URDF (a LEAP variant, bare params, a params
+            JSON without its spec); ``workers`` not an
             integer >= 1; ``mirror`` none of True, False, ``"auto"``.
         ObjectError: an object cannot be resolved to one object.
         DatasetError: an object is in the model's training set (by name or mesh hash) and not
