@@ -416,6 +416,9 @@ def test_a_long_or_short_generation_is_forecast_once_and_a_quick_one_is_not(monk
     assert grasps.forecast(20, 50, 12.0, 50, 1000, 20000) is None  # 9.8 min: not said
     # a continued generation: its earlier attempts count for the rate, this run's for the time per attempt
     assert "about 1000 of 1000" not in grasps.forecast(400, 10000, 50.0, 50, 1000, 20000)
+    assert grasps.forecast(0, 50, 5.0, 50, 1000, 20000) == ("0 of 50 perturbed grasps kept so far (0 %, 0.10 s each): if none "
+                                                           "holds, the generation fails after its limit of 20000 attempts, "
+                                                           "in about 33 more minutes")
     # generate() says it once, after FORECAST_AFTER attempts of its own
     monkeypatch.setattr(grasps, "FORECAST_AFTER", 2)
     monkeypatch.setattr(grasps, "FORECAST_SECONDS", 0.0)

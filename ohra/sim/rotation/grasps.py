@@ -284,6 +284,9 @@ def forecast(kept: int, attempts: int, seconds: float, run_attempts: int, count:
     rate = f"{kept} of {attempts} perturbed grasps kept so far ({100 * kept / attempts:.0f} %, {per_attempt:.2f} s each)"
     if ends >= count:
         return f"{rate}: the {count} starting states take about {eta / 60:.0f} more minutes (cached for later uses)"
+    if kept == 0:  # generate() raises GraspGenerationError when none is kept at all
+        return (f"{rate}: if none holds, the generation fails after its limit of {max_attempts} attempts, in about "
+                f"{eta / 60:.0f} more minutes")
     return (f"{rate}: at that rate the generation stops at its limit of {max_attempts} attempts with about {ends} of "
             f"{count} starting states, in about {eta / 60:.0f} more minutes (cached for later uses); fewer states "
             "(grasp_count) end it sooner")
