@@ -137,7 +137,7 @@ class Protocol:
         row is not solved to its limit within 100 solver iterations; ``benchmarks/results/yield.md``).
         The default gain 0.3 (the survey's PyBullet prototype) closes at
         72 rad/s per rad: fingers hit the object within milliseconds and the impacts make verdicts
-        chaotic (see the synthesis notes in the README for the measured effect on robust yields).
+        chaotic (benchmarks/README.md, *Joint-drive speed*, for the measured effect on robust yields).
         """
         dt = float(overrides.get("dt", cls.dt))
         gain = dt * ISAAC_DRIVE["stiffness"] / ISAAC_DRIVE["damping"]

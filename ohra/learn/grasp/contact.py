@@ -1,7 +1,7 @@
 """Finger-object penetration as a differentiable training term for the joint network.
 
 The joint network is trained by regression on the data's joints, given the data's palm pose. Its
-errors (0.12-0.19 rad RMS on unseen objects, README *Grasp model*) sink fingers into the object:
+errors (0.12-0.19 rad RMS on unseen objects, benchmarks/README.md *Where the loss is*) sink fingers into the object:
 the shipped model's deepest finger starts 6-8 mm inside, the data's 0.5 mm, and a sunk finger is
 pushed out in simulation with an impulse that knocks the object away. This term penalises that
 directly: for the predicted joints (clamped to the hand's limits) at the grasp's palm pose, points
