@@ -94,3 +94,36 @@ def test_the_cli_names_the_hand_as_the_user_gave_it_on_one_line(tmp_path, capsys
     assert len(lines) == 1 and lines[0].startswith(f"ohra: warning: hand '{ABILITY}'")
     assert main(["grasp", "sample", "--hand", "barrett_hand", "--object", "builtin:box", "-n", "2", "-o", str(out)]) == 0
     assert "outside the hands" not in capsys.readouterr().err
+
+
+def test_a_hand_of_your_own_that_the_model_trained_on_is_not_called_unseen(tmp_path, capsule):
+    """The training hands were looked up again by name, so a hand from a params file (no registered name) was
+    dropped: the model called its own training hand unseen, and a model trained only on such hands never warned
+    nor mirrored. Training now records the hands' condition vectors."""
+    import dataclasses
+    import json
+    import shutil
+
+    from grasp_fixtures import tiny_model_config, tiny_train_config, write_dataset
+
+    from ohra.hands import get_hand
+    from ohra.learn.grasp.train import train_grasp
+
+    root = write_dataset(tmp_path / "d", hands=("allegro_hand_left", "shadow_hand_right"))
+    shadow = get_hand("shadow_hand_right")
+    mine = dataclasses.replace(shadow, finger_lengths=np.asarray(shadow.finger_lengths) * 1.15,
+                               palm_radius=shadow.palm_radius * 0.9)
+    man = json.loads((root / "manifest.json").read_text())
+    entry = man["hands"].pop("shadow_hand_right")
+    entry["params"] = mine.to_dict()
+    for sh in entry["shards"].values():
+        sh["file"] = sh["file"].replace("shadow_hand_right/", "my_shadow/")
+    man["hands"]["my_shadow"] = entry
+    shutil.move(root / "shadow_hand_right", root / "my_shadow")
+    (root / "manifest.json").write_text(json.dumps(man))
+    model = train_grasp(root, tiny_model_config(condition="params"), tiny_train_config(steps=1), progress=False).model
+    for own in (mine, "allegro_hand_left"):  # recorded in float32: within rounding of its own condition
+        worst, count = model.support(own)
+        assert count == 0 and worst < 1e-6
+    assert model.support("shadow_hand_right")[1] > 0  # the registered Shadow is not the hand it trained on
+    assert _support_warnings(model, mine, capsule) == []

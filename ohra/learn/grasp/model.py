@@ -507,8 +507,15 @@ class GraspModel:
         return image.params, image.signs, (image.params if cond_params is params else mirror_params(cond_params).params)
 
     def _training_conditions(self) -> np.ndarray | None:
-        """(H, dim) condition vectors of the training hands named in ``meta["hands"]`` that resolve here."""
+        """(H, dim) condition vectors of the training hands: as training recorded them (``meta["train_conditions"]``),
+        else (models saved before it did) those of the hands named in ``meta["hands"]`` that resolve here."""
         if "_train_conditions" not in self._cache:
+            recorded = self.meta.get("train_conditions") if isinstance(self.meta, dict) else None
+            if recorded:
+                table = np.asarray(recorded, dtype=float)
+                if table.ndim == 2 and table.shape[1] == self.condition.dim:
+                    self._cache["_train_conditions"] = table
+                    return table
             rows = []
             for name in (self.meta.get("hands") or []) if isinstance(self.meta, dict) else []:
                 try:

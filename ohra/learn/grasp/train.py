@@ -228,8 +228,11 @@ def _prepare(spec: RunSpec, paths: list, ckpt_path: Path | None, resume: bool,
     net = net.to(device)
     opt = torch.optim.Adam(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     summary = td.summary()
+    # the training hands' own condition vectors: a hand from a params file has no name to resolve later (a model
+    # trained on it took it for unseen), and a file named like a registered hand would resolve to that one
     meta = {"hands": td.hands, "data": spec.data, "data_digest": digest,
-            **{k: summary[k] for k in ("train_objects", "test_objects", "per_hand")}}
+            **{k: summary[k] for k in ("train_objects", "test_objects", "per_hand")},
+            "train_conditions": [[float(v) for v in row] for row in tables[0].numpy()]}
     terms = loss_terms(cfg)
     contact = ContactTerm.for_data(td, cfg, t_scale) if cfg.penetration_weight > 0 or cfg.contact_weight > 0 else None
     state = _State(td, GraspModel(net, cond, t_scale, model_cfg, meta), opt, tables,
