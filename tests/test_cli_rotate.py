@@ -362,3 +362,29 @@ def test_eval_of_a_run_stopped_before_its_end_names_its_last_checkpoint(tmp_path
     assert main(["eval", str(run), "--episodes", "1", "-o", str(tmp_path / "ev")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no trained policy at" in err and "--checkpoint last" in err
+
+
+def test_resume_takes_the_params_file_the_run_was_started_with(tmp_path, capsys, monkeypatch):
+    """`ohra rotate train --hand hands/mine.json ... --resume`, the command the interruption message asks for, was
+    refused: the run names its own copy of the file, so the paths differed. The same hand in the file is the run's."""
+    import dataclasses
+
+    import ohra.learn.rl.train as rl_train
+    from ohra.hands import get_hand
+
+    calls = []
+    monkeypatch.setattr(rl_train, "train_rotation", lambda env_cfg, ppo, out, resume=False, verbose=0, tensorboard=False, init_from=None:
+                        calls.append(env_cfg) or out)
+    (tmp_path / "hands").mkdir()
+    mine = tmp_path / "hands" / "mine.json"
+    p = get_hand("leap_3333")
+    mine.write_text(p.to_json())
+    monkeypatch.chdir(tmp_path)
+    run = str(_saved_run(tmp_path, hand="hands/mine.json"))
+    assert main(["train", "-o", run, "--resume", "--hand", "hands/mine.json", "--steps", "4096"]) == 0, capsys.readouterr().err
+    assert main(["train", "-o", run, "--resume", "--hand", str(mine), "--steps", "4096"]) == 0
+    other = tmp_path / "hands" / "other" / "mine.json"
+    other.parent.mkdir()
+    other.write_text(dataclasses.replace(p, palm_radius=p.palm_radius * 1.1).to_json())
+    assert main(["train", "-o", run, "--resume", "--hand", str(other), "--steps", "4096"]) == 2
+    assert "hand: run " in capsys.readouterr().err and len(calls) == 2

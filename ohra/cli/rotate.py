@@ -234,6 +234,23 @@ def _given_ppo(args: argparse.Namespace) -> dict[str, Any]:
     return {field: getattr(args, opt) for opt, field in _PPO_OPTIONS if getattr(args, opt) is not None}
 
 
+def _same_hand_file(given: str, run: str) -> bool:
+    """Whether ``given`` and ``run`` are hand files (params JSON or spec YAML) holding the same canonical hand."""
+    import numpy as np
+
+    from ohra.errors import OhraError
+    from ohra.hands import get_hand
+
+    a, b = Path(given).expanduser(), Path(run)
+    if not (a.is_file() and b.is_file() and a.suffix == b.suffix):
+        return False
+    try:
+        pa, pb = get_hand(str(a)), get_hand(str(b))
+    except OhraError:
+        return False
+    return type(pa) is type(pb) and np.array_equal(pa.to_vector(), pb.to_vector())
+
+
 def _same_as_run(args: argparse.Namespace, env_cfg, ppo, out: Path, extra: dict[str, Any]) -> None:
     """On --resume, refuse environment or PPO options (``extra``: the --ppo and --policy ones) that differ from
     the run's (they would be ignored); repeating the run's own options is fine, and the budget (--steps,
@@ -246,6 +263,8 @@ def _same_as_run(args: argparse.Namespace, env_cfg, ppo, out: Path, extra: dict[
         if (isinstance(mine[k], str) and Path(str(theirs[k])).is_absolute() and Path(mine[k]).expanduser().exists()
                 and Path(mine[k]).expanduser().resolve() == Path(theirs[k]).resolve()):
             mine[k] = theirs[k]
+    if isinstance(mine["hand"], str) and mine["hand"] != theirs["hand"] and _same_hand_file(mine["hand"], str(theirs["hand"])):
+        mine["hand"] = theirs["hand"]  # the run keeps its own copy of a params file: the file given is that hand
     diff = [f"{k}: run {theirs[k]!r}, given {mine[k]!r}" for k in mine if mine[k] != theirs[k]]
     run_ppo = ppo.to_dict()
     given = PPOSettings.from_dict({**run_ppo, **_given_ppo(args), **extra}, "command line (--ppo)").to_dict()
