@@ -316,3 +316,15 @@ def test_a_key_given_twice_in_a_recipe_file_is_named(tmp_path):
         Recipe.load(f)
     f.write_text("hands: [{pattern: 'leap_*', digit_sum: 11}]\nobjects: [builtin:sphere]\n")  # nested mappings still load
     assert Recipe.load(f).hands == [{"pattern": "leap_*", "digit_sum": 11}]
+
+
+def test_info_names_recipe_hands_with_no_pairs_yet(tmp_path):
+    """A build of some hands (--hands) or one interrupted before it reached a hand said nothing of the others: only
+    hands with pairs were compared with the plan."""
+    path = tmp_path / "two.yaml"
+    path.write_text(TINY.replace("hands: [leap_2200]", "hands: [leap_2200, leap_2020]"))
+    build(path, tmp_path / "ds", progress=False, hands=["leap_2200"])
+    text = format_summary(summary(tmp_path / "ds"))
+    assert "incomplete: leap_2020 0 of 3 objects" in text and "leap_2200 " in text
+    build(path, tmp_path / "ds", progress=False, resume=True)
+    assert "incomplete" not in format_summary(summary(tmp_path / "ds"))

@@ -52,11 +52,13 @@ def build(recipe: Recipe | str | Path, out: str | Path | None = None, workers: i
     from ohra.synth.pipeline import synthesize
 
     r = recipe if isinstance(recipe, Recipe) else Recipe.load(recipe)
-    hands = _select(r.resolve_coupled_hands(), hands, r)  # coupled hands keep their couplings
+    every = r.resolve_coupled_hands()  # coupled hands keep their couplings
+    hands = _select(every, hands, r)
     objects = r.resolve_objects()
     settings = r.synth_settings()
     split = r.split_objects(object_keys(objects))
-    header = {"recipe": r.to_dict(), "split": split}
+    # every hand of the recipe, built here or not (--hands): ohra data info names the ones with no pairs yet
+    header = {"recipe": r.to_dict(), "split": split, "recipe_hands": [h[0] for h in every]}
     return synthesize(hands, objects, Path(out) if out else Path("out") / r.name, settings, workers=workers, resume=resume,
                       progress=progress, overwrite=overwrite, backend=backend, address=address, header=header)
 
@@ -96,7 +98,8 @@ def _summarise(path: Path, man: dict) -> dict:
         row["planned"] = planned or None  # None: not a recipe build, no plan to compare with
         rows.append(row)
     total = {k: sum(r[k] for r in rows) for k in _COUNTS}
-    return {"path": str(path), "format": man.get("format"), "ohra_version": man.get("ohra_version"),
+    unbuilt = [h for h in man.get("recipe_hands", []) if h not in man["hands"]] if planned else []
+    return {"path": str(path), "format": man.get("format"), "unbuilt": unbuilt, "planned": planned or None, "ohra_version": man.get("ohra_version"),
             "settings_digest": man.get("settings_digest"), "recipe": (man.get("recipe") or {}).get("name"),
             "core_hours": man.get("core_hours", total["core_s"] / 3600.0), "cpu_hours": total["cpu_s"] / 3600.0, "split": {"train": len(split.get("train", [])), "test": len(test)},
             "objects": len(_object_keys(man)), "rows": rows, "total": total}
@@ -169,6 +172,7 @@ def format_summary(s: dict) -> str:
         if r["no_convergence"]:
             lines.append(f"  nothing converged on: {', '.join(r['no_convergence'])}")
     unfinished = [f"{r['hand']} {r['pairs']} of {r['planned']}" for r in s["rows"] if r.get("planned") and r["pairs"] < r["planned"]]
+    unfinished += [f"{h} 0 of {s['planned']}" for h in s.get("unbuilt", [])]  # a recipe hand not reached or left out
     if unfinished:  # an interrupted build looked like a small finished one
         lines.append(f"incomplete: {'; '.join(unfinished)} objects (the same build with --resume finishes it)")
     return "\n".join(lines)
