@@ -373,6 +373,8 @@ def test_cli_bad_input_is_one_line_and_exit_2(vae, tmp_path, capsys):
     wrong_form = tmp_path / "ext.json"
     wrong_form.write_text(json.dumps(d))
     cases.append((["vae", "encode", str(wrong_form)], "the morphology VAE works on base-form params"))  # not "ask for the extended form"
+    # which of two hands it is (the message named no hand)
+    cases.append((["vae", "encode", "shadow_hand_right", str(wrong_form)], f"hand '{wrong_form}': the morphology VAE works"))
     (tmp_path / "empty.npy").write_bytes(b"")
     (tmp_path / "afile").write_text("x")
     z = ",".join(["0.1"] * vae.latent_dim)

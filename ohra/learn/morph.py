@@ -60,7 +60,10 @@ def resolve_hand(hand: HandLike) -> BaseParams:
     from ohra.hands import get_hand
 
     if Path(str(hand)).suffix == ".json":  # a file's own form: as_base names the VAE's need if it has no base form
-        return as_base(get_hand(str(hand)))
+        try:
+            return as_base(get_hand(str(hand)))
+        except ParamsError as exc:
+            raise ParamsError(f"hand {str(hand)!r}: {exc}") from None  # two hands to encode: which one
     return as_base(get_hand(str(hand), "base"))
 
 
