@@ -318,6 +318,9 @@ def test_a_resume_with_no_step_left_keeps_the_training_time(dataset, tmp_path):
     again = train_grasp(dataset, tiny_model_config(), tiny_train_config(), tmp_path / "r", resume=True, progress=False).metrics
     assert again["steps_this_run"] == 0
     assert again["train_seconds_total"] == first["train_seconds_total"] == first["history"][-1]["elapsed_s"]
+    assert again["train_seconds_this_run"] == 0.0
+    # both to the last step (this run's seconds counted the final checkpoint too: 4.34 s against a total of 4.32 s)
+    assert 0 < first["train_seconds_this_run"] <= first["train_seconds_total"]
 
 
 def test_a_run_another_process_is_training_is_refused_and_left_alone(dataset, tmp_path):

@@ -345,8 +345,10 @@ def train_grasp(data: str | Path | Sequence[str | Path], model_cfg: GraspModelCo
         seconds = _loop(st, spec, ckpt_path, progress, on_step)
         n_steps, h = cfg.steps - first, st.history
         metrics: dict[str, Any] = {
-            "steps": cfg.steps, "steps_this_run": n_steps, "train_seconds_this_run": seconds,
-            # time to the last step over all sessions (as the history records it: a resume with no step left adds 0)
+            # both to the last step, as the history records it (the final checkpoint's write after it is in neither,
+            # so this run's seconds never exceed the total; a resume with no step left adds 0)
+            "steps": cfg.steps, "steps_this_run": n_steps,
+            "train_seconds_this_run": (float(h[-1]["elapsed_s"]) - before if h else seconds) if n_steps > 0 else 0.0,
             "train_seconds_total": float(h[-1]["elapsed_s"]) if h else before + seconds,
             "steps_per_s": n_steps / seconds if seconds > 0 and n_steps else None,
             "grasps_per_s": n_steps * cfg.batch_size / seconds if seconds > 0 and n_steps else None,
