@@ -846,3 +846,25 @@ def test_a_finished_runs_torn_files_are_mended_on_resume_and_never_evaluated_hal
     train_rotation(env_cfg, with_budget(ppo, total_steps=48), run, resume=True)
     assert list(read_progress(run)["timesteps"]) == [24, 48]
     Policy(run)
+
+
+def test_curves_start_where_every_run_has_data_and_one_seed_twice_is_not_two_seeds(tmp_path):
+    """`ohra rotate plot mine=RUN,RUN_RESUMED` said "2 seeds" of one seed, and drew each curve flat from step 0 to
+    the first finished episode (np.interp holds the first value)."""
+    import json
+
+    from ohra.learn.rl.plots import _runs_label, mean_std_curve
+
+    def run(name: str, seed: int, first: int) -> Path:
+        d = tmp_path / name
+        d.mkdir()
+        (d / "config.json").write_text(json.dumps({"env": {}, "ppo": {"seed": seed}}))
+        rows = ["timesteps,ep_reward_mean"] + [f"{t},{'' if t < first else t / 1000}" for t in range(0, 4097, 256)]
+        (d / "progress.csv").write_text("\n".join(rows) + "\n")
+        return d
+
+    a, b, c = run("a", 0, 512), run("b", 0, 768), run("c", 1, 512)
+    grid, mean, _ = mean_std_curve([a, b], window=1)
+    assert grid[0] == 768 and grid[-1] == 4096 and mean[0] == pytest.approx(0.768)
+    assert _runs_label([a]) == "1 seed" and _runs_label([a, c]) == "2 seeds" and _runs_label([a, b]) == "2 runs, seed 0"
+    assert _runs_label([a, b, c]) == "3 runs, seeds 0, 1"

@@ -58,10 +58,29 @@ def mean_std_curve(runs: list[str | Path], key: str = "ep_reward_mean", x: str =
             raise CheckpointError(f"{Path(r) / 'progress.csv'} has no value of {key!r} yet ({len(ok)} rows, all empty: "
                                   "no episode has ended); plot it once the run has trained longer")
         curves.append((p[x][ok], smooth(p[key], window)[ok]))
-    end = min(c[0][-1] for c in curves)
-    grid = np.linspace(0.0, end, points)
+    # where every run has data: before a run's first finished episode np.interp would draw its first value flat
+    start, end = max(c[0][0] for c in curves), min(c[0][-1] for c in curves)
+    grid = np.linspace(start, max(end, start), points)
     Y = np.array([np.interp(grid, cx, cy) for cx, cy in curves])
     return grid, Y.mean(axis=0), Y.std(axis=0)
+
+
+def _runs_label(runs: list[str | Path]) -> str:
+    """'1 seed', 'k seeds' when the runs' PPO seeds (``config.json``) differ, else 'k runs' (one seed twice is not two)."""
+    import json
+
+    seeds = []
+    for r in runs:
+        try:
+            seeds.append(json.loads((Path(r) / "config.json").read_text())["ppo"]["seed"])
+        except (OSError, ValueError, KeyError, TypeError):
+            seeds.append(None)
+    if len(runs) == 1:
+        return "1 seed"
+    if None not in seeds and len(set(seeds)) == len(seeds):
+        return f"{len(runs)} seeds"
+    known = sorted({s for s in seeds if s is not None})
+    return f"{len(runs)} runs" + (f", seed{'s' if len(known) > 1 else ''} {', '.join(map(str, known))}" if known else "")
 
 
 def reward_curves(groups: dict[str, list[str | Path]], path: str | Path, key: str = "ep_reward_mean",
@@ -75,7 +94,7 @@ def reward_curves(groups: dict[str, list[str | Path]], path: str | Path, key: st
     ax = fig.subplots()
     for label, runs in groups.items():
         g, m, s = mean_std_curve(runs, key, x)
-        ax.plot(g, m, label=f"{label} ({len(runs)} seed{'s' if len(runs) > 1 else ''})")
+        ax.plot(g, m, label=f"{label} ({_runs_label(runs)})")
         ax.fill_between(g, m - s, m + s, alpha=0.25)
     ax.set_xlabel({"timesteps": "environment steps", "wall_s": "wall-clock seconds"}.get(x, x))
     ax.set_ylabel({"ep_reward_mean": "episode return", "rotation_mean": "rotation per episode [rad]",
@@ -94,7 +113,7 @@ def reward_curves(groups: dict[str, list[str | Path]], path: str | Path, key: st
 
 def table3(rows: dict[str, dict], budget: str) -> str:
     """Markdown table: label -> ``EvalResult.summary()``-like dict, with the training budget stated."""
-    lines = [f"| policy | Steps-to-Fall (of 400) | Cumulative Rotation [rad] | survived | budget |",
+    lines = ["| policy | Steps-to-Fall (of 400) | Cumulative Rotation [rad] | survived | budget |",
              "|---|---|---|---|---|"]
     for label, s in rows.items():
         lines.append(f"| {label} | {s['steps_to_fall_mean']:.1f} +- {s['steps_to_fall_std']:.1f} | "
