@@ -96,23 +96,21 @@ def test_the_cli_names_the_hand_as_the_user_gave_it_on_one_line(tmp_path, capsys
     assert "outside the hands" not in capsys.readouterr().err
 
 
-def test_a_hand_of_your_own_that_the_model_trained_on_is_not_called_unseen(tmp_path, capsule):
-    """The training hands were looked up again by name, so a hand from a params file (no registered name) was
-    dropped: the model called its own training hand unseen, and a model trained only on such hands never warned
-    nor mirrored. Training now records the hands' condition vectors."""
+def _own_shadow_dataset(root: Path, scale_palm: float = 0.9):
+    """The fixture dataset with Shadow replaced by a hand of one's own (longer fingers, smaller palm), as a params
+    file would give it: named my_shadow, no registered name."""
     import dataclasses
     import json
     import shutil
 
-    from grasp_fixtures import tiny_model_config, tiny_train_config, write_dataset
+    from grasp_fixtures import write_dataset
 
     from ohra.hands import get_hand
-    from ohra.learn.grasp.train import train_grasp
 
-    root = write_dataset(tmp_path / "d", hands=("allegro_hand_left", "shadow_hand_right"))
+    write_dataset(root, hands=("allegro_hand_left", "shadow_hand_right"))
     shadow = get_hand("shadow_hand_right")
     mine = dataclasses.replace(shadow, finger_lengths=np.asarray(shadow.finger_lengths) * 1.15,
-                               palm_radius=shadow.palm_radius * 0.9)
+                               palm_radius=shadow.palm_radius * scale_palm)
     man = json.loads((root / "manifest.json").read_text())
     entry = man["hands"].pop("shadow_hand_right")
     entry["params"] = mine.to_dict()
@@ -121,6 +119,35 @@ def test_a_hand_of_your_own_that_the_model_trained_on_is_not_called_unseen(tmp_p
     man["hands"]["my_shadow"] = entry
     shutil.move(root / "shadow_hand_right", root / "my_shadow")
     (root / "manifest.json").write_text(json.dumps(man))
+    return mine
+
+
+def test_vae_conditioned_training_names_a_training_hand_outside_the_vaes_support(tmp_path):
+    """`ohra vae encode` warned that the hand's palm radius lies outside the VAE's range; training a VAE-conditioned
+    grasp model on the same hand said nothing."""
+    from grasp_fixtures import tiny_model_config, tiny_train_config
+
+    from ohra.learn.grasp.train import train_grasp
+
+    _own_shadow_dataset(tmp_path / "d")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        train_grasp(tmp_path / "d", tiny_model_config(), tiny_train_config(steps=1), progress=False)
+    said = [str(w.message) for w in caught if issubclass(w.category, OutOfSupportWarning)]
+    assert len(said) == 1 and said[0].startswith("training hand 'my_shadow' lies outside the hands the VAE was trained on")
+    assert "palm_radius" in said[0]
+
+
+def test_a_hand_of_your_own_that_the_model_trained_on_is_not_called_unseen(tmp_path, capsule):
+    """The training hands were looked up again by name, so a hand from a params file (no registered name) was
+    dropped: the model called its own training hand unseen, and a model trained only on such hands never warned
+    nor mirrored. Training now records the hands' condition vectors."""
+    from grasp_fixtures import tiny_model_config, tiny_train_config
+
+    from ohra.learn.grasp.train import train_grasp
+
+    root = tmp_path / "d"
+    mine = _own_shadow_dataset(root)
     model = train_grasp(root, tiny_model_config(condition="params"), tiny_train_config(steps=1), progress=False).model
     for own in (mine, "allegro_hand_left"):  # recorded in float32: within rounding of its own condition
         worst, count = model.support(own)

@@ -62,9 +62,29 @@ def _tables(cond: HandCondition, data: TrainingData) -> tuple[torch.Tensor, torc
         except ParamsError as exc:  # the condition's sampling advice does not fit training: name the hand and the option
             raise GraspConfigError(f"training hand {name!r} cannot be {cond.kind}-conditioned ({str(exc).split(';')[0]}); "
                                    "train with condition='params' (--condition params) or hold the hand out") from None
+    if cond.kind == "vae":
+        _warn_outside_vae(cond, data)
     hand = torch.from_numpy(np.stack(rows).astype(np.float32))
     present = torch.from_numpy(np.stack([p.present_joints for p in data.params]))
     return hand, present
+
+
+def _warn_outside_vae(cond: HandCondition, data: TrainingData) -> None:
+    """Name each training hand outside the VAE's training support (as ``ohra vae encode`` does): its latent, the
+    condition the model learns it by, may not tell it from the hands the VAE knows."""
+    import warnings
+
+    from ohra.errors import user_stacklevel
+    from ohra.learn.encoding import OutOfSupportWarning
+    from ohra.learn.sampler import support_violations
+
+    for name, p in zip(data.hands, data.params):
+        why = support_violations(cond.vae_form(p))
+        if why:
+            warnings.warn(f"training hand {name!r} lies outside the hands the VAE was trained on ({'; '.join(why[:3])}"
+                          f"{f'; and {len(why) - 3} more' if len(why) > 3 else ''}): its latent condition may not tell it "
+                          "from them (condition='params', --condition params, conditions on the parameters instead)",
+                          OutOfSupportWarning, stacklevel=user_stacklevel())
 
 
 def torch_device(name: str) -> torch.device:
