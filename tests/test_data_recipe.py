@@ -328,3 +328,25 @@ def test_info_names_recipe_hands_with_no_pairs_yet(tmp_path):
     assert "incomplete: leap_2020 0 of 3 objects" in text and "leap_2200 " in text
     build(path, tmp_path / "ds", progress=False, resume=True)
     assert "incomplete" not in format_summary(summary(tmp_path / "ds"))
+
+
+def test_a_file_hand_under_a_registered_name_must_be_that_hand(tmp_path):
+    """hands2/shadow_hand_right.json holding other parameters built a dataset hand called shadow_hand_right, which
+    every later use of the name read as the registered Shadow hand."""
+    import dataclasses
+
+    from ohra.hands import get_hand
+
+    shadow = get_hand("shadow_hand_right")
+    (tmp_path / "same").mkdir()
+    (tmp_path / "same" / "shadow_hand_right.json").write_text(shadow.to_json())
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "shadow_hand_right.json").write_text(dataclasses.replace(shadow, palm_radius=shadow.palm_radius * 0.9).to_json())
+    ok = Recipe.from_dict({"hands": [str(tmp_path / "same" / "shadow_hand_right.json")], "objects": ["builtin"]}, "r.yaml")
+    assert [n for n, _ in ok.resolve_hands()] == ["shadow_hand_right"]
+    mine = str(tmp_path / "mine" / "shadow_hand_right.json")
+    with pytest.raises(RecipeError, match=r"r.yaml: hands\[0\]: the hand is named 'shadow_hand_right', a registered hand, but "
+                                          r"holds other parameters; give it its own name \(name: my_shadow_hand_right\)"):
+        Recipe.from_dict({"hands": [mine], "objects": ["builtin"]}, "r.yaml").resolve_hands()
+    named = Recipe.from_dict({"hands": [{"params": mine, "name": "my_shadow"}], "objects": ["builtin"]}, "r.yaml")
+    assert [n for n, _ in named.resolve_hands()] == ["my_shadow"]

@@ -230,9 +230,12 @@ class Recipe:
             from ohra.canonical.couplings import read_couplings
 
             p = self._path(h["params"])
-            return [(h.get("name", p.stem), get_hand(str(p)), read_couplings(p))]
+            name, params = h.get("name", p.stem), get_hand(str(p))
+            _check_not_a_registered_name(name, params, where)
+            return [(name, params, read_couplings(p))]
         if "spec" in h:
             name, params, couplings = _hand_from_spec(self._path(h["spec"]), h.get("form", "extended"), where)
+            _check_not_a_registered_name(h.get("name", name), params, where)
             return [(h.get("name", name), params, couplings)]
         names = [n for n in list_hands(include_variants=True) if fnmatch.fnmatchcase(n, h["pattern"])]
         if "digit_sum" in h:
@@ -391,6 +394,24 @@ def _range(v: Any, where: str) -> tuple[int, int]:
             raise RecipeError(f"{where}: [min, max] with min > max: {v!r}")
         return v[0], v[1]
     raise RecipeError(f"{where}: expected an integer or [min, max], got {v!r}")
+
+
+def _check_not_a_registered_name(name: str, params: Any, where: str) -> None:
+    """Refuse a file's hand under a registered hand's name unless it is that hand (in one of its forms): the dataset
+    keys hands by name, and every later use of the name (ohra eval --hand, rotation, a model's training hands) would
+    read the registered hand."""
+    from ohra.hands import get_hand
+    from ohra.hands.registry import registered_forms, registered_hands
+
+    if name not in registered_hands():
+        return
+    for form in registered_forms(name):
+        theirs = get_hand(name, form)  # a fresh fit of the registered spec lands within ~0.5 mm of it (BLAS builds)
+        if type(theirs) is type(params) and np.allclose(theirs.to_vector(), params.to_vector(), atol=1e-3):
+            return
+    raise RecipeError(f"{where}: the hand is named {name!r}, a registered hand, but holds other parameters; give it "
+                      f"its own name (name: my_{name}): a dataset keys its hands by name, and the name would read the "
+                      "registered hand everywhere else")
 
 
 @contextmanager
