@@ -240,9 +240,13 @@ def test_auto_never_mirrors_when_no_training_hand_resolves(models):
     import copy
 
     m = copy.copy(models["params"])
-    m.meta = {**m.meta, "hands": ["/gone/hand.json"]}
+    # a model saved before training recorded its hands' conditions, whose hands no longer resolve by name
+    m.meta = {**{k: v for k, v in m.meta.items() if k != "train_conditions"}, "hands": ["/gone/hand.json"]}
     m._cache = {}
     assert not m.mirrors("shadow_hand_left")
+    # a model that recorded them mirrors by them, whatever its hands were called
+    m.meta, m._cache = {**models["params"].meta, "hands": ["/gone/hand.json"]}, {}
+    assert m.mirrors("shadow_hand_left")  # trained on shadow_hand_right
 
 
 def test_the_shipped_models_mirror_left_twins_of_their_training_hands():
