@@ -36,6 +36,13 @@ def check_solid(mesh: trimesh.Trimesh, label: str) -> None:
     flat sheet is caught as well as an axis-aligned one.
     """
     v = np.asarray(mesh.vertices, dtype=float)
+    if len(mesh.faces):
+        used = np.unique(np.asarray(mesh.faces))
+        bad = used[~np.isfinite(v[used]).all(axis=1)]
+        if len(bad):  # an SVD of them failed with numpy's LinAlgError; a vertex no face uses is dropped by repair
+            raise ObjectError(f"object {label!r}: {len(bad)} vertices used by its faces are not finite numbers (NaN or "
+                              f"infinity), e.g. vertex {int(bad[0])}; fix or remove them in the mesh file")
+        v = v[used]
     if len(v) < 4 or len(mesh.faces) < 2:
         raise ObjectError(f"object {label!r}: {len(mesh.faces)} face(s) and {len(v)} vertices span no volume; "
                           "a graspable object needs a closed surface")
