@@ -295,3 +295,25 @@ def test_eval_takes_the_protocol_preset_as_grasp_eval_does_and_its_flag_means_th
     assert protocol_of(parsed("--protocol", preset)) == Protocol.preset(preset)
     if preset != "reference":
         assert protocol_of(parsed(f"--{preset}")) == Protocol.preset(preset)
+
+
+def test_a_shard_of_a_scaled_or_chosen_body_is_evaluated_as_it_was_made_by_any_path_to_its_file(tmp_path, capsys, monkeypatch):
+    """A shard of a centimetre mesh made with --scale 0.01 was evaluated on the 9 m box unless --scale was given again
+    (the manifest records it), and a grasp file's recorded scale was applied only when --object was the same string
+    (an absolute path to the same file got the 9 m box)."""
+    import trimesh
+
+    from ohra.cli.synth import main as synth
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "objs").mkdir()
+    trimesh.creation.box(extents=(5.0, 6.0, 9.0)).export(tmp_path / "objs" / "box_cm.stl")  # centimetres
+    assert synth(["--hand", "leap_3303", "--objects", "objs/box_cm.stl", "--scale", "0.01", "--grasps-per-object", "1",
+                  "--robust-trials", "0", "--no-filter", "-o", "d", "--quiet"]) == 0
+    shard = str(next((tmp_path / "d" / "leap_3303").glob("box_cm-*.npz")))
+    capsys.readouterr()
+    for given in ("objs/box_cm.stl", str(tmp_path / "objs" / "box_cm.stl")):
+        assert main(["eval", shard, "--hand", "leap_3303", "--object", given]) == 0
+        err = capsys.readouterr().err
+        assert f"--scale 0.01 from {shard} (the scale its grasps were synthesised at)" in err, err
+        assert "holds grasps of" not in err and "m across" not in err

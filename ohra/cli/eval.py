@@ -145,9 +145,29 @@ def _shard_info(path: Path) -> dict[str, str]:
     except (ValueError, KeyError, TypeError, StopIteration, OSError):
         return {}  # not a shard this manifest lists: nothing to compare
     form = "extended" if "finger_radii" in entry.get("params", {}) else "base"
-    return {"hand": path.parent.name, "form": form, "object_name": str(obj["name"]), "object_hash": str(obj["mesh_hash"]),
-            "body_hash": str(obj.get("body_hash", "")), "body_kind": str(obj.get("body", {}).get("kind", "")),
-            "made": "synthesised"}
+    out = {"hand": path.parent.name, "form": form, "object_name": str(obj["name"]), "object_hash": str(obj["mesh_hash"]),
+           "body_hash": str(obj.get("body_hash", "")), "body_kind": str(obj.get("body", {}).get("kind", "")),
+           "made": "synthesised"}
+    # how the object's file was read (a centimetre mesh's --scale, a chosen --body): applied again when --object
+    # names that file, as for a grasp file from ohra grasp sample
+    if obj.get("source") and obj["source"] != "builtin":
+        out["object"] = str(obj["source"])
+        if obj.get("scale") is not None:
+            out["scale"] = float(obj["scale"])
+        if obj.get("body_choice"):
+            out["body"] = str(obj["body_choice"])
+    return out
+
+
+def _same_object(recorded: str | None, given: str) -> bool:
+    """Whether ``--object`` names the object a grasp file recorded: the same spec, or the same file or folder by
+    another path (relative against absolute: the recorded scale was left out and a 9 m box simulated)."""
+    if not recorded:
+        return False
+    if recorded == str(given):
+        return True
+    a, b = Path(str(recorded)).expanduser(), Path(str(given)).expanduser()
+    return a.exists() and b.exists() and a.resolve() == b.resolve()
 
 
 COUPLING_NOTE_RAD = 1e-3
@@ -201,15 +221,16 @@ def run(args: argparse.Namespace) -> int:
                   f"{args.form} form as --form asks", file=sys.stderr)
     if args.limit is not None:
         grasps = grasps[: args.limit]
-    if args.scale is None and made.get("scale") and float(made["scale"]) != 1.0 and made.get("object") == str(args.object):
+    same_object = _same_object(made.get("object"), args.object)
+    if args.scale is None and made.get("scale") and float(made["scale"]) != 1.0 and same_object:
         # the grasps were sampled on this file read at another scale (a millimetre mesh): read it the same way
         args.scale = float(made["scale"])
-        print(f"ohra: note: --scale {args.scale:g} from {args.grasps} (the scale its grasps were sampled at)", file=sys.stderr)
+        print(f"ohra: note: --scale {args.scale:g} from {args.grasps} (the scale its grasps were {made.get('made', 'sampled')} at)", file=sys.stderr)
     if args.body is None:
         args.body = "auto"
-        if made.get("body", "auto") != "auto" and made.get("object") == str(args.object):
+        if made.get("body", "auto") != "auto" and same_object:
             args.body = made["body"]  # the body refined grasps were made against; the test runs on it too
-            print(f"ohra: note: --body {args.body} from {args.grasps} (the body its grasps were sampled on)", file=sys.stderr)
+            print(f"ohra: note: --body {args.body} from {args.grasps} (the body its grasps were {made.get('made', 'sampled')} on)", file=sys.stderr)
     objs = resolve_objects(args.object, scale=args.scale, body=args.body)
     if len(objs) != 1:
         raise ObjectError(f"--object must name one object, {args.object!r} names {len(objs)}")
