@@ -450,3 +450,23 @@ def test_a_folder_of_stl_meshes_is_one_object_with_a_note_and_a_folder_of_folder
         (shelf / name).mkdir(parents=True)
         trimesh.creation.box(extents=(0.04, 0.05, 0.06)).export(shelf / name / "mesh.stl")
     assert [o.name for o in resolve_objects([str(shelf)])] == ["one", "two"]
+
+
+def test_an_object_urdf_of_two_links_places_each_link_where_its_joint_puts_it(tmp_path):
+    """A box with a handle on a second link (a fixed joint 5 cm up) was merged at the links' own origins, the handle
+    buried in the box; a movable joint was merged without a word."""
+    from ohra.errors import ObjectWarning
+
+    trimesh.creation.box(extents=(0.06, 0.06, 0.04)).export(tmp_path / "base.obj")
+    trimesh.creation.cylinder(radius=0.015, height=0.06).export(tmp_path / "handle.obj")
+    link = '<link name="{0}"><visual><geometry><mesh filename="{0}.obj"/></geometry></visual>' \
+           '<collision><geometry><mesh filename="{0}.obj"/></geometry></collision></link>'
+    urdf = ('<?xml version="1.0"?><robot name="mug">' + link.format("base") + link.format("handle")
+            + '<joint name="j" type="{}"><parent link="base"/><child link="handle"/><origin xyz="0 0 0.05"/></joint></robot>')
+    (tmp_path / "two.urdf").write_text(urdf.format("fixed"))
+    o = ObjectModel.load(tmp_path / "two.urdf")
+    np.testing.assert_allclose(o.bounds, [[-0.03, -0.03, -0.02], [0.03, 0.03, 0.08]], atol=1e-6)
+    (tmp_path / "hinged.urdf").write_text(urdf.format("revolute"))
+    with pytest.warns(ObjectWarning, match=r"movable joint\(s\) j \(revolute\); ohra grasps one rigid object"):
+        h = ObjectModel.load(tmp_path / "hinged.urdf")
+    np.testing.assert_allclose(h.bounds, o.bounds, atol=1e-6)

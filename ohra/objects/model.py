@@ -115,6 +115,34 @@ def _urdf_mesh(path: Path):
             raise ObjectError(f"{path}: a <{el.tag}> primitive with a missing or non-numeric size") from None
         return None
 
+    # each link's frame in the root link's, down the joints at position 0: a handle on a second link sits where its
+    # fixed joint puts it (the links were merged at their own origins, the handle buried in the body)
+    joints = root.findall("joint")
+    parent_of = {j.find("child").get("link"): (j.find("parent").get("link"), origin(j)) for j in joints
+                 if j.find("child") is not None and j.find("parent") is not None}
+    movable = [f"{j.get('name')} ({j.get('type')})" for j in joints if j.get("type", "fixed") != "fixed"]
+    if movable:
+        warnings.warn(f"{path}: the object URDF has movable joint(s) {', '.join(movable[:3])}; ohra grasps one rigid object, "
+                      "so its links are taken together at joint position 0", ObjectWarning, stacklevel=user_stacklevel())
+
+    def link_frame(name: str) -> np.ndarray:
+        T, seen = np.eye(4), set()
+        while name in parent_of and name not in seen:
+            seen.add(name)
+            name, T_joint = parent_of[name]
+            T = T_joint @ T
+        return T
+
+    frames = {link.get("name"): link_frame(link.get("name")) for link in root.findall("link")}
+    placed: dict[int, np.ndarray] = {}
+    for link in root.findall("link"):
+        for el in list(link.findall("visual")) + list(link.findall("collision")):
+            placed[id(el)] = frames[link.get("name")]
+    _origin = origin
+
+    def origin(el) -> np.ndarray:  # noqa: F811  (the element's origin, in the root link's frame)
+        return placed.get(id(el), np.eye(4)) @ _origin(el)
+
     visuals = list(root.iter("visual"))
     vis_el = next((el for el in visuals if mesh_of(el) is not None), None)
     vis = None if vis_el is None else (mesh_of(vis_el), origin(vis_el))
