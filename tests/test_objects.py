@@ -432,26 +432,6 @@ def test_non_finite_vertices_used_by_faces_are_named_and_unused_ones_are_dropped
     assert np.isfinite(o.mesh.vertices).all() and o.volume == pytest.approx(0.04 * 0.05 * 0.06, rel=1e-6)
 
 
-def test_a_folder_of_stl_meshes_is_one_object_with_a_note_and_a_folder_of_folders_is_a_set(tmp_path):
-    """The README: a folder is one object (its first mesh by name, with a warning when it holds several). A folder of
-    STL files (no lower-case .obj or .urdf) became one object per file, and a single-object command then refused it."""
-    from ohra.errors import ObjectWarning
-    from ohra.objects.resolve import resolve_objects
-
-    parts = tmp_path / "parts"
-    parts.mkdir()
-    trimesh.creation.box(extents=(0.04, 0.05, 0.06)).export(parts / "part_b.stl")
-    trimesh.creation.box(extents=(0.05, 0.05, 0.07)).export(parts / "part_a.STL")
-    with pytest.warns(ObjectWarning, match=r"folder holds 2 meshes .*loading part_a.STL as the object"):
-        objs = resolve_objects([str(parts)])
-    assert [o.name for o in objs] == ["parts"]  # a folder given names its object
-    shelf = tmp_path / "shelf"
-    for name in ("one", "two"):
-        (shelf / name).mkdir(parents=True)
-        trimesh.creation.box(extents=(0.04, 0.05, 0.06)).export(shelf / name / "mesh.stl")
-    assert [o.name for o in resolve_objects([str(shelf)])] == ["one", "two"]
-
-
 def test_an_object_urdf_of_two_links_places_each_link_where_its_joint_puts_it(tmp_path):
     """A box with a handle on a second link (a fixed joint 5 cm up) was merged at the links' own origins, the handle
     buried in the box; a movable joint was merged without a word."""

@@ -96,17 +96,14 @@ def _from_path(p: Path, scale: float | None, body: str = "auto") -> list[ObjectM
         if sep and head.lower() in ("builtin", "procedural") and head != head.lower():  # the prefixes are lower case
             hint = f" (the {head.lower()} object: {head.lower()}:{rest})"
         raise ObjectError(f"object file or folder not found: {p}{hint}")
-    if p.is_dir():
-        # a folder holding a mesh or a URDF (any case of suffix) is one object (ObjectModel.load picks its file and
-        # says when it holds several); one of folders only is a set of objects. Hidden entries (.git, .ci,
-        # .ipynb_checkpoints) are neither.
-        own = [f for f in p.iterdir() if not f.name.startswith(".") and f.is_file()
-               and f.suffix.lower() in (*MESH_SUFFIXES, ".urdf")]
-        if not own:
-            subs = sorted(d for d in p.iterdir() if d.is_dir() and not d.name.startswith("."))
-            if not subs:
-                raise ObjectError(f"{p}: folder holds no objects")
-            return [ObjectModel.load(d, scale=scale, body=body) for d in subs]
+    if p.is_dir() and not any(p.glob("*.obj")) and not any(p.glob("*.urdf")):
+        # hidden entries (.git, .ci, .ipynb_checkpoints) are not objects
+        subs = sorted(d for d in p.iterdir() if d.is_dir() and not d.name.startswith("."))
+        files = sorted(f for f in p.iterdir() if f.suffix.lower() in MESH_SUFFIXES and not f.name.startswith("."))
+        if not subs and not files:
+            raise ObjectError(f"{p}: folder holds no objects")
+        return ([ObjectModel.load(d, scale=scale, body=body) for d in subs]
+                + [ObjectModel.load(f, scale=scale, body=body) for f in files])
     return [ObjectModel.load(p, scale=scale, body=body)]
 
 
