@@ -216,8 +216,9 @@ def test_show_fails_on_a_bad_name_before_starting_meshcat(monkeypatch, capsys):
 
 
 
-def test_show_without_a_terminal_stops_the_viewer_instead_of_a_traceback(monkeypatch, capsys):
-    """Piped or under CI, input() met end of file: an EOFError traceback after the URL."""
+@pytest.fixture
+def piped_viewer(monkeypatch):
+    """`ohra hand show` with a stand-in viewer (no meshcat server) and stdin that is not a terminal."""
     import io
 
     from ohra import viz
@@ -229,6 +230,10 @@ def test_show_without_a_terminal_stops_the_viewer_instead_of_a_traceback(monkeyp
     monkeypatch.setattr(viz, "new_visualizer", Vis)
     monkeypatch.setattr(viz, "show_hand", lambda *a, **k: None)
     monkeypatch.setattr("sys.stdin", io.StringIO(""))
+
+
+def test_show_without_a_terminal_stops_the_viewer_instead_of_a_traceback(piped_viewer, capsys):
+    """Piped or under CI, input() met end of file: an EOFError traceback after the URL."""
     assert cli.main(["hand", "show", "leap_3303"]) == 0
     assert "stdin is not a terminal: the viewer stops now" in capsys.readouterr().err
 
@@ -245,20 +250,10 @@ def test_show_no_wait_saves_a_page_that_outlives_the_command_and_says_when_there
     assert "127.0.0.1" not in out.out and "-o PAGE.html saves a page that stays" in out.err
 
 
-def test_show_says_which_joints_of_q_the_hand_cannot_take(monkeypatch, capsys):
+def test_show_says_which_joints_of_q_the_hand_cannot_take(piped_viewer, capsys):
     """`--q` of 3 rad everywhere was drawn past every limit, absent joints included, with no word."""
-    import io
-
-    from ohra import viz
     from ohra.cli.hand import limits_note
 
-    class Vis:
-        def url(self):
-            return "http://127.0.0.1:7000/static/"
-
-    monkeypatch.setattr(viz, "new_visualizer", Vis)
-    monkeypatch.setattr(viz, "show_hand", lambda *a, **k: None)
-    monkeypatch.setattr("sys.stdin", io.StringIO(""))
     p = get_hand("leap_3303")
     lo, up = np.asarray(p.joint_lowers), np.asarray(p.joint_uppers)
     inside = np.where(p.present_joints, 0.5 * (lo + up), 0.0)

@@ -142,7 +142,7 @@ class VAEBundle:
 
     def _encode_one(self, hand: HandLike) -> np.ndarray:
         """The encoding of one hand; its warnings (snapped thumb axes, a hand outside the training data) name it."""
-        from ohra.learn.sampler import support_violations
+        from ohra.learn.sampler import support_violations, violations_text
 
         label = hand if isinstance(hand, (str, Path)) else f"{type(hand).__name__}({hand.num_fingers} fingers)"
         params = resolve_hand(hand)
@@ -155,8 +155,8 @@ class VAEBundle:
         if why:
             # the decoder was trained on the sampler's hands: a latent of a hand outside them may decode to another
             # hand (Ability's decodes with a 69 mm third thumb segment)
-            warnings.warn(f"{label}: outside the hands the VAE was trained on ({'; '.join(why[:3])}"
-                          f"{f'; and {len(why) - 3} more' if len(why) > 3 else ''}); its latent may not decode back to it",
+            warnings.warn(f"{label}: outside the hands the VAE was trained on ({violations_text(why)}); its latent may not "
+                          "decode back to it",
                           OutOfSupportWarning, stacklevel=user_stacklevel())
         return x
 

@@ -386,6 +386,11 @@ def _range(out: list[str], name: str, values: np.ndarray, lo: float, hi: float, 
             out.append(f"{label} = {x:.4g} outside [{lo:.4g}, {hi:.4g}]")
 
 
+def violations_text(why: list[str], shown: int = 3) -> str:
+    """The first ``shown`` of :func:`support_violations`' lines joined, with how many more there are."""
+    return "; ".join(why[:shown]) + (f"; and {len(why) - shown} more" if len(why) > shown else "")
+
+
 def support_violations(params: BaseParams, config: SamplerConfig = DEFAULT_CONFIG) -> list[str]:
     """Why a base-form hand lies outside the sampler's support: one line per violated range or rule
     (right-hand values: a left hand is mirrored first). An empty list means the sampler can draw it,

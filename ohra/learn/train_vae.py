@@ -303,6 +303,10 @@ def train(config: TrainConfig = TrainConfig(), run_dir: str | Path | None = None
         bar = tqdm(range(epoch, cfg.epochs), initial=epoch, total=cfg.epochs, desc="train vae", unit="epoch",
                    disable=not progress, dynamic_ncols=True)
         t_run = time.perf_counter()
+
+        def checkpoint(done: int) -> None:
+            atomic_save(_state(model, opt, done, step, gens, history, cfg, std, digest), ckpt_path)
+
         try:
             with DeferredStop("VAE training", at="after the current epoch") as stop:
                 for ep in bar:
@@ -312,16 +316,13 @@ def train(config: TrainConfig = TrainConfig(), run_dir: str | Path | None = None
                     bar.set_postfix(loss=f"{losses['total']:.4f}", kl=f"{losses['kl']:.2f}")
                     done = ep + 1
                     periodic = ckpt_path is not None and (done % cfg.checkpoint_every == 0 or done == cfg.epochs)
-                    def checkpoint() -> None:
-                        atomic_save(_state(model, opt, done, step, gens, history, cfg, std, digest), ckpt_path)
-
                     if periodic:
-                        checkpoint()
+                        checkpoint(done)
                     if on_epoch is not None:
                         on_epoch(done, losses)
                     if stop.requested:  # Ctrl-C waits for the epoch's end: a checkpoint there resumes exactly
                         if ckpt_path is not None and not periodic:
-                            checkpoint()
+                            checkpoint(done)
                         stop.stop()  # a handler that returns (it chose to go on) lets training go on
         finally:
             bar.close()

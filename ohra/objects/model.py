@@ -88,7 +88,7 @@ def _urdf_mesh(path: Path):
         except ValueError:
             raise ObjectError(f"{path}: {what} {text!r} is not a list of numbers") from None
 
-    def origin(el) -> np.ndarray:
+    def own_origin(el) -> np.ndarray:  # an element's <origin>, in its parent's frame
         o = el.find("origin")
         xyz = floats(o.get("xyz", "0 0 0") if o is not None else "0 0 0", "origin xyz")
         rpy = floats(o.get("rpy", "0 0 0") if o is not None else "0 0 0", "origin rpy")
@@ -118,7 +118,7 @@ def _urdf_mesh(path: Path):
     # each link's frame in the root link's, down the joints at position 0: a handle on a second link sits where its
     # fixed joint puts it (the links were merged at their own origins, the handle buried in the body)
     joints = root.findall("joint")
-    parent_of = {j.find("child").get("link"): (j.find("parent").get("link"), origin(j)) for j in joints
+    parent_of = {j.find("child").get("link"): (j.find("parent").get("link"), own_origin(j)) for j in joints
                  if j.find("child") is not None and j.find("parent") is not None}
     movable = [f"{j.get('name')} ({j.get('type')})" for j in joints if j.get("type", "fixed") != "fixed"]
     if movable:
@@ -138,10 +138,8 @@ def _urdf_mesh(path: Path):
     for link in root.findall("link"):
         for el in list(link.findall("visual")) + list(link.findall("collision")):
             placed[id(el)] = frames[link.get("name")]
-    _origin = origin
-
-    def origin(el) -> np.ndarray:  # noqa: F811  (the element's origin, in the root link's frame)
-        return placed.get(id(el), np.eye(4)) @ _origin(el)
+    def origin(el) -> np.ndarray:  # a visual's or collision's origin, in the root link's frame
+        return placed.get(id(el), np.eye(4)) @ own_origin(el)
 
     visuals = list(root.iter("visual"))
     vis_el = next((el for el in visuals if mesh_of(el) is not None), None)

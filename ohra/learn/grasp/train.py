@@ -76,14 +76,14 @@ def _warn_outside_vae(cond: HandCondition, data: TrainingData) -> None:
 
     from ohra.errors import user_stacklevel
     from ohra.learn.encoding import OutOfSupportWarning
-    from ohra.learn.sampler import support_violations
+    from ohra.learn.sampler import support_violations, violations_text
 
     for name, p in zip(data.hands, data.params):
         why = support_violations(cond.vae_form(p))
         if why:
-            warnings.warn(f"training hand {name!r} lies outside the hands the VAE was trained on ({'; '.join(why[:3])}"
-                          f"{f'; and {len(why) - 3} more' if len(why) > 3 else ''}): its latent condition may not tell it "
-                          "from them (condition='params', --condition params, conditions on the parameters instead)",
+            warnings.warn(f"training hand {name!r} lies outside the hands the VAE was trained on ({violations_text(why)}): "
+                          "its latent condition may not tell it from them (condition='params', --condition params, "
+                          "conditions on the parameters instead)",
                           OutOfSupportWarning, stacklevel=user_stacklevel())
 
 
@@ -294,6 +294,10 @@ def _steps(st: _State, spec: RunSpec, ckpt_path: Path | None, on_step, bar, stop
            t_run: float, sums: dict[str, float], count: int) -> None:
     cfg, net, opt = spec.train, st.model.net, st.opt
     terms_logged = loss_terms(cfg)
+
+    def checkpoint(done: int, window: tuple[dict[str, float], int]) -> None:
+        atomic_save(_payload(st.model, opt, spec, done, st.history, st.model.meta["data_digest"], window), ckpt_path)
+
     for s in bar:
         lr = learning_rate(cfg, s)
         for group in opt.param_groups:
@@ -316,17 +320,14 @@ def _steps(st: _State, spec: RunSpec, ckpt_path: Path | None, on_step, bar, stop
             bar.set_postfix(diff=f"{entry['diffusion']:.4f}", joints=f"{entry['joints']:.4f}")
             sums, count = {k: 0.0 for k in terms_logged}, 0
         st.step = done
-        def checkpoint() -> None:
-            atomic_save(_payload(st.model, opt, spec, done, st.history, st.model.meta["data_digest"], (sums, count)), ckpt_path)
-
         periodic = ckpt_path is not None and (done % cfg.checkpoint_every == 0 or done == cfg.steps)
         if periodic:
-            checkpoint()
+            checkpoint(done, (sums, count))
         if on_step is not None:
             on_step(done, vals)
         if stop.requested:  # batches are seeded by step, so a checkpoint at any step resumes exactly
             if ckpt_path is not None and not periodic:
-                checkpoint()
+                checkpoint(done, (sums, count))
             stop.stop()  # a handler that returns (it chose to go on) lets training go on
 
 
